@@ -1,0 +1,18 @@
+//! `vic`: plan and run variable-impedance control under noise, unstable force fields and feedback
+//! delays (after Berret, Ivaldi, Nori & Sandini, "Stochastic optimal control with variable
+//! impedance manipulators in presence of uncertainties and delayed feedback").
+//!
+//! The modules follow the paper: [`model`] (limb, actuator, field, noise) → [`dynamics`]
+//! (discretisation and linearisation) → [`delay`] (state augmentation) → [`cost`] and
+//! [`reference`] → [`solver`] (ILQG) → [`config`] and [`plan`] (scenarios and the `vic plan`
+//! command).
+
+pub mod config;
+pub mod cost;
+pub mod delay;
+pub mod dynamics;
+pub mod model;
+pub mod plan;
+pub mod reference;
+pub mod scalar;
+pub mod solver;

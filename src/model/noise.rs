@@ -1,0 +1,27 @@
+//! Noise models: the diffusion `F(x, u)` of `dx = f dt + F dw` (paper Eq. 8).
+
+use serde::{Deserialize, Serialize};
+
+/// Which noise drives the plant.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub enum Noise {
+    /// Deterministic plant.
+    None,
+    /// `F = σ x_v I_n`: every state component is disturbed in proportion to one velocity
+    /// component `x_v` (the paper's `σ q1' I` for the arm, `σ q' I` for the elbow).
+    StateProportional { sigma: f64, component: usize },
+    /// Torque noise `e_i = (a + b q'_i) η_i` on every joint (the iCub's identified model, Eq. 16),
+    /// acting through `M⁻¹` on the joint accelerations.
+    Torque { a: f64, b: f64 },
+}
+
+impl Noise {
+    /// Number of independent noise channels `p` (columns of `F`).
+    pub fn nw(&self, nx: usize, dof: usize) -> usize {
+        match self {
+            Noise::None => 0,
+            Noise::StateProportional { .. } => nx,
+            Noise::Torque { .. } => dof,
+        }
+    }
+}

@@ -1,0 +1,360 @@
+//! Planning a scenario: from a validated [`Scenario`] to a solved [`PlanFile`] (the `vic plan`
+//! command's work), and the plan file format other commands read back.
+
+use crate::config::{Scenario, TaskPath};
+use crate::cost::TrackingCost;
+use crate::delay::Delayed;
+use crate::dynamics::{Dynamics, EulerModel};
+use crate::model::{Actuator, Exogenous};
+use crate::reference;
+use crate::solver::{Bounds, Ilqg, Problem, Solution};
+use nalgebra::DVector;
+use serde::{Deserialize, Serialize};
+
+/// Plan-file format version; bumped on incompatible changes.
+pub const PLAN_VERSION: u32 = 1;
+
+/// Everything needed to solve a scenario with any method.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    pub dynamics: EulerModel,
+    pub cost: TrackingCost,
+    /// Initial state x₀ (start posture at rest).
+    pub x0: Vec<f64>,
+    /// Initial guess: inverse dynamics along the reference with the configured initial stiffness.
+    pub u_init: Vec<DVector<f64>>,
+    pub bounds: Bounds,
+    pub reference: Vec<Exogenous>,
+}
+
+/// Builds the discrete model, the cost, the start state and the warm start of a scenario.
+pub fn setup(s: &Scenario) -> Result<Setup, String> {
+    let model = &s.model;
+    let (dof, nx, nu) = (model.dof(), model.nx(), model.nu());
+    let task = &s.task;
+    let steps = task.steps;
+    let reference = match &task.path {
+        TaskPath::Joint { start, target } => {
+            reference::joint_minimum_jerk(start, target, task.duration, task.dt, steps)
+        }
+        TaskPath::Hand { start, target } => reference::hand_straight_line(
+            &model.plant,
+            *start,
+            *target,
+            task.duration,
+            task.dt,
+            steps,
+        )?,
+    };
+
+    // Inverse dynamics along the reference (q'' by central differences of q_d').
+    let qdd = |k: usize, i: usize| {
+        let (a, b) = (k.saturating_sub(1), (k + 1).min(steps));
+        (reference[b].qd_d[i] - reference[a].qd_d[i]) / ((b - a) as f64 * task.dt)
+    };
+    let tau: Vec<[f64; 2]> = (0..=steps)
+        .map(|k| {
+            let r = &reference[k];
+            let acc = [qdd(k, 0), if dof > 1 { qdd(k, 1) } else { 0.0 }];
+            model.inverse_dynamics(&r.q_d[..dof], &r.qd_d[..dof], &acc[..dof])
+        })
+        .collect();
+    let k0 = s.initial_stiffness;
+    let mut x0 = vec![0.0; nx];
+    x0[..dof].copy_from_slice(&reference[0].q_d[..dof]);
+    let u_init: Vec<DVector<f64>> = match &model.actuator {
+        Actuator::Torque => (0..steps)
+            .map(|k| DVector::from_column_slice(&tau[k][..dof]))
+            .collect(),
+        Actuator::Impedance { .. } => (0..steps)
+            .map(|k| {
+                let mut u = DVector::from_element(nu, k0);
+                u.rows_mut(0, dof).copy_from_slice(&tau[k][..dof]);
+                u
+            })
+            .collect(),
+        Actuator::Vsa { motor_inertia } => {
+            if k0 <= 0.0 {
+                return Err("a VSA plan needs [actuator] initial_stiffness > 0".into());
+            }
+            // Motor angles that make the spring deliver the torque, and the motor torque that
+            // moves the motor along them.
+            let theta: Vec<[f64; 2]> = (0..=steps)
+                .map(|k| {
+                    let mut t = [0.0; 2];
+                    for i in 0..dof {
+                        t[i] = reference[k].q_d[i] + tau[k][i] / k0;
+                    }
+                    t
+                })
+                .collect();
+            for i in 0..dof {
+                x0[2 * dof + i] = theta[0][i];
+            }
+            (0..steps)
+                .map(|k| {
+                    let mut u = DVector::from_element(nu, k0);
+                    for i in 0..dof {
+                        let (a, b) = (k.saturating_sub(1), (k + 1).min(steps));
+                        let acc = if b - a == 2 {
+                            (theta[b][i] - 2.0 * theta[k][i] + theta[a][i]) / (task.dt * task.dt)
+                        } else {
+                            0.0
+                        };
+                        u[i] = motor_inertia[i] * acc + tau[k][i];
+                    }
+                    u
+                })
+                .collect()
+        }
+    };
+    let mut control_weights = vec![s.weights.w_torque; dof];
+    control_weights.extend(std::iter::repeat_n(s.weights.w_stiffness, nu - dof));
+    let cost = TrackingCost {
+        dof,
+        nx,
+        control_weights,
+        w_p: s.weights.w_p,
+        w_v: s.weights.w_v,
+        dt: task.dt,
+        reference: reference.clone(),
+    };
+    let dynamics = EulerModel {
+        model: model.clone(),
+        dt: task.dt,
+        exogenous: reference.clone(),
+    };
+    Ok(Setup {
+        dynamics,
+        cost,
+        x0,
+        u_init,
+        bounds: s.bounds.clone(),
+        reference,
+    })
+}
+
+/// Headline figures of a plan.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct PlanSummary {
+    pub method: String,
+    pub converged: bool,
+    pub stop: String,
+    pub iterations: usize,
+    /// Cost of the noise-free nominal trajectory.
+    pub cost: f64,
+    /// Predicted expected cost of the plan's policy.
+    pub expected_cost: f64,
+    pub solve_ms: f64,
+    /// Largest planned stiffness [N m/rad] (0 without a stiffness control).
+    pub max_stiffness: f64,
+    /// Time-averaged planned stiffness over all joints [N m/rad].
+    pub mean_stiffness: f64,
+    /// Feedback delay the plan was made for, in steps and ms.
+    pub delay_steps: usize,
+    pub delay_ms: f64,
+    /// Final position error of the nominal trajectory: joint angle [deg] for a single joint, hand
+    /// [mm] for the arm.
+    pub final_error: f64,
+    pub final_error_unit: String,
+}
+
+/// A plan as written by `vic plan`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PlanFile {
+    pub version: u32,
+    /// The scenario file the plan was made from.
+    pub scenario: String,
+    /// The configuration as resolved (after `--set` overrides).
+    pub config: serde_json::Value,
+    pub dt: f64,
+    /// Knot times `0, Δ, …, N Δ` [s].
+    pub time: Vec<f64>,
+    pub state_names: Vec<String>,
+    pub control_names: Vec<String>,
+    /// Nominal states at the knots (the plant's state, without the commands in flight).
+    pub x: Vec<Vec<f64>>,
+    /// Commands issued at each step (with a delay of d steps, command k acts at step k + d).
+    pub u: Vec<Vec<f64>>,
+    /// Feedback gains per step, m×n row-major, on the plant state (Eq. 13's block when delayed).
+    pub gains: Vec<Vec<Vec<f64>>>,
+    /// Reference `q_d`, `q_d'` at the knots [rad, rad/s].
+    pub reference: Vec<Exogenous>,
+    pub summary: PlanSummary,
+}
+
+/// Solves a scenario with ILQG, with the scenario's feedback delay.
+pub fn plan(s: &Scenario) -> Result<PlanFile, String> {
+    let setup = setup(s)?;
+    let d = s.task.delay_steps();
+    let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
+    let steps = s.task.steps;
+    let solution = if d == 0 {
+        let problem = Problem {
+            dynamics: &setup.dynamics,
+            cost: &setup.cost,
+            x0: setup.x0.clone(),
+            horizon: steps,
+            bounds: setup.bounds.clone(),
+        };
+        let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+        solver.solve(&problem, &setup.u_init)
+    } else {
+        let delayed = Delayed::new(setup.dynamics.clone(), d);
+        let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+        let cost = DelayedCost {
+            inner: &setup.cost,
+            nx,
+        };
+        let problem = Problem {
+            dynamics: &delayed,
+            cost: &cost,
+            x0,
+            horizon: steps,
+            bounds: setup.bounds.clone(),
+        };
+        // A command issued at k acts at k + d: warm-start with the shifted guess.
+        let u_init: Vec<DVector<f64>> = (0..steps)
+            .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
+            .collect();
+        let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+        let mut sol = solver.solve(&problem, &u_init);
+        for x in &mut sol.x {
+            *x = x.rows(0, nx).into_owned();
+        }
+        for g in &mut sol.gains {
+            *g = g.columns(0, nx).into_owned();
+        }
+        sol
+    };
+    Ok(plan_file(s, &setup, &solution, d, nu))
+}
+
+/// The cost of the plain plant applied to the plant block of a delay-augmented state.
+struct DelayedCost<'a> {
+    inner: &'a TrackingCost,
+    nx: usize,
+}
+
+impl crate::cost::Cost for DelayedCost<'_> {
+    fn running(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
+        self.inner.running(k, &x[..self.nx], u)
+    }
+    fn terminal(&self, x: &[f64]) -> f64 {
+        self.inner.terminal(&x[..self.nx])
+    }
+    fn running_derivatives(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        d: &mut crate::cost::CostDerivatives,
+    ) {
+        // The augmented derivatives are zero outside the plant block; write that block only.
+        let (n, m) = (self.nx, u.len());
+        let mut inner = crate::cost::CostDerivatives::new(n, m);
+        self.inner.running_derivatives(k, &x[..n], u, &mut inner);
+        d.lx.fill(0.0);
+        d.lxx.fill(0.0);
+        d.lux.fill(0.0);
+        d.lx.rows_mut(0, n).copy_from(&inner.lx);
+        d.lxx.view_mut((0, 0), (n, n)).copy_from(&inner.lxx);
+        d.lux.view_mut((0, 0), (m, n)).copy_from(&inner.lux);
+        d.lu.copy_from(&inner.lu);
+        d.luu.copy_from(&inner.luu);
+    }
+    fn terminal_derivatives(&self, x: &[f64], d: &mut crate::cost::CostDerivatives) {
+        let n = self.nx;
+        let mut inner = crate::cost::CostDerivatives::new(n, d.lu.len());
+        self.inner.terminal_derivatives(&x[..n], &mut inner);
+        d.lx.fill(0.0);
+        d.lxx.fill(0.0);
+        d.lx.rows_mut(0, n).copy_from(&inner.lx);
+        d.lxx.view_mut((0, 0), (n, n)).copy_from(&inner.lxx);
+    }
+}
+
+fn plan_file(s: &Scenario, setup: &Setup, sol: &Solution, d: usize, nu: usize) -> PlanFile {
+    let model = &s.model;
+    let dof = model.dof();
+    let dt = s.task.dt;
+    let steps = s.task.steps;
+    let stiffness: Vec<f64> = match model.actuator.stiffness_offset(dof) {
+        Some(off) => sol
+            .u
+            .iter()
+            .flat_map(|u| u.rows(off, dof).iter().copied().collect::<Vec<_>>())
+            .collect(),
+        None => vec![],
+    };
+    let max_stiffness = stiffness.iter().copied().fold(0.0, f64::max);
+    let mean_stiffness = if stiffness.is_empty() {
+        0.0
+    } else {
+        stiffness.iter().sum::<f64>() / stiffness.len() as f64
+    };
+    let last = &sol.x[steps];
+    let target = &setup.reference[steps];
+    let (final_error, unit) = if dof == 1 {
+        ((last[0] - target.q_d[0]).abs().to_degrees(), "deg")
+    } else {
+        let p = model.plant.hand_position(&last.as_slice()[..2]);
+        let t = model.plant.hand_position(&target.q_d);
+        (
+            ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2)).sqrt() * 1000.0,
+            "mm",
+        )
+    };
+    let joints: Vec<String> = (1..=dof)
+        .map(|i| {
+            if dof == 1 {
+                "q".to_string()
+            } else {
+                format!("q{i}")
+            }
+        })
+        .collect();
+    let mut state_names: Vec<String> = joints.clone();
+    state_names.extend(joints.iter().map(|j| format!("{j}_dot")));
+    if matches!(model.actuator, Actuator::Vsa { .. }) {
+        let motors: Vec<String> = (1..=dof).map(|i| format!("theta{i}")).collect();
+        state_names.extend(motors.clone());
+        state_names.extend(motors.iter().map(|m| format!("{m}_dot")));
+    }
+    let mut control_names: Vec<String> = (1..=dof).map(|i| format!("tau{i}")).collect();
+    if nu > dof {
+        control_names.extend((1..=dof).map(|i| format!("k{i}")));
+    }
+    PlanFile {
+        version: PLAN_VERSION,
+        scenario: s.source.display().to_string(),
+        config: serde_json::to_value(&s.resolved).unwrap_or(serde_json::Value::Null),
+        dt,
+        time: (0..=steps).map(|k| k as f64 * dt).collect(),
+        state_names,
+        control_names,
+        x: sol.x.iter().map(|v| v.iter().copied().collect()).collect(),
+        u: sol.u.iter().map(|v| v.iter().copied().collect()).collect(),
+        gains: sol
+            .gains
+            .iter()
+            .map(|g| g.row_iter().map(|r| r.iter().copied().collect()).collect())
+            .collect(),
+        reference: setup.reference.clone(),
+        summary: PlanSummary {
+            method: "ilqg".into(),
+            converged: sol.stop.converged(),
+            stop: format!("{:?}", sol.stop),
+            iterations: sol.iterations,
+            cost: sol.cost,
+            expected_cost: sol.expected_cost,
+            solve_ms: sol.solve_time.as_secs_f64() * 1000.0,
+            max_stiffness,
+            mean_stiffness,
+            delay_steps: d,
+            delay_ms: d as f64 * dt * 1000.0,
+            final_error,
+            final_error_unit: unit.into(),
+        },
+    }
+}
