@@ -6,6 +6,7 @@
 //! reject unknown keys, then validated into a typed [`Scenario`] whose models cannot be
 //! inconsistent. Every error names the file, the key and what is wrong.
 
+use crate::dynamics::Integrator;
 use crate::model::{Actuator, ArmModel, Damping, Field, Noise, Plant, SingleJoint, TwoLink};
 use crate::solver::{Bounds, IlqgOptions};
 use serde::Deserialize;
@@ -99,6 +100,7 @@ struct RawNoise {
     component: Option<usize>,
     a: Option<f64>,
     b: Option<f64>,
+    sample_time: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -122,6 +124,8 @@ struct RawTask {
     dt: f64,
     #[serde(default)]
     delay_ms: f64,
+    substeps: Option<usize>,
+    integrator: Option<String>,
 }
 
 /// The `[solver]` section: the method and the solver's options (every key optional).
@@ -193,6 +197,10 @@ pub struct Task {
     pub steps: usize,
     /// Central feedback delay [ms] (a whole number of steps).
     pub delay_ms: f64,
+    /// Integration sub-steps per control step (default 1: the paper's Euler step).
+    pub substeps: usize,
+    /// Integrator of the drift (default explicit Euler).
+    pub integrator: Integrator,
 }
 
 impl Task {
@@ -533,6 +541,16 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
         "torque" => Noise::Torque {
             a: cx.need(n.a, "noise", "a", "for kind = \"torque\"")?,
             b: cx.need(n.b, "noise", "b", "for kind = \"torque\"")?,
+            sample_time: cx.positive(
+                cx.need(
+                    n.sample_time,
+                    "noise",
+                    "sample_time",
+                    "for kind = \"torque\" (s)",
+                )?,
+                "noise",
+                "sample_time",
+            )?,
         },
         other => {
             return Err(cx.err(
@@ -624,12 +642,29 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
             ));
         }
     };
+    let substeps = t.substeps.unwrap_or(1);
+    if substeps == 0 {
+        return Err(cx.err("task", "substeps", "must be at least 1"));
+    }
+    let integrator = match t.integrator.as_deref().unwrap_or("euler") {
+        "euler" => Integrator::Euler,
+        "semi_implicit" => Integrator::SemiImplicit,
+        other => {
+            return Err(cx.err(
+                "task",
+                "integrator",
+                format!("unknown integrator \"{other}\"; expected \"euler\" or \"semi_implicit\""),
+            ));
+        }
+    };
     let task = Task {
         path: task_path,
         duration,
         dt,
         steps: steps_f.round() as usize,
         delay_ms,
+        substeps,
+        integrator,
     };
 
     let nu = model.nu();
@@ -644,7 +679,7 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
     if let Some(off) = model.actuator.stiffness_offset(dof) {
         let lo = cx.non_negative(a.stiffness_min.unwrap_or(0.0), "actuator", "stiffness_min")?;
         let hi = a.stiffness_max.unwrap_or(f64::INFINITY);
-        if !(hi > lo) {
+        if hi.is_nan() || hi <= lo {
             return Err(cx.err(
                 "actuator",
                 "stiffness_max",
@@ -662,6 +697,8 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
         _ => 0.0,
     });
     let initial_stiffness = cx.non_negative(initial_stiffness, "actuator", "initial_stiffness")?;
+
+    check_substep(&model, &task, &bounds, &cx)?;
 
     let solver = raw.solver.resolve();
     if solver.method != "ilqg" {
@@ -689,6 +726,65 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
         solver,
         resolved,
     })
+}
+
+/// Refuses integration sub-steps too long for the stiffest configured impedance: explicit and
+/// semi-implicit Euler both diverge once `h · K_D / I > 2` (a damping rate) or `h · ω > 2` (a VSA
+/// spring). A plan made on a numerically unstable plant says nothing about the robot.
+fn check_substep(
+    model: &ArmModel,
+    task: &Task,
+    bounds: &Bounds,
+    cx: &Ctx,
+) -> Result<(), ConfigError> {
+    let dof = model.dof();
+    let Some(off) = model.actuator.stiffness_offset(dof) else {
+        return Ok(());
+    };
+    let k_max = bounds.upper[off..off + dof]
+        .iter()
+        .copied()
+        .fold(0.0, f64::max);
+    if !k_max.is_finite() {
+        return Ok(());
+    }
+    // Smallest effective inertia over the workspace: the smallest eigenvalue of M(q).
+    let inertia = (0..=36)
+        .map(|i| {
+            let q = [0.0, i as f64 * std::f64::consts::PI / 36.0];
+            let m = model.plant.mass_matrix(&q);
+            if dof == 1 {
+                m[0][0]
+            } else {
+                let (tr, det) = (m[0][0] + m[1][1], m[0][0] * m[1][1] - m[0][1] * m[1][0]);
+                0.5 * (tr - (tr * tr - 4.0 * det).max(0.0).sqrt())
+            }
+        })
+        .fold(f64::INFINITY, f64::min);
+    let rate = match &model.actuator {
+        Actuator::Impedance { damping } => damping.gain(k_max) / inertia,
+        Actuator::Vsa { motor_inertia } => {
+            let b = motor_inertia.iter().copied().fold(f64::INFINITY, f64::min);
+            (k_max / inertia.min(b)).sqrt()
+        }
+        Actuator::Torque => return Ok(()),
+    };
+    let h = task.dt / task.substeps as f64;
+    if h * rate >= 2.0 {
+        let needed = (task.dt * rate / 2.0).floor() as usize + 1;
+        return Err(cx.err(
+            "task",
+            "substeps",
+            format!(
+                "{} sub-step(s) of {:.2} ms are numerically unstable at stiffness_max = {k_max} N m/rad \
+                 (rate {rate:.0}/s needs h < {:.2} ms): use substeps ≥ {needed} or a lower stiffness_max",
+                task.substeps,
+                h * 1000.0,
+                2000.0 / rate
+            ),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -3,8 +3,9 @@
 //! linearisation `δx' = A δx + B δu + Σ_i (c_i + Cx_i δx + Cu_i δu) ε_i` (DESIGN §4).
 
 use crate::model::{ArmModel, Exogenous};
-use crate::scalar::{MAX_NU, MAX_NW, MAX_NX};
+use crate::scalar::{MAX_NU, MAX_NW, MAX_NX, Scalar};
 use nalgebra::DMatrix;
+use num_dual::Dual64;
 
 /// What kind of noise a linearisation carries; the backward pass skips what is absent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -67,21 +68,105 @@ pub trait Dynamics: Send + Sync {
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization);
 }
 
-/// A continuous model discretised by Euler–Maruyama on a fixed grid (paper Eq. 10):
-/// `x[k+1] = x[k] + Δ f(x[k], u[k]) + √Δ F(x[k], u[k]) ε[k]`, with the reference of knot `k`.
+/// How the drift is integrated over one control step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Integrator {
+    /// Explicit Euler (the paper's): `x += h f(x, u)`.
+    Euler,
+    /// Semi-implicit (symplectic) Euler: velocities first, then positions with the new
+    /// velocities. Stable for undamped springs (the VSA) where explicit Euler gains energy.
+    SemiImplicit,
+}
+
+/// A continuous model discretised on a fixed grid (paper Eq. 10):
+/// `x[k+1] = Φ_Δ(x[k], u[k]) + √Δ F(x[k], u[k]) ε[k]`, where `Φ_Δ` integrates the drift over Δ in
+/// `substeps` steps of the chosen [`Integrator`] with the control and reference of knot `k` held.
+///
+/// The noise enters once per control step as in Eq. 10; sub-steps only keep a stiff impedance
+/// (large `K_D / J`) numerically stable, which explicit Euler at Δ = 10 ms is not.
 #[derive(Debug, Clone)]
 pub struct EulerModel {
     pub model: ArmModel,
     /// Time step Δ [s].
     pub dt: f64,
+    /// Integration sub-steps per control step (1: the paper's single Euler step).
+    pub substeps: usize,
+    pub integrator: Integrator,
     /// Exogenous inputs (reference, external torque) at each knot.
     pub exogenous: Vec<Exogenous>,
 }
 
 impl EulerModel {
+    /// The paper's discretisation: one explicit Euler step per control step.
+    pub fn euler(model: ArmModel, dt: f64, exogenous: Vec<Exogenous>) -> Self {
+        EulerModel {
+            model,
+            dt,
+            substeps: 1,
+            integrator: Integrator::Euler,
+            exogenous,
+        }
+    }
+
     fn exo(&self, k: usize) -> &Exogenous {
         &self.exogenous[k.min(self.exogenous.len() - 1)]
     }
+
+    /// The deterministic step `Φ_Δ(x, u)` in any scalar type (so it can be differentiated).
+    pub fn flow<S: Scalar>(&self, k: usize, x: &[S], u: &[S], next: &mut [S]) {
+        flow(
+            &self.model,
+            self.exo(k),
+            self.dt,
+            self.substeps,
+            self.integrator,
+            x,
+            u,
+            next,
+        );
+    }
+}
+
+/// Integrates the drift of `model` over `dt` in `substeps` steps, control and exogenous input
+/// held. The one integrator of the project: the planner, the Monte Carlo and the board use it.
+#[allow(clippy::too_many_arguments)]
+pub fn flow<S: Scalar>(
+    model: &ArmModel,
+    ex: &Exogenous,
+    dt: f64,
+    substeps: usize,
+    integrator: Integrator,
+    x: &[S],
+    u: &[S],
+    next: &mut [S],
+) {
+    let nx = model.nx();
+    let h = dt / substeps as f64;
+    let mut cur = [S::zero(); MAX_NX];
+    cur[..nx].copy_from_slice(&x[..nx]);
+    let mut xdot = [S::zero(); MAX_NX];
+    for _ in 0..substeps {
+        model.f(&cur[..nx], u, ex, &mut xdot[..nx]);
+        match integrator {
+            Integrator::Euler => {
+                for i in 0..nx {
+                    cur[i] += xdot[i] * h;
+                }
+            }
+            Integrator::SemiImplicit => {
+                let dof = model.dof();
+                // Velocities are the second half of each (position, velocity) block.
+                for block in (0..nx).step_by(2 * dof) {
+                    for i in 0..dof {
+                        cur[block + dof + i] += xdot[block + dof + i] * h;
+                        cur[block + i] += cur[block + dof + i] * h;
+                    }
+                }
+            }
+        }
+    }
+    next[..nx].copy_from_slice(&cur[..nx]);
 }
 
 impl Dynamics for EulerModel {
@@ -96,12 +181,7 @@ impl Dynamics for EulerModel {
     }
 
     fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
-        let nx = self.nx();
-        let mut xdot = [0.0; MAX_NX];
-        self.model.f(x, u, self.exo(k), &mut xdot[..nx]);
-        for i in 0..nx {
-            next[i] = x[i] + self.dt * xdot[i];
-        }
+        self.flow(k, x, u, next);
     }
 
     fn noise_gain(&self, _k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
@@ -118,22 +198,22 @@ impl Dynamics for EulerModel {
 
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
-        let mut fx = [0.0; MAX_NX * MAX_NX];
-        let mut fu = [0.0; MAX_NX * MAX_NU];
-        let mut dfx = [0.0; MAX_NX * MAX_NX * MAX_NW];
-        let mut dfu = [0.0; MAX_NU * MAX_NX * MAX_NW];
-        let noise = (nw > 0).then_some((&mut dfx[..], &mut dfu[..]));
-        self.model
-            .jacobians(x, u, self.exo(k), &mut fx, &mut fu, noise);
-        let dt = self.dt;
-        for j in 0..nx {
+        // A and B by forward-mode AD through the whole step (all sub-steps).
+        let mut xd = [Dual64::from(0.0); MAX_NX];
+        let mut ud = [Dual64::from(0.0); MAX_NU];
+        lift(x, &mut xd);
+        lift(u, &mut ud);
+        let mut out = [Dual64::from(0.0); MAX_NX];
+        for j in 0..nx + nu {
+            seed(&mut xd, &mut ud, nx, j, 1.0);
+            self.flow(k, &xd[..nx], &ud[..nu], &mut out[..nx]);
+            seed(&mut xd, &mut ud, nx, j, 0.0);
             for i in 0..nx {
-                lin.a[(i, j)] = dt * fx[j * nx + i] + if i == j { 1.0 } else { 0.0 };
-            }
-        }
-        for j in 0..nu {
-            for i in 0..nx {
-                lin.b[(i, j)] = dt * fu[j * nx + i];
+                if j < nx {
+                    lin.a[(i, j)] = out[i].eps;
+                } else {
+                    lin.b[(i, j - nx)] = out[i].eps;
+                }
             }
         }
         if nw == 0 {
@@ -141,22 +221,22 @@ impl Dynamics for EulerModel {
             return;
         }
         self.noise_gain(k, x, u, &mut lin.c);
-        let s = dt.sqrt();
-        let block = nx * nw;
+        let s = self.dt.sqrt();
+        let mut big_f = [Dual64::from(0.0); MAX_NX * MAX_NW];
         let mut dependent = false;
-        for ch in 0..nw {
-            for j in 0..nx {
+        for j in 0..nx + nu {
+            seed(&mut xd, &mut ud, nx, j, 1.0);
+            self.model.diffusion(&xd[..nx], &ud[..nu], &mut big_f);
+            seed(&mut xd, &mut ud, nx, j, 0.0);
+            for ch in 0..nw {
                 for r in 0..nx {
-                    let v = s * dfx[j * block + ch * nx + r];
+                    let v = s * big_f[ch * nx + r].eps;
                     dependent |= v != 0.0;
-                    lin.cx[ch][(r, j)] = v;
-                }
-            }
-            for j in 0..nu {
-                for r in 0..nx {
-                    let v = s * dfu[j * block + ch * nx + r];
-                    dependent |= v != 0.0;
-                    lin.cu[ch][(r, j)] = v;
+                    if j < nx {
+                        lin.cx[ch][(r, j)] = v;
+                    } else {
+                        lin.cu[ch][(r, j - nx)] = v;
+                    }
                 }
             }
         }
@@ -165,5 +245,20 @@ impl Dynamics for EulerModel {
         } else {
             NoiseKind::Additive
         };
+    }
+}
+
+fn lift(src: &[f64], dst: &mut [Dual64]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d = Dual64::from(*s);
+    }
+}
+
+/// Sets the derivative seed of variable `j` of the stacked vector `(x, u)`.
+fn seed(x: &mut [Dual64], u: &mut [Dual64], nx: usize, j: usize, value: f64) {
+    if j < nx {
+        x[j].eps = value;
+    } else {
+        u[j - nx].eps = value;
     }
 }

@@ -7,6 +7,9 @@
 //! [`reference`] → [`solver`] (ILQG) → [`config`] and [`plan`] (scenarios and the `vic plan`
 //! command).
 
+// Index loops read like the equations they implement; iterator chains over several arrays do not.
+#![allow(clippy::needless_range_loop)]
+
 pub mod config;
 pub mod cost;
 pub mod delay;

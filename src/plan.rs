@@ -7,7 +7,7 @@ use crate::delay::Delayed;
 use crate::dynamics::{Dynamics, EulerModel};
 use crate::model::{Actuator, Exogenous};
 use crate::reference;
-use crate::solver::{Bounds, Ilqg, Problem, Solution};
+use crate::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
@@ -122,6 +122,8 @@ pub fn setup(s: &Scenario) -> Result<Setup, String> {
     let dynamics = EulerModel {
         model: model.clone(),
         dt: task.dt,
+        substeps: task.substeps,
+        integrator: task.integrator,
         exogenous: reference.clone(),
     };
     Ok(Setup {
@@ -197,8 +199,7 @@ pub fn plan(s: &Scenario) -> Result<PlanFile, String> {
             horizon: steps,
             bounds: setup.bounds.clone(),
         };
-        let mut solver = Ilqg::new(&problem, s.solver.options.clone());
-        solver.solve(&problem, &setup.u_init)
+        solve_in_phases(&problem, &s.solver.options, &setup.u_init)
     } else {
         let delayed = Delayed::new(setup.dynamics.clone(), d);
         let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
@@ -217,8 +218,7 @@ pub fn plan(s: &Scenario) -> Result<PlanFile, String> {
         let u_init: Vec<DVector<f64>> = (0..steps)
             .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
             .collect();
-        let mut solver = Ilqg::new(&problem, s.solver.options.clone());
-        let mut sol = solver.solve(&problem, &u_init);
+        let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init);
         for x in &mut sol.x {
             *x = x.rows(0, nx).into_owned();
         }
@@ -228,6 +228,28 @@ pub fn plan(s: &Scenario) -> Result<PlanFile, String> {
         sol
     };
     Ok(plan_file(s, &setup, &solution, d, nu))
+}
+
+/// Solves a stochastic problem by continuation: first the deterministic problem (whose landscape
+/// is benign), then the stochastic one from its solution. Started far from the optimum, the noise
+/// terms can lead ILQG to poor local solutions in an unstable field. Iterations and solve time
+/// add up over the phases.
+pub fn solve_in_phases(
+    problem: &Problem,
+    options: &IlqgOptions,
+    u_init: &[DVector<f64>],
+) -> Solution {
+    let mut solver = Ilqg::new(problem, options.clone());
+    if !options.stochastic || problem.dynamics.nw() == 0 {
+        return solver.solve(problem, u_init);
+    }
+    solver.options.stochastic = false;
+    let first = solver.solve(problem, u_init);
+    solver.options.stochastic = true;
+    let mut second = solver.solve(problem, &first.u);
+    second.iterations += first.iterations;
+    second.solve_time += first.solve_time;
+    second
 }
 
 /// The cost of the plain plant applied to the plant block of a delay-augmented state.

@@ -55,7 +55,7 @@ impl ArmModel {
                     motor_inertia.len()
                 ));
             }
-            if motor_inertia.iter().any(|b| !(*b > 0.0)) {
+            if motor_inertia.iter().any(|b| b.is_nan() || *b <= 0.0) {
                 return Err("motor_inertia must be positive".into());
             }
         }
@@ -144,10 +144,8 @@ impl ArmModel {
         }
         let mut qdd = [S::zero(); 2];
         self.plant.solve_mass(q, &rhs[..n], &mut qdd[..n]);
-        for i in 0..n {
-            xdot[i] = qd[i];
-            xdot[n + i] = qdd[i];
-        }
+        xdot[..n].copy_from_slice(qd);
+        xdot[n..2 * n].copy_from_slice(&qdd[..n]);
         if let Actuator::Vsa { motor_inertia } = &self.actuator {
             for i in 0..n {
                 let theta = x[2 * n + i];
@@ -170,12 +168,13 @@ impl ArmModel {
                     out[i * nx + i] = scale;
                 }
             }
-            Noise::Torque { a, b } => {
+            Noise::Torque { a, b, sample_time } => {
+                let scale = sample_time.sqrt();
                 let n = self.dof();
                 let q = &x[..n];
                 for i in 0..n {
                     let mut e = [S::zero(); 2];
-                    e[i] = x[n + i] * b + a;
+                    e[i] = (x[n + i] * b + a) * scale;
                     let mut acc = [S::zero(); 2];
                     self.plant.solve_mass(q, &e[..n], &mut acc[..n]);
                     for j in 0..n {

@@ -11,8 +11,12 @@ pub enum Noise {
     /// component `x_v` (the paper's `σ q1' I` for the arm, `σ q' I` for the elbow).
     StateProportional { sigma: f64, component: usize },
     /// Torque noise `e_i = (a + b q'_i) η_i` on every joint (the iCub's identified model, Eq. 16),
-    /// acting through `M⁻¹` on the joint accelerations.
-    Torque { a: f64, b: f64 },
+    /// acting through `M⁻¹` on the joint accelerations. `e` is what the identification measures:
+    /// one independent torque error [N m] per sample of length `sample_time` [s]. Its white-noise
+    /// equivalent has intensity `e² T_s`, so `F = √T_s M⁻¹ (a + b q')`. (Taking `a`, `b` as a
+    /// diffusion in N m √s instead makes the second moments of the iCub elbow explode: the
+    /// velocity-proportional part alone multiplies the variance by about 50 per 10 ms step.)
+    Torque { a: f64, b: f64, sample_time: f64 },
 }
 
 impl Noise {

@@ -24,7 +24,7 @@ impl SmallCholesky {
                     s -= l[i][k] * l[j][k];
                 }
                 if i == j {
-                    if !(s > 0.0) || !s.is_finite() {
+                    if s.is_nan() || s <= 0.0 || !s.is_finite() {
                         return None;
                     }
                     l[i][i] = s.sqrt();

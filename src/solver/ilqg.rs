@@ -4,11 +4,10 @@
 //!
 //! The line search compares *expected* costs when the plant is stochastic: the nominal cost plus
 //! the second-order noise cost of the candidate under the new feedback gains
-//! ([`moments::expected_cost`]). The deterministic cost alone would reject the very steps the noise
+//! ([`crate::solver::moments::expected_cost`]). The deterministic cost alone would reject the very steps the noise
 //! terms of the backward pass ask for.
 
 use super::boxqp::{MAX_QP, QpStatus, solve_box_qp};
-use super::moments::{self, MomentWorkspace};
 use super::{Bounds, Problem};
 use crate::cost::CostDerivatives;
 use crate::dynamics::{Linearization, NoiseKind};
@@ -22,9 +21,10 @@ use std::time::{Duration, Instant};
 pub struct IlqgOptions {
     /// Iteration limit (default 200).
     pub max_iterations: usize,
-    /// Stop when an accepted step improves the cost by less than this fraction (default 1e-8).
+    /// Stop when a step improves (or is predicted to improve) the cost by less than this fraction
+    /// (default 1e-6).
     pub tolerance: f64,
-    /// Stop when every feedforward step `|l_k| / (|ū_k| + 1)` is below this (default 1e-7).
+    /// Stop when every feedforward step `|l_k| / (|ū_k| + 1)` is below this (default 1e-6).
     pub gradient_tolerance: f64,
     /// Initial Levenberg–Marquardt regularisation μ added to `Q_uu` (default 0: exact Newton).
     pub mu_init: f64,
@@ -41,8 +41,8 @@ impl Default for IlqgOptions {
     fn default() -> Self {
         IlqgOptions {
             max_iterations: 200,
-            tolerance: 1e-8,
-            gradient_tolerance: 1e-7,
+            tolerance: 1e-6,
+            gradient_tolerance: 1e-6,
             mu_init: 0.0,
             mu_min: 1e-6,
             mu_max: 1e10,
@@ -135,6 +135,8 @@ struct Backward {
     qxx: DMatrix<f64>,
     quu: DMatrix<f64>,
     qux: DMatrix<f64>,
+    quu_reg: DMatrix<f64>,
+    qux_reg: DMatrix<f64>,
     t_mn: DMatrix<f64>,
     t_m: DVector<f64>,
 }
@@ -147,7 +149,9 @@ pub struct Ilqg {
     ff: Vec<DVector<f64>>,
     gains: Vec<DMatrix<f64>>,
     bw: Backward,
-    moments: MomentWorkspace,
+    /// `S_{k+1}` of the last backward pass, per step (for the merit).
+    value_hessians: Vec<DMatrix<f64>>,
+    noise_scratch: DMatrix<f64>,
     dims: (usize, usize, usize, usize),
 }
 
@@ -180,10 +184,13 @@ impl Ilqg {
                 qxx: DMatrix::zeros(nx, nx),
                 quu: DMatrix::zeros(nu, nu),
                 qux: DMatrix::zeros(nu, nx),
+                quu_reg: DMatrix::zeros(nu, nu),
+                qux_reg: DMatrix::zeros(nu, nx),
                 t_mn: DMatrix::zeros(nu, nx),
                 t_m: DVector::zeros(nu),
             },
-            moments: MomentWorkspace::new(nx, nu),
+            value_hessians: (0..h).map(|_| DMatrix::zeros(nx, nx)).collect(),
+            noise_scratch: DMatrix::zeros(nx, nw),
             dims: (nx, nu, nw, h),
         }
     }
@@ -275,7 +282,12 @@ impl Ilqg {
             }
 
             // The merit of the current nominal under the new gains, for a like-for-like comparison.
-            let merit_now = self.merit(stochastic, false);
+            let merit_now = self.merit(problem, stochastic, false);
+            // Nothing left to gain at first order: the predicted improvement is negligible.
+            if -(dv1 + dv2) < self.options.tolerance * merit_now.abs() {
+                stop = StopReason::SmallImprovement;
+                break;
+            }
 
             let mut accepted = None;
             for alpha in [
@@ -292,10 +304,7 @@ impl Ilqg {
                 if !ok {
                     continue;
                 }
-                if stochastic {
-                    linearize(problem, &mut self.candidate);
-                }
-                let merit_new = self.merit(stochastic, true);
+                let merit_new = self.merit(problem, stochastic, true);
                 let predicted = -alpha * (dv1 + alpha * dv2);
                 let actual = merit_now - merit_new;
                 let ratio = if predicted > 0.0 {
@@ -304,26 +313,31 @@ impl Ilqg {
                     actual.signum()
                 };
                 if actual > 0.0 && ratio > 1e-4 {
-                    accepted = Some((merit_now, merit_new));
+                    accepted = Some((merit_now, merit_new, alpha));
                     break;
                 }
             }
 
             match accepted {
-                Some((before, after)) => {
+                Some((before, after, alpha)) => {
                     std::mem::swap(&mut self.nominal, &mut self.candidate);
-                    if !stochastic {
-                        linearize(problem, &mut self.nominal);
-                    }
+                    linearize(problem, &mut self.nominal);
                     iterations += 1;
                     history.push(after);
-                    // Success: lower μ (Tassa's schedule).
-                    mu_step = (mu_step / 2.0).min(0.5);
-                    mu = if mu * mu_step > self.options.mu_min {
-                        mu * mu_step
+                    if alpha >= 0.5 {
+                        // The local model was trusted: lower μ (Tassa's schedule).
+                        mu_step = (mu_step / 2.0).min(0.5);
+                        mu = if mu * mu_step > self.options.mu_min {
+                            mu * mu_step
+                        } else {
+                            0.0
+                        };
                     } else {
-                        0.0
-                    };
+                        // Only a short step helped: the quadratic model overshoots (typically in
+                        // the stiffness, whose effect is bilinear). Damp the next Newton step.
+                        mu_step = (mu_step * 2.0).max(2.0);
+                        mu = (mu * mu_step).max(self.options.mu_min);
+                    }
                     if (before - after) / after.abs().max(1e-300) < self.options.tolerance {
                         // One more backward pass so that the gains and s_0 belong to this nominal.
                         finish_after_backward = true;
@@ -357,8 +371,13 @@ impl Ilqg {
         }
     }
 
-    /// Expected cost of the nominal (or the candidate) under the current gains.
-    fn merit(&mut self, stochastic: bool, candidate: bool) -> f64 {
+    /// The line-search merit of the nominal (or the candidate): its cost plus the noise cost
+    /// `Σ_k ½ Σ_i c_iᵀ S_{k+1} c_i` with the value Hessians `S` of the last backward pass frozen.
+    /// Its gradient is exactly the noise part of the backward pass's `Q_x`, `Q_u` (the `Cxᵀ S c`,
+    /// `Cuᵀ S c` terms), so an ILQG step is a descent direction for it. The fully propagated
+    /// expected cost ([`crate::solver::moments::expected_cost`]) also moves with the linearisation itself, which
+    /// ILQG's first-order step does not see (DESIGN §4), and makes a poor merit.
+    fn merit(&mut self, problem: &Problem, stochastic: bool, candidate: bool) -> f64 {
         let traj = if candidate {
             &self.candidate
         } else {
@@ -367,14 +386,23 @@ impl Ilqg {
         if !stochastic {
             return traj.cost;
         }
-        moments::expected_cost(
-            traj.cost,
-            &traj.lin,
-            &traj.derivs,
-            Some(&self.gains),
-            &mut self.moments,
-            |_, _| {},
-        )
+        let g = &mut self.noise_scratch;
+        let mut noise = 0.0;
+        for k in 0..problem.horizon {
+            problem
+                .dynamics
+                .noise_gain(k, traj.x[k].as_slice(), traj.u[k].as_slice(), g);
+            let s = &self.value_hessians[k];
+            for i in 0..g.ncols() {
+                let c = g.column(i);
+                let mut q = 0.0;
+                for a in 0..c.len() {
+                    q += c[a] * s.column(a).dot(&c);
+                }
+                noise += 0.5 * q;
+            }
+        }
+        traj.cost + noise
     }
 
     /// One backward pass at the nominal with regularisation `mu`. Returns the predicted expected
@@ -396,6 +424,7 @@ impl Ilqg {
         let (mut dv1, mut dv2) = (0.0, 0.0);
 
         for k in (0..horizon).rev() {
+            self.value_hessians[k].copy_from(&bw.s_mat);
             let (lin, d) = (&traj.lin[k], &traj.derivs[k]);
             let mut q0 = problem
                 .cost
@@ -429,6 +458,21 @@ impl Ilqg {
                 }
             }
 
+            // Regularisation on the value function (Tassa, Erez & Todorov 2012): S + μ I in the
+            // control terms. As μ grows the gains tend to −(BᵀB)⁻¹BᵀA, which cancels state
+            // deviations, rather than to zero (open loop), so the line search stays meaningful in
+            // an unstable field. The value update below uses the unregularised Q.
+            bw.quu_reg.copy_from(&bw.quu);
+            bw.qux_reg.copy_from(&bw.qux);
+            if mu > 0.0 {
+                bw.quu_reg.gemm_tr(mu, &lin.b, &lin.b, 1.0);
+                bw.qux_reg.gemm_tr(mu, &lin.b, &lin.a, 1.0);
+                for j in 0..nu {
+                    // A trace of control-space damping for controls that do not move the state.
+                    bw.quu_reg[(j, j)] += mu * 1e-6;
+                }
+            }
+
             // Feedforward step and gains from the box QP on the regularised Q_uu.
             let u = &traj.u[k];
             let mut lower = [0.0; MAX_QP];
@@ -437,8 +481,8 @@ impl Ilqg {
                 lower[j] = problem.bounds.lower[j] - u[j];
                 upper[j] = problem.bounds.upper[j] - u[j];
             }
-            let quu = &bw.quu;
-            let h = |i: usize, j: usize| quu[(i, j)] + if i == j { mu } else { 0.0 };
+            let quu = &bw.quu_reg;
+            let h = |i: usize, j: usize| quu[(i, j)];
             let qp = solve_box_qp(
                 h,
                 bw.qu.as_slice(),
@@ -455,7 +499,7 @@ impl Ilqg {
             }
             let gain = &mut self.gains[k];
             gain.fill(0.0);
-            if let Some(factor) = &qp.factor {
+            if let Some(regularized) = &qp.factor {
                 let mut free = [0usize; MAX_QP];
                 let mut nfree = 0;
                 for j in (0..nu).filter(|&j| qp.free[j]) {
@@ -463,10 +507,11 @@ impl Ilqg {
                     nfree += 1;
                 }
                 let free = &free[..nfree];
+                let factor = regularized;
                 let mut col = [0.0; MAX_QP];
                 for c in 0..gain.ncols() {
                     for (a, &j) in free.iter().enumerate() {
-                        col[a] = bw.qux[(j, c)];
+                        col[a] = bw.qux_reg[(j, c)];
                     }
                     factor.solve(&mut col[..nfree]);
                     for (a, &j) in free.iter().enumerate() {
@@ -509,12 +554,15 @@ impl Ilqg {
     }
 }
 
+/// A policy to roll out: the nominal it was made around, the feedforward steps and the gains.
+type Policy<'a> = (&'a Trajectory, &'a [DVector<f64>], &'a [DMatrix<f64>]);
+
 /// Rolls `traj` forward from `traj.x[0]`. With a policy `(nominal, l, L)` the controls are
 /// `clamp(ū + α l + L (x − x̄))`; without, `traj.u` is used as it is. Returns false on divergence.
 fn rollout(
     problem: &Problem,
     traj: &mut Trajectory,
-    policy: Option<(&Trajectory, &[DVector<f64>], &[DMatrix<f64>])>,
+    policy: Option<Policy>,
     bounds: Option<&Bounds>,
     alpha: f64,
 ) -> bool {

@@ -1,0 +1,627 @@
+//! Derivatives of every model × actuator × field × noise combination.
+//!
+//! * [`ArmModel::f`] and [`ArmModel::diffusion`] against an independent transcription of the
+//!   equations of motion in DESIGN §2 (written here with nalgebra, not with the crate's code).
+//! * [`ArmModel::jacobians`] (`f_x`, `f_u`, `∂F/∂x`, `∂F/∂u`) against central finite differences
+//!   of `f` and `diffusion`.
+//! * [`EulerModel::linearize`] (`A = I + Δ f_x`, `B = Δ f_u`, `c = √Δ F`, `Cx`, `Cu`) against
+//!   central finite differences of [`EulerModel::step`] and [`EulerModel::noise_gain`].
+
+use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use vic::dynamics::{Dynamics, EulerModel, Integrator, Linearization, NoiseKind};
+use vic::model::{
+    Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
+};
+
+/// Random points per model.
+const POINTS: usize = 6;
+
+fn single_joint() -> SingleJoint {
+    SingleJoint {
+        inertia: 5.08e-3,
+        mass: 0.812,
+        com: 0.103,
+        length: 0.273,
+        gravity: 9.81,
+        viscosity: 0.02,
+    }
+}
+
+fn two_link() -> TwoLink {
+    TwoLink {
+        l1: 0.30,
+        l2: 0.33,
+        s2: 0.16,
+        m2: 1.0,
+        i1: 0.025,
+        i2: 0.045,
+        viscosity: [[0.05, 0.025], [0.025, 0.05]],
+    }
+}
+
+/// Every valid combination of plant, actuator, field and noise.
+fn all_models() -> Vec<ArmModel> {
+    let mut models = Vec::new();
+    for plant in [
+        Plant::SingleJoint(single_joint()),
+        Plant::TwoLink(two_link()),
+    ] {
+        let dof = plant.dof();
+        let actuators = [
+            Actuator::Torque,
+            Actuator::Impedance {
+                damping: Damping::Proportional { alpha: 0.1 },
+            },
+            Actuator::Impedance {
+                damping: Damping::Affine {
+                    slope: 0.075,
+                    offset: -0.0015,
+                },
+            },
+            Actuator::Vsa {
+                motor_inertia: [2.0, 0.2][..dof].to_vec(),
+            },
+        ];
+        let fields = if dof == 1 {
+            vec![Field::None]
+        } else {
+            vec![
+                Field::None,
+                Field::Divergent { beta: 50.0 },
+                // Not antisymmetric, so that every entry of B_c matters.
+                Field::Curl {
+                    matrix: [[1.5, 13.0], [-11.0, 2.0]],
+                },
+            ]
+        };
+        for actuator in &actuators {
+            let nx = actuator.nx(dof);
+            let noises = [
+                Noise::None,
+                // The first joint velocity (the paper's σ q1' I) and the last state component.
+                Noise::StateProportional {
+                    sigma: 0.05,
+                    component: dof,
+                },
+                Noise::StateProportional {
+                    sigma: 0.3,
+                    component: nx - 1,
+                },
+                Noise::Torque { a: 0.15, b: 0.37 },
+            ];
+            for field in &fields {
+                for noise in noises {
+                    models.push(
+                        ArmModel::new(plant.clone(), actuator.clone(), *field, noise)
+                            .expect("valid model"),
+                    );
+                }
+            }
+        }
+    }
+    // 4 actuators × 4 noises × (1 + 3 fields).
+    assert_eq!(models.len(), 4 * 4 * 4);
+    models
+}
+
+fn random_exogenous(rng: &mut StdRng) -> Exogenous {
+    Exogenous {
+        q_d: [rng.random_range(-1.0..1.5), rng.random_range(0.2..2.0)],
+        qd_d: [rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)],
+        tau_ext: [rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)],
+    }
+}
+
+/// A random state (angles, velocities and, with a VSA, motor angles near the joint angles and motor
+/// velocities) and a random control (torques, non-negative stiffnesses).
+fn random_point(model: &ArmModel, rng: &mut StdRng) -> (Vec<f64>, Vec<f64>) {
+    let dof = model.dof();
+    let mut x = vec![0.0; model.nx()];
+    for i in 0..dof {
+        x[i] = rng.random_range(-1.0..1.5);
+        x[dof + i] = rng.random_range(-2.0..2.0);
+    }
+    if model.nx() > 2 * dof {
+        for i in 0..dof {
+            x[2 * dof + i] = x[i] + rng.random_range(-0.3..0.3);
+            x[3 * dof + i] = rng.random_range(-2.0..2.0);
+        }
+    }
+    let mut u = vec![0.0; model.nu()];
+    for (j, v) in u.iter_mut().enumerate() {
+        *v = if j < dof {
+            rng.random_range(-3.0..3.0)
+        } else {
+            rng.random_range(0.5..40.0)
+        };
+    }
+    (x, u)
+}
+
+fn describe(model: &ArmModel) -> String {
+    format!(
+        "{}-dof {:?} / {:?} / {:?}",
+        model.dof(),
+        model.actuator,
+        model.field,
+        model.noise
+    )
+}
+
+/// Drift through the crate's `f`.
+fn drift(model: &ArmModel, x: &[f64], u: &[f64], ex: &Exogenous) -> Vec<f64> {
+    let mut out = vec![0.0; model.nx()];
+    model.f(x, u, ex, &mut out);
+    out
+}
+
+/// Diffusion through the crate's `diffusion`, as an n×p matrix.
+fn diffusion(model: &ArmModel, x: &[f64], u: &[f64]) -> DMatrix<f64> {
+    let (nx, nw) = (model.nx(), model.nw());
+    let mut out = vec![0.0; nx * nw.max(1)];
+    model.diffusion(x, u, &mut out);
+    DMatrix::from_column_slice(nx, nw, &out[..nx * nw])
+}
+
+/// Checks that `actual` equals `expected` entry by entry: within `rel` of the entry and `rel` of
+/// the largest entry of its row (derivatives of one output share a scale; different outputs do
+/// not: a joint acceleration moves 10⁴ times more than an angle), plus `abs` for round-off.
+fn assert_close(what: &str, actual: &DMatrix<f64>, expected: &DMatrix<f64>, rel: f64, abs: f64) {
+    assert_close_with(what, actual, expected, rel, |_, _| abs);
+}
+
+/// [`assert_close`] with an absolute allowance per entry.
+fn assert_close_with(
+    what: &str,
+    actual: &DMatrix<f64>,
+    expected: &DMatrix<f64>,
+    rel: f64,
+    abs: impl Fn(usize, usize) -> f64,
+) {
+    assert_eq!(actual.shape(), expected.shape(), "{what}: shape");
+    for i in 0..expected.nrows() {
+        let row_scale = expected.row(i).amax();
+        for j in 0..expected.ncols() {
+            let (a, e) = (actual[(i, j)], expected[(i, j)]);
+            let tol = rel * (e.abs() + row_scale) + abs(i, j);
+            assert!(
+                (a - e).abs() <= tol,
+                "{what}: entry ({i}, {j}) is {a:e}, expected {e:e} (tolerance {tol:e})\n\
+                 actual {actual:.6e}\nexpected {expected:.6e}"
+            );
+        }
+    }
+}
+
+/// Checks a derivative against its finite-difference estimate, allowing [`FD_REL`] relative
+/// (truncation) and the estimate's own round-off.
+fn assert_matches_fd(what: &str, actual: &DMatrix<f64>, fd: &Fd) {
+    assert_close_with(what, actual, &fd.value, FD_REL, |i, j| fd.roundoff[(i, j)]);
+}
+
+/// Central-difference step for a variable of size `v`.
+fn step_size(v: f64) -> f64 {
+    1e-6 * (1.0 + v.abs())
+}
+
+// ---------------------------------------------------------------------------------------------
+// An independent transcription of DESIGN §2.
+// ---------------------------------------------------------------------------------------------
+
+/// Mass matrix, bias torques `C + B_v q' + g`, hand Jacobian and hand position of the limb.
+struct Limb {
+    mass: Matrix2<f64>,
+    bias: Vector2<f64>,
+    jacobian: Matrix2<f64>,
+    hand: Vector2<f64>,
+}
+
+fn limb(plant: &Plant, q: &[f64], qd: &[f64]) -> Limb {
+    match plant {
+        Plant::SingleJoint(p) => Limb {
+            // The unused second joint gets unit inertia so that M stays invertible.
+            mass: Matrix2::new(p.inertia, 0.0, 0.0, 1.0),
+            bias: Vector2::new(
+                p.mass * p.gravity * p.com * q[0].cos() + p.viscosity * qd[0],
+                0.0,
+            ),
+            jacobian: Matrix2::new(-p.length * q[0].sin(), 0.0, p.length * q[0].cos(), 0.0),
+            hand: Vector2::new(p.length * q[0].cos(), p.length * q[0].sin()),
+        },
+        Plant::TwoLink(p) => {
+            let (c2, s2) = (q[1].cos(), q[1].sin());
+            let a1 = p.i1 + p.i2 + p.m2 * p.l1 * p.l1;
+            let a2 = p.m2 * p.l1 * p.s2;
+            let m = Matrix2::new(a1 + 2.0 * a2 * c2, p.i2 + a2 * c2, p.i2 + a2 * c2, p.i2);
+            let coriolis = a2 * s2 * Vector2::new(-qd[1] * (2.0 * qd[0] + qd[1]), qd[0] * qd[0]);
+            let bv = Matrix2::new(
+                p.viscosity[0][0],
+                p.viscosity[0][1],
+                p.viscosity[1][0],
+                p.viscosity[1][1],
+            );
+            let (t1, t12) = (q[0], q[0] + q[1]);
+            Limb {
+                mass: m,
+                bias: coriolis + bv * Vector2::new(qd[0], qd[1]),
+                jacobian: Matrix2::new(
+                    -p.l1 * t1.sin() - p.l2 * t12.sin(),
+                    -p.l2 * t12.sin(),
+                    p.l1 * t1.cos() + p.l2 * t12.cos(),
+                    p.l2 * t12.cos(),
+                ),
+                hand: Vector2::new(
+                    p.l1 * t1.cos() + p.l2 * t12.cos(),
+                    p.l1 * t1.sin() + p.l2 * t12.sin(),
+                ),
+            }
+        }
+    }
+}
+
+/// `x' = f(x, u)` from the equations of DESIGN §2.
+fn reference_drift(model: &ArmModel, x: &[f64], u: &[f64], ex: &Exogenous) -> Vec<f64> {
+    let n = model.dof();
+    let mut q = [0.0; 2];
+    let mut qd = [0.0; 2];
+    q[..n].copy_from_slice(&x[..n]);
+    qd[..n].copy_from_slice(&x[n..2 * n]);
+    let limb = limb(&model.plant, &q, &qd);
+    let mut tau = Vector2::from(ex.tau_ext);
+    for i in 0..n {
+        tau[i] += match &model.actuator {
+            Actuator::Torque => u[i],
+            Actuator::Impedance { damping } => {
+                let kp = u[n + i];
+                let kd = match *damping {
+                    Damping::Proportional { alpha } => alpha * kp,
+                    Damping::Affine { slope, offset } => slope * kp + offset,
+                };
+                u[i] - kp * (q[i] - ex.q_d[i]) - kd * (qd[i] - ex.qd_d[i])
+            }
+            Actuator::Vsa { .. } => u[n + i] * (x[2 * n + i] - q[i]),
+        };
+    }
+    let hand_velocity = limb.jacobian * Vector2::from(qd);
+    let force = match model.field {
+        Field::None => Vector2::zeros(),
+        Field::Divergent { beta } => Vector2::new(beta * limb.hand[0], 0.0),
+        Field::Curl { matrix: b } => {
+            Matrix2::new(b[0][0], b[0][1], b[1][0], b[1][1]) * hand_velocity
+        }
+    };
+    let rhs = tau - limb.bias + limb.jacobian.transpose() * force;
+    let qdd = limb.mass.try_inverse().expect("M invertible") * rhs;
+    let mut xdot = vec![0.0; model.nx()];
+    for i in 0..n {
+        xdot[i] = qd[i];
+        xdot[n + i] = qdd[i];
+    }
+    if let Actuator::Vsa { motor_inertia } = &model.actuator {
+        for i in 0..n {
+            let theta = x[2 * n + i];
+            xdot[2 * n + i] = x[3 * n + i];
+            xdot[3 * n + i] = (u[i] - u[n + i] * (theta - q[i])) / motor_inertia[i];
+        }
+    }
+    xdot
+}
+
+/// `F(x, u)` from DESIGN §2: `σ x_c I`, or the torque noise `(a + b q'_i)` on joint `i` through
+/// `M⁻¹`.
+fn reference_diffusion(model: &ArmModel, x: &[f64]) -> DMatrix<f64> {
+    let (n, nx) = (model.dof(), model.nx());
+    match model.noise {
+        Noise::None => DMatrix::zeros(nx, 0),
+        Noise::StateProportional { sigma, component } => {
+            DMatrix::identity(nx, nx) * (sigma * x[component])
+        }
+        Noise::Torque { a, b } => {
+            let mut q = [0.0; 2];
+            q[..n].copy_from_slice(&x[..n]);
+            let minv = limb(&model.plant, &q, &[0.0; 2])
+                .mass
+                .try_inverse()
+                .expect("M invertible");
+            let mut f = DMatrix::zeros(nx, n);
+            for i in 0..n {
+                let e = a + b * x[n + i];
+                for j in 0..n {
+                    f[(n + j, i)] = minv[(j, i)] * e;
+                }
+            }
+            f
+        }
+    }
+}
+
+#[test]
+fn drift_and_diffusion_match_the_equations_of_motion() {
+    let mut rng = StdRng::seed_from_u64(11);
+    for model in all_models() {
+        let name = describe(&model);
+        for _ in 0..POINTS {
+            let (x, u) = random_point(&model, &mut rng);
+            let ex = random_exogenous(&mut rng);
+            let f = DMatrix::from_column_slice(model.nx(), 1, &drift(&model, &x, &u, &ex));
+            let f_ref =
+                DMatrix::from_column_slice(model.nx(), 1, &reference_drift(&model, &x, &u, &ex));
+            assert_close(&format!("{name}: f"), &f, &f_ref, 1e-12, 1e-12);
+            let big_f = diffusion(&model, &x, &u);
+            assert_close(
+                &format!("{name}: F"),
+                &big_f,
+                &reference_diffusion(&model, &x),
+                1e-12,
+                1e-15,
+            );
+            assert_eq!(big_f.ncols(), model.nw(), "{name}: noise channels");
+        }
+    }
+}
+
+/// A central-difference Jacobian and a bound on its round-off error.
+struct Fd {
+    value: DMatrix<f64>,
+    roundoff: DMatrix<f64>,
+}
+
+/// Central differences of a vector function of `x` (columns: one per component of `x`). The
+/// round-off bound allows 64 ulps of error in each evaluated value, divided by the step.
+fn fd_jacobian(x: &[f64], rows: usize, mut g: impl FnMut(&[f64]) -> Vec<f64>) -> Fd {
+    let mut value = DMatrix::zeros(rows, x.len());
+    let mut roundoff = DMatrix::zeros(rows, x.len());
+    let mut xp = x.to_vec();
+    for j in 0..x.len() {
+        let h = step_size(x[j]);
+        xp[j] = x[j] + h;
+        let plus = g(&xp);
+        xp[j] = x[j] - h;
+        let minus = g(&xp);
+        xp[j] = x[j];
+        for i in 0..rows {
+            value[(i, j)] = (plus[i] - minus[i]) / (2.0 * h);
+            roundoff[(i, j)] = 64.0 * f64::EPSILON * plus[i].abs().max(minus[i].abs()) / h;
+        }
+    }
+    Fd { value, roundoff }
+}
+
+/// Relative tolerance of the finite-difference comparisons: the truncation error of a central
+/// difference with h ≈ 1e-6 is ~1e-12 relative and its round-off ~1e-10 relative; a wrong
+/// derivative is off by O(1).
+const FD_REL: f64 = 1e-7;
+
+#[test]
+fn arm_model_jacobians_match_finite_differences() {
+    let mut rng = StdRng::seed_from_u64(1);
+    for model in all_models() {
+        let name = describe(&model);
+        let (nx, nu, nw) = (model.nx(), model.nu(), model.nw());
+        for _ in 0..POINTS {
+            let (x, u) = random_point(&model, &mut rng);
+            let ex = random_exogenous(&mut rng);
+            let mut fx = vec![f64::NAN; nx * nx];
+            let mut fu = vec![f64::NAN; nx * nu];
+            let mut dfx = vec![f64::NAN; nx * nx * nw];
+            let mut dfu = vec![f64::NAN; nu * nx * nw];
+            model.jacobians(
+                &x,
+                &u,
+                &ex,
+                &mut fx,
+                &mut fu,
+                Some((&mut dfx[..], &mut dfu[..])),
+            );
+            let fx = DMatrix::from_column_slice(nx, nx, &fx);
+            let fu = DMatrix::from_column_slice(nx, nu, &fu);
+            let fd_fx = fd_jacobian(&x, nx, |xp| drift(&model, xp, &u, &ex));
+            let fd_fu = fd_jacobian(&u, nx, |up| drift(&model, &x, up, &ex));
+            assert_matches_fd(&format!("{name}: f_x"), &fx, &fd_fx);
+            assert_matches_fd(&format!("{name}: f_u"), &fu, &fd_fu);
+
+            // ∂F/∂x_j and ∂F/∂u_j, each an n×p block in the layout of `diffusion`.
+            let block = nx * nw;
+            let flat = |m: DMatrix<f64>| m.as_slice().to_vec();
+            let fd_dfx = fd_jacobian(&x, block, |xp| flat(diffusion(&model, xp, &u)));
+            let fd_dfu = fd_jacobian(&u, block, |up| flat(diffusion(&model, &x, up)));
+            assert_matches_fd(
+                &format!("{name}: dF/dx"),
+                &DMatrix::from_column_slice(block, nx, &dfx),
+                &fd_dfx,
+            );
+            assert_matches_fd(
+                &format!("{name}: dF/du"),
+                &DMatrix::from_column_slice(block, nu, &dfu),
+                &fd_dfu,
+            );
+
+            // Without the noise request the drift Jacobians are the same.
+            let mut fx2 = vec![f64::NAN; nx * nx];
+            let mut fu2 = vec![f64::NAN; nx * nu];
+            model.jacobians(&x, &u, &ex, &mut fx2, &mut fu2, None);
+            assert_eq!(fx.as_slice(), &fx2[..], "{name}: f_x without noise request");
+            assert_eq!(fu.as_slice(), &fu2[..], "{name}: f_u without noise request");
+        }
+    }
+}
+
+fn noise_gain(model: &EulerModel, k: usize, x: &[f64], u: &[f64]) -> DMatrix<f64> {
+    let mut g = DMatrix::from_element(model.nx(), model.nw(), f64::NAN);
+    model.noise_gain(k, x, u, &mut g);
+    g
+}
+
+fn euler_step(model: &EulerModel, k: usize, x: &[f64], u: &[f64]) -> Vec<f64> {
+    let mut next = vec![f64::NAN; model.nx()];
+    model.step(k, x, u, &mut next);
+    next
+}
+
+/// The discrete step from the drift, written out here: `substeps` explicit Euler steps, or
+/// semi-implicit Euler (velocities first, then positions with the new velocities) on each
+/// (position, velocity) block.
+fn reference_step(
+    model: &ArmModel,
+    ex: &Exogenous,
+    dt: f64,
+    substeps: usize,
+    integrator: Integrator,
+    x: &[f64],
+    u: &[f64],
+) -> Vec<f64> {
+    let (dof, nx) = (model.dof(), model.nx());
+    let h = dt / substeps as f64;
+    let mut cur = x.to_vec();
+    for _ in 0..substeps {
+        let xdot = reference_drift(model, &cur, u, ex);
+        match integrator {
+            Integrator::Euler => {
+                for i in 0..nx {
+                    cur[i] += h * xdot[i];
+                }
+            }
+            Integrator::SemiImplicit => {
+                // Blocks (q, q') and, with a VSA, (θ, θ').
+                for block in 0..nx / (2 * dof) {
+                    let (p, v) = (2 * dof * block, 2 * dof * block + dof);
+                    for i in 0..dof {
+                        cur[v + i] += h * xdot[v + i];
+                        cur[p + i] += h * cur[v + i];
+                    }
+                }
+            }
+        }
+    }
+    cur
+}
+
+/// The discretisations checked: the paper's single Euler step and the sub-stepped ones.
+const DISCRETISATIONS: [(Integrator, usize); 4] = [
+    (Integrator::Euler, 1),
+    (Integrator::Euler, 3),
+    (Integrator::SemiImplicit, 1),
+    (Integrator::SemiImplicit, 4),
+];
+
+#[test]
+fn discrete_step_matches_the_integrator_applied_to_the_drift() {
+    let mut rng = StdRng::seed_from_u64(3);
+    let dt = 0.01;
+    for model in all_models() {
+        let name = describe(&model);
+        let exogenous: Vec<Exogenous> = (0..4).map(|_| random_exogenous(&mut rng)).collect();
+        for (integrator, substeps) in DISCRETISATIONS {
+            let mut euler = EulerModel::euler(model.clone(), dt, exogenous.clone());
+            euler.integrator = integrator;
+            euler.substeps = substeps;
+            for k in [0, 3, 9] {
+                let what = format!("{name}, {integrator:?} × {substeps}, knot {k}");
+                let (x, u) = random_point(&model, &mut rng);
+                let ex = &exogenous[k.min(exogenous.len() - 1)];
+                let next = euler_step(&euler, k, &x, &u);
+                let expected = reference_step(&model, ex, dt, substeps, integrator, &x, &u);
+                assert_close(
+                    &format!("{what}: step"),
+                    &DMatrix::from_column_slice(x.len(), 1, &next),
+                    &DMatrix::from_column_slice(x.len(), 1, &expected),
+                    1e-12,
+                    1e-12,
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn euler_linearization_matches_finite_differences() {
+    let mut rng = StdRng::seed_from_u64(2);
+    let dt = 0.01;
+    for model in all_models() {
+        let name = describe(&model);
+        let exogenous: Vec<Exogenous> = (0..4).map(|_| random_exogenous(&mut rng)).collect();
+        for (integrator, substeps) in DISCRETISATIONS {
+            let mut euler = EulerModel::euler(model.clone(), dt, exogenous.clone());
+            euler.integrator = integrator;
+            euler.substeps = substeps;
+            let (nx, nu, nw) = (euler.nx(), euler.nu(), euler.nw());
+            assert_eq!((nx, nu, nw), (model.nx(), model.nu(), model.nw()));
+            // Knot 7 is past the reference and must use its last entry.
+            for (point, k) in [0, 2, 3, 7].into_iter().enumerate() {
+                let what = format!("{name}, {integrator:?} × {substeps}, point {point}, knot {k}");
+                let (x, u) = random_point(&model, &mut rng);
+                let ex = exogenous[k.min(exogenous.len() - 1)];
+                let mut lin = Linearization::new(nx, nu, nw);
+                euler.linearize(k, &x, &u, &mut lin);
+                let fd_a = fd_jacobian(&x, nx, |xp| euler_step(&euler, k, xp, &u));
+                let fd_b = fd_jacobian(&u, nx, |up| euler_step(&euler, k, &x, up));
+                // The identity part of A is exact; compare A − I.
+                let eye = DMatrix::<f64>::identity(nx, nx);
+                let fd_a_minus_i = Fd {
+                    value: &fd_a.value - &eye,
+                    roundoff: fd_a.roundoff.clone(),
+                };
+                assert_matches_fd(&format!("{what}: A - I"), &(&lin.a - &eye), &fd_a_minus_i);
+                assert_matches_fd(&format!("{what}: B"), &lin.b, &fd_b);
+                if (integrator, substeps) == (Integrator::Euler, 1) {
+                    // The paper's discretisation: A = I + Δ f_x, B = Δ f_u exactly.
+                    let mut fx = vec![0.0; nx * nx];
+                    let mut fu = vec![0.0; nx * nu];
+                    model.jacobians(&x, &u, &ex, &mut fx, &mut fu, None);
+                    let a = eye.clone() + DMatrix::from_column_slice(nx, nx, &fx) * dt;
+                    let b = DMatrix::from_column_slice(nx, nu, &fu) * dt;
+                    assert_close(&format!("{what}: A = I + Δ f_x"), &lin.a, &a, 1e-13, 0.0);
+                    assert_close(&format!("{what}: B = Δ f_u"), &lin.b, &b, 1e-13, 0.0);
+                }
+
+                if nw == 0 {
+                    assert_eq!(lin.noise, NoiseKind::None, "{what}: noise kind");
+                    continue;
+                }
+                // c = √Δ F at the start of the step, once per control step.
+                let expected_c = diffusion(&model, &x, &u) * dt.sqrt();
+                assert_close(&format!("{what}: c"), &lin.c, &expected_c, 1e-14, 0.0);
+                assert_close(
+                    &format!("{what}: noise_gain"),
+                    &noise_gain(&euler, k, &x, &u),
+                    &expected_c,
+                    1e-14,
+                    0.0,
+                );
+                // Cx_i, Cu_i: derivatives of column i of the noise gain.
+                let mut all_zero = true;
+                for i in 0..nw {
+                    let column = |m: DMatrix<f64>| m.column(i).iter().copied().collect::<Vec<_>>();
+                    let fd_cx = fd_jacobian(&x, nx, |xp| column(noise_gain(&euler, k, xp, &u)));
+                    let fd_cu = fd_jacobian(&u, nx, |up| column(noise_gain(&euler, k, &x, up)));
+                    assert_matches_fd(&format!("{what}: Cx[{i}]"), &lin.cx[i], &fd_cx);
+                    assert_matches_fd(&format!("{what}: Cu[{i}]"), &lin.cu[i], &fd_cu);
+                    all_zero &= fd_cx.value.amax() == 0.0 && fd_cu.value.amax() == 0.0;
+                }
+                // The kind tells the backward pass which terms it may skip.
+                let expected_kind = if all_zero {
+                    NoiseKind::Additive
+                } else {
+                    NoiseKind::Dependent
+                };
+                assert_eq!(lin.noise, expected_kind, "{what}: noise kind");
+            }
+        }
+    }
+}
+
+/// The finite-difference reference itself: exact (to round-off) on an affine map.
+#[test]
+fn finite_differences_are_exact_on_affine_maps() {
+    let a = DMatrix::from_fn(3, 4, |i, j| (i as f64 + 1.0) * 0.5 - j as f64);
+    let x0 = [0.3, -1.0, 2.0, 0.1];
+    let fd = fd_jacobian(&x0, 3, |x| {
+        (&a * DVector::from_column_slice(x))
+            .iter()
+            .copied()
+            .collect()
+    });
+    assert_close("affine map", &fd.value, &a, 1e-9, 1e-9);
+}
