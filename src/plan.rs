@@ -253,9 +253,16 @@ pub fn solve_in_phases(
 }
 
 /// The cost of the plain plant applied to the plant block of a delay-augmented state.
-struct DelayedCost<'a> {
+pub struct DelayedCost<'a> {
     inner: &'a TrackingCost,
     nx: usize,
+}
+
+impl<'a> DelayedCost<'a> {
+    /// Wraps `inner`, a cost on the first `nx` components of the state.
+    pub fn new(inner: &'a TrackingCost, nx: usize) -> Self {
+        DelayedCost { inner, nx }
+    }
 }
 
 impl crate::cost::Cost for DelayedCost<'_> {
