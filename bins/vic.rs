@@ -29,8 +29,12 @@ enum Command {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum Method {
-    /// Iterative LQG: a nominal plan with locally optimal feedback gains (Todorov & Li 2005).
+    /// Iterative LQG: a nominal plan with locally optimal feedback gains (Todorov & Li 2005),
+    /// made for the scenario's feedback delay.
     Ilqg,
+    /// Stochastic optimal open-loop control: torque and stiffness for execution without any
+    /// feedback, optimal for the open-loop plant's mean and covariance (Berret & Jean 2020).
+    Sooc,
 }
 
 #[derive(clap::Args)]
@@ -38,9 +42,9 @@ struct PlanArgs {
     /// Scenario file (TOML).
     #[arg(long, short, value_name = "FILE")]
     config: PathBuf,
-    /// Planning method.
-    #[arg(long, value_enum, default_value = "ilqg")]
-    method: Method,
+    /// Planning method (default: the scenario's [solver] method, else ilqg).
+    #[arg(long, value_enum)]
+    method: Option<Method>,
     /// Central feedback delay in ms (a whole number of time steps); overrides task.delay_ms.
     #[arg(long, value_name = "D")]
     delay_ms: Option<f64>,
@@ -96,9 +100,13 @@ fn run_plan(args: PlanArgs) -> Result<(), Failure> {
         overrides.push(format!("task.delay_ms={d}"));
     }
     let scenario = Scenario::load(&args.config, &overrides).map_err(Failure::input)?;
-    let Method::Ilqg = args.method;
-    let plan =
-        plan(&scenario).map_err(|e| Failure::input(format!("{}: {e}", args.config.display())))?;
+    let method = match args.method {
+        Some(Method::Ilqg) => vic::plan::Method::Ilqg,
+        Some(Method::Sooc) => vic::plan::Method::Sooc,
+        None => scenario.solver.method,
+    };
+    let plan = plan(&scenario, method)
+        .map_err(|e| Failure::input(format!("{}: {e}", args.config.display())))?;
     if let Some(out) = &args.out {
         let text = serde_json::to_string(&plan).map_err(Failure::runtime)?;
         std::fs::write(out, text)

@@ -131,15 +131,15 @@ struct RawTask {
 /// The `[solver]` section: the method and the solver's options (every key optional).
 #[derive(Debug, Clone, PartialEq)]
 pub struct IlqgSection {
-    /// `ilqg` (closed-loop policy) for now.
-    pub method: String,
+    /// The planning method.
+    pub method: crate::plan::Method,
     pub options: IlqgOptions,
 }
 
 impl Default for IlqgSection {
     fn default() -> Self {
         IlqgSection {
-            method: "ilqg".into(),
+            method: crate::plan::Method::Ilqg,
             options: IlqgOptions::default(),
         }
     }
@@ -159,10 +159,21 @@ struct RawSolver {
 }
 
 impl RawSolver {
-    fn resolve(self) -> IlqgSection {
+    fn resolve(self, cx: &Ctx) -> Result<IlqgSection, ConfigError> {
         let d = IlqgOptions::default();
-        IlqgSection {
-            method: self.method.unwrap_or_else(|| "ilqg".into()),
+        let method = match self.method.as_deref().unwrap_or("ilqg") {
+            "ilqg" => crate::plan::Method::Ilqg,
+            "sooc" => crate::plan::Method::Sooc,
+            other => {
+                return Err(cx.err(
+                    "solver",
+                    "method",
+                    format!("unknown method \"{other}\"; expected \"ilqg\" or \"sooc\""),
+                ));
+            }
+        };
+        Ok(IlqgSection {
+            method,
             options: IlqgOptions {
                 max_iterations: self.max_iterations.unwrap_or(d.max_iterations),
                 tolerance: self.tolerance.unwrap_or(d.tolerance),
@@ -172,7 +183,7 @@ impl RawSolver {
                 mu_max: self.mu_max.unwrap_or(d.mu_max),
                 stochastic: self.stochastic.unwrap_or(d.stochastic),
             },
-        }
+        })
     }
 }
 
@@ -700,14 +711,7 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
 
     check_substep(&model, &task, &bounds, &cx)?;
 
-    let solver = raw.solver.resolve();
-    if solver.method != "ilqg" {
-        return Err(cx.err(
-            "solver",
-            "method",
-            format!("unknown method \"{}\"; expected \"ilqg\"", solver.method),
-        ));
-    }
+    let solver = raw.solver.resolve(&cx)?;
     let o = &solver.options;
     if o.max_iterations == 0 {
         return Err(cx.err("solver", "max_iterations", "must be at least 1"));
@@ -748,10 +752,24 @@ fn check_substep(
     if !k_max.is_finite() {
         return Ok(());
     }
-    // Smallest effective inertia over the workspace: the smallest eigenvalue of M(q).
+    // Smallest effective inertia over the postures of the task (elbow angles between start and
+    // target, with a margin): the smallest eigenvalue of M(q).
+    let elbow = |path: &TaskPath| -> (f64, f64) {
+        let ends = match path {
+            TaskPath::Joint { start, target } => [
+                start.get(1).copied().unwrap_or(0.0),
+                target.get(1).copied().unwrap_or(0.0),
+            ],
+            TaskPath::Hand { start, target } => {
+                [*start, *target].map(|p| model.plant.inverse_kinematics(p).map_or(0.0, |q| q[1]))
+            }
+        };
+        (ends[0].min(ends[1]) - 0.3, ends[0].max(ends[1]) + 0.3)
+    };
+    let (lo, hi) = elbow(&task.path);
     let inertia = (0..=36)
         .map(|i| {
-            let q = [0.0, i as f64 * std::f64::consts::PI / 36.0];
+            let q = [0.0, lo + (hi - lo) * i as f64 / 36.0];
             let m = model.plant.mass_matrix(&q);
             if dof == 1 {
                 m[0][0]

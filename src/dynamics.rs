@@ -5,7 +5,7 @@
 use crate::model::{ArmModel, Exogenous};
 use crate::scalar::{MAX_NU, MAX_NW, MAX_NX, Scalar};
 use nalgebra::DMatrix;
-use num_dual::Dual64;
+use num_dual::Dual;
 
 /// What kind of noise a linearisation carries; the backward pass skips what is absent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,45 +198,45 @@ impl Dynamics for EulerModel {
 
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
-        // A and B by forward-mode AD through the whole step (all sub-steps).
-        let mut xd = [Dual64::from(0.0); MAX_NX];
-        let mut ud = [Dual64::from(0.0); MAX_NU];
-        lift(x, &mut xd);
-        lift(u, &mut ud);
-        let mut out = [Dual64::from(0.0); MAX_NX];
-        for j in 0..nx + nu {
-            seed(&mut xd, &mut ud, nx, j, 1.0);
-            self.flow(k, &xd[..nx], &ud[..nu], &mut out[..nx]);
-            seed(&mut xd, &mut ud, nx, j, 0.0);
+        let mut a = [0.0; MAX_NX * MAX_NX];
+        let mut b = [0.0; MAX_NX * MAX_NU];
+        self.flow_jacobian(k, x, u, &mut a, &mut b);
+        for j in 0..nx {
             for i in 0..nx {
-                if j < nx {
-                    lin.a[(i, j)] = out[i].eps;
-                } else {
-                    lin.b[(i, j - nx)] = out[i].eps;
-                }
+                lin.a[(i, j)] = a[j * nx + i];
+            }
+        }
+        for j in 0..nu {
+            for i in 0..nx {
+                lin.b[(i, j)] = b[j * nx + i];
             }
         }
         if nw == 0 {
             lin.noise = NoiseKind::None;
             return;
         }
-        self.noise_gain(k, x, u, &mut lin.c);
-        let s = self.dt.sqrt();
-        let mut big_f = [Dual64::from(0.0); MAX_NX * MAX_NW];
+        let mut g = [0.0; MAX_NX * MAX_NW];
+        let mut dgx = [0.0; MAX_NX * MAX_NX * MAX_NW];
+        let mut dgu = [0.0; MAX_NU * MAX_NX * MAX_NW];
+        self.noise_jacobian(x, u, &mut g, &mut dgx, &mut dgu);
+        let block = nx * nw;
         let mut dependent = false;
-        for j in 0..nx + nu {
-            seed(&mut xd, &mut ud, nx, j, 1.0);
-            self.model.diffusion(&xd[..nx], &ud[..nu], &mut big_f);
-            seed(&mut xd, &mut ud, nx, j, 0.0);
-            for ch in 0..nw {
+        for ch in 0..nw {
+            for r in 0..nx {
+                lin.c[(r, ch)] = g[ch * nx + r];
+            }
+            for j in 0..nx {
                 for r in 0..nx {
-                    let v = s * big_f[ch * nx + r].eps;
+                    let v = dgx[j * block + ch * nx + r];
                     dependent |= v != 0.0;
-                    if j < nx {
-                        lin.cx[ch][(r, j)] = v;
-                    } else {
-                        lin.cu[ch][(r, j - nx)] = v;
-                    }
+                    lin.cx[ch][(r, j)] = v;
+                }
+            }
+            for j in 0..nu {
+                for r in 0..nx {
+                    let v = dgu[j * block + ch * nx + r];
+                    dependent |= v != 0.0;
+                    lin.cu[ch][(r, j)] = v;
                 }
             }
         }
@@ -248,14 +248,81 @@ impl Dynamics for EulerModel {
     }
 }
 
-fn lift(src: &[f64], dst: &mut [Dual64]) {
-    for (d, s) in dst.iter_mut().zip(src) {
-        *d = Dual64::from(*s);
+impl EulerModel {
+    /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` of the step (column-major n×n and n×m) by forward-mode AD
+    /// through every sub-step, in any scalar type: with dual numbers in, the result carries the
+    /// second derivatives of the flow (what the moment dynamics of SOOC need).
+    pub fn flow_jacobian<S: Scalar>(&self, k: usize, x: &[S], u: &[S], a: &mut [S], b: &mut [S]) {
+        let (nx, nu) = (self.nx(), self.nu());
+        let mut xd = [Dual::from_re(S::zero()); MAX_NX];
+        let mut ud = [Dual::from_re(S::zero()); MAX_NU];
+        for (d, v) in xd.iter_mut().zip(x) {
+            *d = Dual::from_re(*v);
+        }
+        for (d, v) in ud.iter_mut().zip(u) {
+            *d = Dual::from_re(*v);
+        }
+        let mut out = [Dual::from_re(S::zero()); MAX_NX];
+        for j in 0..nx + nu {
+            seed(&mut xd, &mut ud, nx, j, S::one());
+            self.flow(k, &xd[..nx], &ud[..nu], &mut out[..nx]);
+            seed(&mut xd, &mut ud, nx, j, S::zero());
+            let col = if j < nx {
+                &mut a[j * nx..(j + 1) * nx]
+            } else {
+                &mut b[(j - nx) * nx..(j - nx + 1) * nx]
+            };
+            for (c, o) in col.iter_mut().zip(&out[..nx]) {
+                *c = o.eps;
+            }
+        }
+    }
+
+    /// The noise gain `G = √Δ F` (layout of [`ArmModel::diffusion`]) and its derivatives
+    /// `dgx[j]`, `dgu[j]` with respect to `x_j` and `u_j`, in any scalar type.
+    pub fn noise_jacobian<S: Scalar>(
+        &self,
+        x: &[S],
+        u: &[S],
+        g: &mut [S],
+        dgx: &mut [S],
+        dgu: &mut [S],
+    ) {
+        let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
+        let block = nx * nw;
+        let s = self.dt.sqrt();
+        let mut xd = [Dual::from_re(S::zero()); MAX_NX];
+        let mut ud = [Dual::from_re(S::zero()); MAX_NU];
+        for (d, v) in xd.iter_mut().zip(x) {
+            *d = Dual::from_re(*v);
+        }
+        for (d, v) in ud.iter_mut().zip(u) {
+            *d = Dual::from_re(*v);
+        }
+        let mut big_f = [Dual::from_re(S::zero()); MAX_NX * MAX_NW];
+        for j in 0..nx + nu {
+            seed(&mut xd, &mut ud, nx, j, S::one());
+            self.model.diffusion(&xd[..nx], &ud[..nu], &mut big_f);
+            seed(&mut xd, &mut ud, nx, j, S::zero());
+            if j == 0 {
+                for (dst, v) in g.iter_mut().zip(&big_f[..block]) {
+                    *dst = v.re * s;
+                }
+            }
+            let dst = if j < nx {
+                &mut dgx[j * block..(j + 1) * block]
+            } else {
+                &mut dgu[(j - nx) * block..(j - nx + 1) * block]
+            };
+            for (d, v) in dst.iter_mut().zip(&big_f[..block]) {
+                *d = v.eps * s;
+            }
+        }
     }
 }
 
 /// Sets the derivative seed of variable `j` of the stacked vector `(x, u)`.
-fn seed(x: &mut [Dual64], u: &mut [Dual64], nx: usize, j: usize, value: f64) {
+fn seed<S: Scalar>(x: &mut [Dual<S>], u: &mut [Dual<S>], nx: usize, j: usize, value: S) {
     if j < nx {
         x[j].eps = value;
     } else {

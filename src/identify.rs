@@ -522,7 +522,18 @@ pub struct PolyFit {
 /// SVD (nalgebra), and the coefficients are converted back to powers of `x`. Needs at least
 /// `degree + 1` distinct abscissae.
 pub fn polyfit(x: &[f64], y: &[f64], degree: usize) -> Result<PolyFit, IdentifyError> {
-    if x.len() != y.len() {
+    polyfit_weighted(x, y, None, degree)
+}
+
+/// [`polyfit`] minimising `Σ w_i (y_i − p(x_i))²` (all weights 1 if `weights` is `None`); the
+/// reported residuals are unweighted.
+fn polyfit_weighted(
+    x: &[f64],
+    y: &[f64],
+    weights: Option<&[f64]>,
+    degree: usize,
+) -> Result<PolyFit, IdentifyError> {
+    if x.len() != y.len() || weights.is_some_and(|w| w.len() != x.len()) {
         return Err(IdentifyError::InvalidInput(format!(
             "polyfit: {} abscissae but {} ordinates",
             x.len(),
@@ -549,7 +560,11 @@ pub fn polyfit(x: &[f64], y: &[f64], degree: usize) -> Result<PolyFit, IdentifyE
         )));
     }
     let scale = if scale == 0.0 { 1.0 } else { scale };
-    let vandermonde = DMatrix::from_fn(n, m, |i, j| ((x[i] - center) / scale).powi(j as i32));
+    let sqrt_w = |i: usize| weights.map_or(1.0, |w| w[i].sqrt());
+    let vandermonde = DMatrix::from_fn(n, m, |i, j| {
+        sqrt_w(i) * ((x[i] - center) / scale).powi(j as i32)
+    });
+    let rhs = DVector::from_fn(n, |i, _| sqrt_w(i) * y[i]);
     let svd = vandermonde.svd(true, true);
     let s_max = svd.singular_values.max();
     let s_min = svd.singular_values.min();
@@ -559,7 +574,7 @@ pub fn polyfit(x: &[f64], y: &[f64], degree: usize) -> Result<PolyFit, IdentifyE
         )));
     }
     let scaled = svd
-        .solve(&DVector::from_column_slice(y), 0.0)
+        .solve(&rhs, 0.0)
         .map_err(|msg| IdentifyError::Numerical(msg.into()))?;
     // p(x) = Σ_k c_k ((x − center)/scale)^k, expanded by the binomial theorem.
     let mut coefficients = vec![0.0; m];
@@ -607,8 +622,8 @@ pub struct NoiseFit {
     pub a_std_error: Option<f64>,
     /// Standard error of `b` from the observed Fisher information (`None` if it is singular).
     pub b_std_error: Option<f64>,
-    /// Negative log-likelihood at the optimum, `Σ ln|a + b q̇_i| + e_i²/(2(a + b q̇_i)²) +
-    /// ½ ln 2π`.
+    /// Negative log-likelihood at the optimum,
+    /// `Σ [ln|a + b q̇_i| + e_i²/(2(a + b q̇_i)²) + ½ ln 2π]`.
     pub neg_log_likelihood: f64,
     /// Number of samples.
     pub samples: usize,
@@ -621,9 +636,66 @@ impl NoiseFit {
     }
 }
 
+/// The least-squares fit of `|e_i| ≈ √(2/π) |a + b q̇_i|` (the mean absolute value of a
+/// `N(0, σ²)` variable is `√(2/π) σ`): a moment estimate of `(a, b)`, less efficient than
+/// [`fit_noise_ml`] but insensitive to a small noise floor where `a + b q̇` vanishes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MomentFit {
+    /// Constant part `a` (non-negative).
+    pub a: f64,
+    /// Velocity-dependent part `b` [per rad/s].
+    pub b: f64,
+}
+
 /// Floor on `u²` in the profile likelihood, so that a sample with `e = 0` exactly cannot make
 /// the likelihood unbounded when `a + b q̇` crosses zero at its velocity.
 const U2_FLOOR: f64 = 1e-24;
+fn u2_floor() -> f64 {
+    std::env::var("VIC_U2")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(U2_FLOOR)
+}
+
+/// Number of directions of the coarse grid of [`minimise_over_direction`].
+const COARSE_DIRECTIONS: usize = 4096;
+
+/// At most this many samples (evenly strided) are used on the coarse grid of the
+/// maximum-likelihood fit; the refinement uses all of them.
+const COARSE_SAMPLES: usize = 20_000;
+
+/// Minimises `fine(θ)` over the directions `θ ∈ [0, π)`: the best of [`COARSE_DIRECTIONS`]
+/// equally spaced directions for `coarse` (a cheaper approximation of `fine`, or `fine`
+/// itself), then nested grids of `fine`, each 10 times finer (±4 coarse spacings first, then ±2
+/// spacings of the previous level, centre included so that the value never increases), down to
+/// 1e-14 rad. Returns the best direction and `fine` there.
+fn minimise_over_direction(coarse: impl Fn(f64) -> f64, fine: impl Fn(f64) -> f64) -> (f64, f64) {
+    let mut spacing = std::f64::consts::PI / COARSE_DIRECTIONS as f64;
+    let mut best_theta = 0.0;
+    let mut best = f64::INFINITY;
+    for k in 0..COARSE_DIRECTIONS {
+        let theta = spacing * k as f64;
+        let value = coarse(theta);
+        if value < best {
+            (best_theta, best) = (theta, value);
+        }
+    }
+    best = fine(best_theta);
+    let mut half_width = 40;
+    while spacing > 1e-14 {
+        spacing /= 10.0;
+        let center = best_theta;
+        for j in -half_width..=half_width {
+            let theta = center + f64::from(j) * spacing;
+            let value = fine(theta);
+            if value < best {
+                (best_theta, best) = (theta, value);
+            }
+        }
+        half_width = 20;
+    }
+    (best_theta, best)
+}
 
 /// Mean negative log-likelihood (without the constants) profiled over the scale `r`, for the
 /// direction `θ`: `(a, b̃) = r (cos θ, sin θ)`, `u_i = cos θ + q̃_i sin θ`, `r² = mean e_i²/u_i²`,
@@ -633,7 +705,7 @@ fn profile_nll(theta: f64, q: &[f64], e2: &[f64]) -> (f64, f64) {
     let (mut ratio, mut log) = (0.0, 0.0);
     for (&qi, &ei2) in q.iter().zip(e2) {
         let u = cos + sin * qi;
-        let u2 = (u * u).max(U2_FLOOR);
+        let u2 = (u * u).max(u2_floor());
         ratio += ei2 / u2;
         log += u2.ln();
     }
@@ -642,17 +714,8 @@ fn profile_nll(theta: f64, q: &[f64], e2: &[f64]) -> (f64, f64) {
     (0.5 * r2.ln() + 0.5 * log / n, r2.sqrt())
 }
 
-/// Maximum-likelihood estimate of `(a, b)` in `e_i ~ N(0, (a + b q̇_i)²)`, i.e. the minimum of
-/// `Σ [ln|a + b q̇_i| + e_i² / (2 (a + b q̇_i)²)]`.
-///
-/// The likelihood is infinite wherever `a + b q̇_i = 0` for a sample (a line through the origin
-/// of the `(a, b)` plane per sample), so local optimisers started on the wrong side of the true
-/// zero crossing `q̇ = −a/b` cannot reach the optimum. Instead the problem is written in polar
-/// form `(a, b q̇_s) = r (cos θ, sin θ)` (with `q̇_s = max|q̇_i|`), the scale `r` is eliminated in
-/// closed form, and the one-dimensional profile in `θ ∈ [0, π)` is minimised globally by a grid
-/// of 4096 directions followed by nested zooming grids down to 1e-14 rad. The result is exact
-/// to rounding, whatever the sign changes of `a + b q̇` over the data.
-pub fn fit_noise_ml(qd: &[f64], e: &[f64]) -> Result<NoiseFit, IdentifyError> {
+/// Validated samples with velocities scaled to `[−1, 1]`: `(q̃, v_scale)`.
+fn scaled_velocities(qd: &[f64], e: &[f64]) -> Result<(Vec<f64>, f64), IdentifyError> {
     check_samples(qd, e)?;
     let n = qd.len();
     if n < 3 {
@@ -672,51 +735,59 @@ pub fn fit_noise_ml(qd: &[f64], e: &[f64]) -> Result<NoiseFit, IdentifyError> {
         ));
     }
     let v_scale = lo.abs().max(hi.abs());
-    let q: Vec<f64> = qd.iter().map(|v| v / v_scale).collect();
-    let e2: Vec<f64> = e.iter().map(|v| v * v).collect();
+    Ok((qd.iter().map(|v| v / v_scale).collect(), v_scale))
+}
 
-    const COARSE: usize = 4096;
-    const ZOOM_HALF_WIDTH: i32 = 20;
-    let mut best_theta = 0.0;
-    let mut best = (f64::INFINITY, 0.0);
-    for k in 0..COARSE {
-        let theta = std::f64::consts::PI * k as f64 / COARSE as f64;
-        let value = profile_nll(theta, &q, &e2);
-        if value.0 < best.0 {
-            (best_theta, best) = (theta, value);
-        }
+/// `(a, b)` from the polar form, with the sign convention `a ≥ 0`.
+fn from_polar(r: f64, theta: f64, v_scale: f64) -> (f64, f64) {
+    let (sin, cos) = theta.sin_cos();
+    let (a, b) = (r * cos, r * sin / v_scale);
+    if a < 0.0 || (a == 0.0 && b < 0.0) {
+        (-a, -b)
+    } else {
+        (a, b)
     }
-    // Nested grids of 41 points over ±2 previous spacings; the centre is always re-evaluated, so
-    // the objective never increases.
-    let mut spacing = std::f64::consts::PI / COARSE as f64;
-    while spacing > 1e-14 {
-        spacing /= 10.0;
-        let center = best_theta;
-        for j in -ZOOM_HALF_WIDTH..=ZOOM_HALF_WIDTH {
-            let theta = center + j as f64 * spacing;
-            let value = profile_nll(theta, &q, &e2);
-            if value.0 < best.0 {
-                (best_theta, best) = (theta, value);
-            }
-        }
-    }
-    if !best.0.is_finite() {
+}
+
+/// Maximum-likelihood estimate of `(a, b)` in `e_i ~ N(0, (a + b q̇_i)²)`, i.e. the minimum of
+/// `Σ [ln|a + b q̇_i| + e_i² / (2 (a + b q̇_i)²)]`.
+///
+/// The likelihood is infinite wherever `a + b q̇_i = 0` for a sample (a line through the origin
+/// of the `(a, b)` plane per sample), so a local optimiser (Newton, Nelder–Mead) started on the
+/// wrong side of the true zero crossing `q̇ = −a/b` cannot reach the optimum. Instead the
+/// problem is written in polar form `(a, b q̇_s) = r (cos θ, sin θ)` (with `q̇_s = max|q̇_i|`),
+/// the scale `r` is eliminated in closed form (`r² = mean e_i²/u_i²`), and the one-dimensional
+/// profile in `θ ∈ [0, π)` is minimised globally: a grid of 4096 directions (on at most 20 000
+/// evenly strided samples), then nested zooming grids on all samples down to 1e-14 rad. The
+/// result is the optimum to rounding, whatever the sign changes of `a + b q̇` over the data.
+///
+/// The model has no noise floor: near the zero crossing of `a + b q̇` the few samples with the
+/// smallest predicted deviation weigh most, so an offset left in `e` there (e.g. an imperfectly
+/// subtracted mean) biases the estimate; compare with [`fit_noise_moments`].
+pub fn fit_noise_ml(qd: &[f64], e: &[f64]) -> Result<NoiseFit, IdentifyError> {
+    let (q, v_scale) = scaled_velocities(qd, e)?;
+    let n = q.len();
+    let e2: Vec<f64> = e.iter().map(|v| v * v).collect();
+    let stride = n.div_ceil(COARSE_SAMPLES);
+    let q_coarse: Vec<f64> = q.iter().step_by(stride).copied().collect();
+    let e2_coarse: Vec<f64> = e2.iter().step_by(stride).copied().collect();
+    let (theta, value) = minimise_over_direction(
+        |theta| profile_nll(theta, &q_coarse, &e2_coarse).0,
+        |theta| profile_nll(theta, &q, &e2).0,
+    );
+    if !value.is_finite() {
         return Err(IdentifyError::Numerical(
             "the likelihood is not finite anywhere".into(),
         ));
     }
-    let (sin, cos) = best_theta.sin_cos();
-    let r = best.1;
-    let (mut a, mut b) = (r * cos, r * sin / v_scale);
-    if a < 0.0 || (a == 0.0 && b < 0.0) {
-        (a, b) = (-a, -b);
-    }
+    let r = profile_nll(theta, &q, &e2).1;
+    let (a, b) = from_polar(r, theta, v_scale);
 
     // Negative log-likelihood and observed information in (a, b).
     let mut nll = 0.0;
     let mut info = Matrix2::zeros();
     for (&v, &err) in qd.iter().zip(e) {
-        let s2 = ((a + b * v) * (a + b * v)).max(U2_FLOOR * r * r);
+        let s2 = ((a + b * v) * (a + b * v)).max(u2_floor() * r * r);
         nll += 0.5 * s2.ln() + err * err / (2.0 * s2);
         let curvature = -1.0 / s2 + 3.0 * err * err / (s2 * s2);
         info += curvature * Matrix2::new(1.0, v, v, v * v);
@@ -736,6 +807,32 @@ pub fn fit_noise_ml(qd: &[f64], e: &[f64]) -> Result<NoiseFit, IdentifyError> {
         neg_log_likelihood: nll,
         samples: n,
     })
+}
+
+/// Least-squares fit of `|e_i| ≈ √(2/π) |a + b q̇_i|` ([`MomentFit`]). The absolute value makes
+/// it non-linear when `a + b q̇` changes sign over the data; it is solved like
+/// [`fit_noise_ml`], in polar form with the scale in closed form and a global search over the
+/// direction (the objective is continuous, so the search is straightforward).
+pub fn fit_noise_moments(qd: &[f64], e: &[f64]) -> Result<MomentFit, IdentifyError> {
+    let (q, v_scale) = scaled_velocities(qd, e)?;
+    let k = (2.0 / std::f64::consts::PI).sqrt();
+    // For a direction, Σ (|e| − k r |u|)² is minimal at r = Σ|e||u| / (k Σu²), where it equals
+    // Σe² − (Σ|e||u|)²/Σu²: maximise the last ratio.
+    let sums = |theta: f64| {
+        let (sin, cos) = theta.sin_cos();
+        q.iter().zip(e).fold((0.0, 0.0), |(eu, uu), (&qi, &ei)| {
+            let u = cos + sin * qi;
+            (eu + ei.abs() * u.abs(), uu + u * u)
+        })
+    };
+    let objective = |theta: f64| {
+        let (eu, uu) = sums(theta);
+        -eu * eu / uu
+    };
+    let (theta, _) = minimise_over_direction(objective, objective);
+    let (eu, uu) = sums(theta);
+    let (a, b) = from_polar(eu / (k * uu), theta, v_scale);
+    Ok(MomentFit { a, b })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -924,13 +1021,23 @@ pub fn identify_samples(
     let mean_fit = fit_bins(options.mean_degree, "mean", |b| b.mean)?;
     let std_fit = fit_bins(options.std_degree, "standard deviation", |b| b.std)?;
 
-    let residual: Vec<f64> = if options.subtract_mean {
-        qd.iter()
-            .zip(e)
-            .map(|(&v, &err)| err - mean_fit.polynomial.eval(v))
-            .collect()
+    let subtracted = if options.subtract_mean {
+        Some(refine_mean(
+            qd,
+            e,
+            &mean_fit.polynomial,
+            options.mean_degree,
+        )?)
     } else {
-        e.to_vec()
+        None
+    };
+    let residual: Vec<f64> = match &subtracted {
+        Some(mean) => qd
+            .iter()
+            .zip(e)
+            .map(|(&v, &err)| err - mean.eval(v))
+            .collect(),
+        None => e.to_vec(),
     };
     let noise = fit_noise_ml(qd, &residual)?;
     let eta: Vec<f64> = qd
@@ -1026,6 +1133,47 @@ impl fmt::Display for IdentifyReport {
             }
         )
     }
+}
+
+/// The mean polynomial subtracted by [`IdentifyOptions::subtract_mean`]: refitted on all samples
+/// by weighted least squares, with weights `1/σ_i²` from the moment estimate of the noise on the
+/// errors minus the bin fit (feasible generalised least squares).
+fn refine_mean(
+    qd: &[f64],
+    e: &[f64],
+    bin_fit: &Polynomial,
+    degree: usize,
+) -> Result<Polynomial, IdentifyError> {
+    let centred: Vec<f64> = qd
+        .iter()
+        .zip(e)
+        .map(|(&v, &err)| err - bin_fit.eval(v))
+        .collect();
+    let moments = fit_noise_moments(qd, &centred)?;
+    let floor_frac: f64 = std::env::var("VIC_FLOOR")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.05);
+    let iters: usize = std::env::var("VIC_ITERS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    let s2: Vec<f64> = qd
+        .iter()
+        .map(|&v| (moments.a + moments.b * v).powi(2))
+        .collect();
+    let floor2 = floor_frac * floor_frac * s2.iter().sum::<f64>() / s2.len() as f64;
+    let weights: Vec<f64> = s2.iter().map(|s2| 1.0 / s2.max(floor2)).collect();
+    let mut p = polyfit_weighted(qd, e, Some(&weights), degree)?.polynomial;
+    for _ in 1..iters {
+        let centred: Vec<f64> = qd.iter().zip(e).map(|(&v, &err)| err - p.eval(v)).collect();
+        let ml = fit_noise_ml(qd, &centred)?;
+        let s2: Vec<f64> = qd.iter().map(|&v| (ml.a + ml.b * v).powi(2)).collect();
+        let floor2 = floor_frac * floor_frac * s2.iter().sum::<f64>() / s2.len() as f64;
+        let weights: Vec<f64> = s2.iter().map(|s2| 1.0 / s2.max(floor2)).collect();
+        p = polyfit_weighted(qd, e, Some(&weights), degree)?.polynomial;
+    }
+    Ok(p)
 }
 
 fn check_samples(qd: &[f64], e: &[f64]) -> Result<(), IdentifyError> {

@@ -7,8 +7,9 @@ use crate::delay::Delayed;
 use crate::dynamics::{Dynamics, EulerModel};
 use crate::model::{Actuator, Exogenous};
 use crate::reference;
+use crate::solver::sooc::{MomentCost, MomentDynamics, unpack};
 use crate::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 /// Plan-file format version; bumped on incompatible changes.
@@ -159,6 +160,13 @@ pub struct PlanSummary {
     /// [mm] for the arm.
     pub final_error: f64,
     pub final_error_unit: String,
+    /// Expected cost of executing the plan's commands open loop (gains ignored), by covariance
+    /// propagation: the common footing of every method.
+    pub open_loop_expected_cost: f64,
+    /// Predicted standard deviation of the final position executed open loop, in the unit of
+    /// `final_error` (for the arm, the square root of the largest eigenvalue of the hand
+    /// covariance).
+    pub open_loop_final_std: f64,
 }
 
 /// A plan as written by `vic plan`.
@@ -182,52 +190,154 @@ pub struct PlanFile {
     pub gains: Vec<Vec<Vec<f64>>>,
     /// Reference `q_d`, `q_d'` at the knots [rad, rad/s].
     pub reference: Vec<Exogenous>,
+    /// Predicted covariance of the final state executed open loop (n×n, row-major).
+    pub open_loop_final_covariance: Vec<Vec<f64>>,
+    /// Predicted covariance of the final hand position [m²] (two-link) or of the final joint
+    /// angle [rad²] (single joint, 1×1), executed open loop.
+    pub open_loop_final_position_covariance: Vec<Vec<f64>>,
     pub summary: PlanSummary,
 }
 
-/// Solves a scenario with ILQG, with the scenario's feedback delay.
-pub fn plan(s: &Scenario) -> Result<PlanFile, String> {
+/// How a plan is made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// ILQG: a nominal plan with locally optimal feedback gains (DESIGN §4), made for the
+    /// scenario's feedback delay.
+    Ilqg,
+    /// Stochastic optimal open-loop control: torque and stiffness for execution without feedback,
+    /// optimal for the open-loop plant's mean and covariance (DESIGN §5). Delay-free by nature.
+    Sooc,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Ilqg => "ilqg",
+            Method::Sooc => "sooc",
+        }
+    }
+}
+
+/// What executing a command sequence open loop is predicted to give (covariance propagation).
+#[derive(Debug, Clone)]
+pub struct OpenLoopPrediction {
+    /// Expected cost `E[C]` of the open-loop plant.
+    pub expected_cost: f64,
+    /// Mean states `m_0 ..= m_N`.
+    pub mean: Vec<DVector<f64>>,
+    /// Final state covariance `P_N`.
+    pub final_covariance: DMatrix<f64>,
+}
+
+/// Predicts the open-loop execution of the controls `acting` (those that act at each step) by
+/// mean and covariance propagation: feedback gains ignored, so that plans from any method compare
+/// on the same footing.
+pub fn predict_open_loop(setup: &Setup, acting: &[DVector<f64>]) -> OpenLoopPrediction {
+    let moments = MomentDynamics::new(&setup.dynamics);
+    let cost = MomentCost::new(&setup.cost, acting.len());
+    let problem = Problem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: moments.initial_state(&setup.x0),
+        horizon: acting.len(),
+        bounds: setup.bounds.clone(),
+    };
+    let (z, expected_cost) = problem.rollout(acting);
+    let n = setup.x0.len();
+    let mut final_covariance = DMatrix::zeros(n, n);
+    unpack(n, &z[acting.len()].as_slice()[n..], &mut final_covariance);
+    OpenLoopPrediction {
+        expected_cost,
+        mean: z.iter().map(|v| v.rows(0, n).into_owned()).collect(),
+        final_covariance,
+    }
+}
+
+/// Plans a scenario with the given method (ILQG uses the scenario's feedback delay).
+pub fn plan(s: &Scenario, method: Method) -> Result<PlanFile, String> {
     let setup = setup(s)?;
-    let d = s.task.delay_steps();
     let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
     let steps = s.task.steps;
-    let solution = if d == 0 {
-        let problem = Problem {
-            dynamics: &setup.dynamics,
-            cost: &setup.cost,
-            x0: setup.x0.clone(),
-            horizon: steps,
-            bounds: setup.bounds.clone(),
-        };
-        solve_in_phases(&problem, &s.solver.options, &setup.u_init)
-    } else {
-        let delayed = Delayed::new(setup.dynamics.clone(), d);
-        let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
-        let cost = DelayedCost {
-            inner: &setup.cost,
-            nx,
-        };
-        let problem = Problem {
-            dynamics: &delayed,
-            cost: &cost,
-            x0,
-            horizon: steps,
-            bounds: setup.bounds.clone(),
-        };
-        // A command issued at k acts at k + d: warm-start with the shifted guess.
-        let u_init: Vec<DVector<f64>> = (0..steps)
-            .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
-            .collect();
-        let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init);
-        for x in &mut sol.x {
-            *x = x.rows(0, nx).into_owned();
-        }
-        for g in &mut sol.gains {
-            *g = g.columns(0, nx).into_owned();
-        }
-        sol
+    let plain = Problem {
+        dynamics: &setup.dynamics,
+        cost: &setup.cost,
+        x0: setup.x0.clone(),
+        horizon: steps,
+        bounds: setup.bounds.clone(),
     };
-    Ok(plan_file(s, &setup, &solution, d, nu))
+    let (solution, d) = match method {
+        Method::Sooc => {
+            // Warm start from the deterministic optimum, then optimise the open-loop moments.
+            let mut det = Ilqg::new(&plain, s.solver.options.clone());
+            det.options.stochastic = false;
+            let first = det.solve(&plain, &setup.u_init);
+            let moments = MomentDynamics::new(&setup.dynamics);
+            let cost = MomentCost::new(&setup.cost, steps);
+            let problem = Problem {
+                dynamics: &moments,
+                cost: &cost,
+                x0: moments.initial_state(&setup.x0),
+                horizon: steps,
+                bounds: setup.bounds.clone(),
+            };
+            let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+            let mut sol = solver.solve(&problem, &first.u);
+            sol.iterations += first.iterations;
+            sol.solve_time += first.solve_time;
+            for x in &mut sol.x {
+                *x = x.rows(0, nx).into_owned();
+            }
+            // Executed open loop: no feedback gains.
+            for g in &mut sol.gains {
+                *g = DMatrix::zeros(nu, nx);
+            }
+            (sol, 0)
+        }
+        Method::Ilqg if s.task.delay_steps() == 0 => {
+            (solve_in_phases(&plain, &s.solver.options, &setup.u_init), 0)
+        }
+        Method::Ilqg => {
+            let d = s.task.delay_steps();
+            let delayed = Delayed::new(setup.dynamics.clone(), d);
+            let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+            let cost = DelayedCost {
+                inner: &setup.cost,
+                nx,
+            };
+            let problem = Problem {
+                dynamics: &delayed,
+                cost: &cost,
+                x0,
+                horizon: steps,
+                bounds: setup.bounds.clone(),
+            };
+            // A command issued at k acts at k + d: warm-start with the shifted guess.
+            let u_init: Vec<DVector<f64>> = (0..steps)
+                .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
+                .collect();
+            let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init);
+            for x in &mut sol.x {
+                *x = x.rows(0, nx).into_owned();
+            }
+            for g in &mut sol.gains {
+                *g = g.columns(0, nx).into_owned();
+            }
+            (sol, d)
+        }
+    };
+    // The commands that act at each step: with a delay, the hold command first.
+    let acting: Vec<DVector<f64>> = (0..steps)
+        .map(|k| {
+            if k < d {
+                setup.u_init[0].clone()
+            } else {
+                solution.u[k - d].clone()
+            }
+        })
+        .collect();
+    let open_loop = predict_open_loop(&setup, &acting);
+    Ok(plan_file(s, &setup, &solution, d, nu, method, &open_loop))
 }
 
 /// Solves a stochastic problem by continuation: first the deterministic problem (whose landscape
@@ -303,7 +413,15 @@ impl crate::cost::Cost for DelayedCost<'_> {
     }
 }
 
-fn plan_file(s: &Scenario, setup: &Setup, sol: &Solution, d: usize, nu: usize) -> PlanFile {
+fn plan_file(
+    s: &Scenario,
+    setup: &Setup,
+    sol: &Solution,
+    d: usize,
+    nu: usize,
+    method: Method,
+    open_loop: &OpenLoopPrediction,
+) -> PlanFile {
     let model = &s.model;
     let dof = model.dof();
     let dt = s.task.dt;
@@ -334,6 +452,8 @@ fn plan_file(s: &Scenario, setup: &Setup, sol: &Solution, d: usize, nu: usize) -
             "mm",
         )
     };
+    let (position_cov, open_loop_final_std) =
+        final_position_covariance(model, &open_loop.mean[steps], &open_loop.final_covariance);
     let joints: Vec<String> = (1..=dof)
         .map(|i| {
             if dof == 1 {
@@ -370,8 +490,10 @@ fn plan_file(s: &Scenario, setup: &Setup, sol: &Solution, d: usize, nu: usize) -
             .map(|g| g.row_iter().map(|r| r.iter().copied().collect()).collect())
             .collect(),
         reference: setup.reference.clone(),
+        open_loop_final_covariance: rows(&open_loop.final_covariance),
+        open_loop_final_position_covariance: rows(&position_cov),
         summary: PlanSummary {
-            method: "ilqg".into(),
+            method: method.name().into(),
             converged: sol.stop.converged(),
             stop: format!("{:?}", sol.stop),
             iterations: sol.iterations,
@@ -384,6 +506,36 @@ fn plan_file(s: &Scenario, setup: &Setup, sol: &Solution, d: usize, nu: usize) -
             delay_ms: d as f64 * dt * 1000.0,
             final_error,
             final_error_unit: unit.into(),
+            open_loop_expected_cost: open_loop.expected_cost,
+            open_loop_final_std,
         },
+    }
+}
+
+fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    m.row_iter().map(|r| r.iter().copied().collect()).collect()
+}
+
+/// The covariance of the final position (hand for the arm, `J P_qq Jᵀ`; joint angle for a single
+/// joint) and its largest standard deviation in mm (arm) or degrees (joint).
+pub fn final_position_covariance(
+    model: &crate::model::ArmModel,
+    mean: &DVector<f64>,
+    cov: &DMatrix<f64>,
+) -> (DMatrix<f64>, f64) {
+    if model.dof() == 1 {
+        let c = DMatrix::from_element(1, 1, cov[(0, 0)]);
+        (c, cov[(0, 0)].max(0.0).sqrt().to_degrees())
+    } else {
+        let j = model.plant.jacobian(&mean.as_slice()[..2]);
+        let jm = DMatrix::from_row_slice(2, 2, &[j[0][0], j[0][1], j[1][0], j[1][1]]);
+        let pq = cov.view((0, 0), (2, 2));
+        let c = &jm * pq * jm.transpose();
+        let (tr, det) = (
+            c[(0, 0)] + c[(1, 1)],
+            c[(0, 0)] * c[(1, 1)] - c[(0, 1)] * c[(1, 0)],
+        );
+        let largest = 0.5 * (tr + (tr * tr - 4.0 * det).max(0.0).sqrt());
+        (c, largest.max(0.0).sqrt() * 1000.0)
     }
 }

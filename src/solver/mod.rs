@@ -4,6 +4,7 @@
 pub mod boxqp;
 pub mod ilqg;
 pub mod moments;
+pub mod sooc;
 
 pub use ilqg::{Ilqg, IlqgOptions, Solution, StopReason};
 
