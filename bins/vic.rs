@@ -25,6 +25,57 @@ enum Command {
     ///
     /// Example: vic plan --config config/icub_elbow.toml --out plan.json
     Plan(PlanArgs),
+    /// Monte Carlo of a plan on the stochastic plant: spread, 95 % ellipse, tracking error,
+    /// divergence and the expected cost, next to the plan's prediction.
+    ///
+    /// Example: vic simulate --config config/two_link_divergent.toml --plan plan.json --policy open-loop
+    Simulate(SimulateArgs),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum PolicyArg {
+    /// The planned commands, no feedback at all.
+    OpenLoop,
+    /// The plan's gains on the current state.
+    Feedback,
+    /// The plan's gains on the state seen --delay-ms late (default: the plan's delay).
+    DelayedFeedback,
+}
+
+#[derive(clap::Args)]
+struct SimulateArgs {
+    /// Scenario file (TOML): the plant the plan runs on (it may differ from the plan's, e.g. in
+    /// noise).
+    #[arg(long, short, value_name = "FILE")]
+    config: PathBuf,
+    /// Plan file written by `vic plan --out`.
+    #[arg(long, value_name = "FILE")]
+    plan: PathBuf,
+    /// How the plan is executed.
+    #[arg(long, value_enum, default_value = "open-loop")]
+    policy: PolicyArg,
+    /// Number of trials.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
+    trials: u64,
+    /// Seed of the noise (each trial derives its own stream from it).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Feedback latency for --policy delayed-feedback [ms] (default: the plan's delay).
+    #[arg(long, value_name = "D")]
+    delay_ms: Option<f64>,
+    /// A trial has diverged when it ends further than this from the target [mm for the arm,
+    /// degrees for a single joint] (default 50 mm / 10°).
+    #[arg(long, value_name = "DIST")]
+    divergence: Option<f64>,
+    /// Override a configuration key of the scenario (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    overrides: Vec<String>,
+    /// Write every trial's states and commands to this CSV file.
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
+    /// Print one JSON object instead of the readable report.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -84,6 +135,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Plan(args) => run_plan(args),
+        Command::Simulate(args) => run_simulate(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -153,4 +205,126 @@ fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
     if let Some(out) = out {
         println!("written    {}", out.display());
     }
+}
+
+fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
+    use vic::simulation::{Executable, Policy, run_trials};
+    let scenario = Scenario::load(&args.config, &args.overrides).map_err(Failure::input)?;
+    let text = std::fs::read_to_string(&args.plan)
+        .map_err(|e| Failure::input(format!("{}: cannot read: {e}", args.plan.display())))?;
+    let plan: PlanFile = serde_json::from_str(&text)
+        .map_err(|e| Failure::input(format!("{}: not a plan file: {e}", args.plan.display())))?;
+    let setup = vic::plan::setup(&scenario).map_err(Failure::input)?;
+    let exe = Executable::from_plan(&plan, &setup)
+        .map_err(|e| Failure::input(format!("{}: {e}", args.plan.display())))?;
+    let dt = scenario.task.dt;
+    let policy = match args.policy {
+        PolicyArg::OpenLoop => Policy::OpenLoop,
+        PolicyArg::Feedback => Policy::Feedback,
+        PolicyArg::DelayedFeedback => {
+            let steps = match args.delay_ms {
+                Some(ms) => {
+                    let s = ms / 1000.0 / dt;
+                    if !(s >= 0.0) || (s - s.round()).abs() > 1e-6 {
+                        return Err(Failure::input(format!(
+                            "--delay-ms {ms}: not a whole number of {} ms steps",
+                            dt * 1000.0
+                        )));
+                    }
+                    s.round() as usize
+                }
+                None => plan.summary.delay_steps,
+            };
+            Policy::DelayedFeedback {
+                latency_steps: steps,
+            }
+        }
+    };
+    let divergence = args
+        .divergence
+        .unwrap_or(if setup.dynamics.model.dof() == 1 {
+            10.0
+        } else {
+            50.0
+        });
+    let trials = run_trials(&setup, &exe, policy, args.trials as usize, args.seed);
+    let report = vic::evaluation::summarize(&setup, &trials, divergence);
+    if let Some(path) = &args.csv {
+        write_trials_csv(path, &plan, &trials).map_err(Failure::runtime)?;
+    }
+    let predicted = match policy {
+        Policy::OpenLoop => plan.summary.open_loop_expected_cost,
+        _ => plan.summary.expected_cost,
+    };
+    if args.json {
+        let mut v = serde_json::to_value(&report).map_err(Failure::runtime)?;
+        v["policy"] = serde_json::to_value(policy).map_err(Failure::runtime)?;
+        v["expected_cost_predicted"] = predicted.into();
+        v["seed"] = args.seed.into();
+        println!("{v}");
+    } else {
+        let u = &report.unit;
+        println!(
+            "simulate   {} with {} ({:?}), {} trials, seed {}",
+            plan.scenario,
+            args.config.display(),
+            policy,
+            report.trials,
+            args.seed
+        );
+        println!(
+            "final      std {:.3} {u}, 95 % ellipse semi-axes {:?} {u}",
+            report.final_std,
+            report
+                .ellipse_95
+                .iter()
+                .map(|v| format!("{v:.3}"))
+                .collect::<Vec<_>>()
+        );
+        println!(
+            "errors     RMS {:.3} {u}, final mean {:.3} / max {:.3} {u}",
+            report.rms_error, report.final_error_mean, report.final_error_max
+        );
+        println!(
+            "diverged   {} of {} (ending > {divergence} {u} from the target)",
+            report.diverged, report.trials
+        );
+        println!(
+            "cost       Monte Carlo {:.6e} ± {:.2e}, predicted {:.6e}",
+            report.expected_cost_mc, report.expected_cost_se, predicted
+        );
+    }
+    Ok(())
+}
+
+fn write_trials_csv(
+    path: &PathBuf,
+    plan: &PlanFile,
+    trials: &[vic::simulation::Trial],
+) -> Result<(), String> {
+    use std::io::Write;
+    let file =
+        std::fs::File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    let mut header = vec!["trial".to_string(), "k".into(), "t".into()];
+    header.extend(plan.state_names.iter().cloned());
+    header.extend(plan.control_names.iter().cloned());
+    let io = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    for (i, t) in trials.iter().enumerate() {
+        for (k, x) in t.x.iter().enumerate() {
+            write!(w, "{i},{k},{}", plan.dt * k as f64).map_err(io)?;
+            for v in x.iter() {
+                write!(w, ",{v}").map_err(io)?;
+            }
+            match t.u.get(k) {
+                Some(u) => u.iter().try_for_each(|v| write!(w, ",{v}")).map_err(io)?,
+                None => (0..plan.control_names.len())
+                    .try_for_each(|_| write!(w, ","))
+                    .map_err(io)?,
+            }
+            writeln!(w).map_err(io)?;
+        }
+    }
+    w.flush().map_err(io)
 }
