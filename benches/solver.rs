@@ -14,7 +14,9 @@ use vic::plan::{self, Setup};
 use vic::solver::{Ilqg, Problem};
 
 fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config").join(file);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(file);
     let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
     let s = Scenario::load(&path, &o).expect("scenario loads");
     let setup = plan::setup(&s).expect("scenario sets up");
@@ -38,17 +40,27 @@ fn bench_plain(c: &mut Criterion, name: &str, file: &str, overrides: &[&str]) {
         sol.stop,
         sol.solve_time.as_secs_f64() * 1e3 / sol.iterations.max(1) as f64
     );
-    c.bench_function(name, |b| b.iter(|| black_box(solver.solve(&problem, &setup.u_init))));
+    c.bench_function(name, |b| {
+        b.iter(|| black_box(solver.solve(&problem, &setup.u_init)))
+    });
 }
 
 fn solvers(c: &mut Criterion) {
     bench_plain(c, "two_link_reach_ddp", "two_link_reach.toml", &[]);
-    bench_plain(c, "two_link_reach_box", "two_link_reach.toml", &["actuator.torque_limit=1.5"]);
+    bench_plain(
+        c,
+        "two_link_reach_box",
+        "two_link_reach.toml",
+        &["actuator.torque_limit=1.5"],
+    );
     bench_plain(c, "two_link_divergent_ilqg", "two_link_divergent.toml", &[]);
     bench_plain(c, "single_joint_ilqg", "icub_elbow.toml", &[]);
 
     // The single joint with a 200 ms delay, deterministic: the central process's replanning load.
-    let (s, setup) = load("single_joint_delay.toml", &["noise.kind=none", "noise.sigma=0"]);
+    let (s, setup) = load(
+        "single_joint_delay.toml",
+        &["noise.kind=none", "noise.sigma=0"],
+    );
     let d = s.task.delay_steps();
     let delayed = Delayed::new(setup.dynamics.clone(), d);
     let nx = setup.x0.len();
@@ -60,8 +72,9 @@ fn solvers(c: &mut Criterion) {
         horizon: s.task.steps,
         bounds: setup.bounds.clone(),
     };
-    let u_init: Vec<_> =
-        (0..s.task.steps).map(|k| setup.u_init[(k + d).min(s.task.steps - 1)].clone()).collect();
+    let u_init: Vec<_> = (0..s.task.steps)
+        .map(|k| setup.u_init[(k + d).min(s.task.steps - 1)].clone())
+        .collect();
     let mut solver = Ilqg::new(&problem, s.solver.options.clone());
     let sol = solver.solve(&problem, &u_init);
     eprintln!(

@@ -157,8 +157,12 @@ fn run_plan(args: PlanArgs) -> Result<(), Failure> {
         Some(Method::Sooc) => vic::plan::Method::Sooc,
         None => scenario.solver.method,
     };
-    let plan = plan(&scenario, method)
+    let progress = progress_printer();
+    let plan = plan(&scenario, method, progress)
         .map_err(|e| Failure::input(format!("{}: {e}", args.config.display())))?;
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        eprint!("\r\x1b[2K");
+    }
     if let Some(out) = &args.out {
         let text = serde_json::to_string(&plan).map_err(Failure::runtime)?;
         std::fs::write(out, text)
@@ -173,6 +177,22 @@ fn run_plan(args: PlanArgs) -> Result<(), Failure> {
         print_summary(&plan, args.out.as_ref());
     }
     Ok(())
+}
+
+/// Progress on stderr when it is a terminal: one line, rewritten in place; nothing when piped.
+fn progress_printer() -> Option<vic::plan::ProgressFn> {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return None;
+    }
+    Some(std::sync::Arc::new(
+        |phase: &str, p: &vic::solver::ilqg::Progress| {
+            eprint!(
+                "\r\x1b[2K{phase}: iteration {} merit {:.6e} (μ {:.1e}, step {})",
+                p.iteration, p.merit, p.mu, p.alpha
+            );
+        },
+    ))
 }
 
 fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
@@ -225,7 +245,7 @@ fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
             let steps = match args.delay_ms {
                 Some(ms) => {
                     let s = ms / 1000.0 / dt;
-                    if !(s >= 0.0) || (s - s.round()).abs() > 1e-6 {
+                    if s.is_nan() || s < 0.0 || (s - s.round()).abs() > 1e-6 {
                         return Err(Failure::input(format!(
                             "--delay-ms {ms}: not a whole number of {} ms steps",
                             dt * 1000.0

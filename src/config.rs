@@ -156,6 +156,7 @@ struct RawSolver {
     mu_min: Option<f64>,
     mu_max: Option<f64>,
     stochastic: Option<bool>,
+    damp_short_steps: Option<bool>,
 }
 
 impl RawSolver {
@@ -182,6 +183,8 @@ impl RawSolver {
                 mu_min: self.mu_min.unwrap_or(d.mu_min),
                 mu_max: self.mu_max.unwrap_or(d.mu_max),
                 stochastic: self.stochastic.unwrap_or(d.stochastic),
+                damp_short_steps: self.damp_short_steps.unwrap_or(d.damp_short_steps),
+                shrink_below_step: d.shrink_below_step,
             },
         })
     }

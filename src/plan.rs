@@ -7,10 +7,12 @@ use crate::delay::Delayed;
 use crate::dynamics::{Dynamics, EulerModel};
 use crate::model::{Actuator, Exogenous};
 use crate::reference;
+use crate::solver::ilqg::Progress;
 use crate::solver::sooc::{MomentCost, MomentDynamics, unpack};
 use crate::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// Plan-file format version; bumped on incompatible changes.
 pub const PLAN_VERSION: u32 = 1;
@@ -254,8 +256,29 @@ pub fn predict_open_loop(setup: &Setup, acting: &[DVector<f64>]) -> OpenLoopPred
     }
 }
 
-/// Plans a scenario with the given method (ILQG uses the scenario's feedback delay).
-pub fn plan(s: &Scenario, method: Method) -> Result<PlanFile, String> {
+/// A progress report: the phase of the solve and the solver's state after an iteration.
+pub type ProgressFn = Arc<dyn Fn(&str, &Progress) + Send + Sync>;
+
+fn solver_for(
+    problem: &Problem,
+    options: &IlqgOptions,
+    phase: &'static str,
+    progress: &Option<ProgressFn>,
+) -> Ilqg {
+    let mut solver = Ilqg::new(problem, options.clone());
+    if let Some(p) = progress.clone() {
+        solver.on_iteration = Some(Box::new(move |it: &Progress| p(phase, it)));
+    }
+    solver
+}
+
+/// Plans a scenario with the given method (ILQG uses the scenario's feedback delay), reporting
+/// progress to `progress` if given.
+pub fn plan(
+    s: &Scenario,
+    method: Method,
+    progress: Option<ProgressFn>,
+) -> Result<PlanFile, String> {
     let setup = setup(s)?;
     let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
     let steps = s.task.steps;
@@ -269,7 +292,7 @@ pub fn plan(s: &Scenario, method: Method) -> Result<PlanFile, String> {
     let (solution, d) = match method {
         Method::Sooc => {
             // Warm start from the deterministic optimum, then optimise the open-loop moments.
-            let mut det = Ilqg::new(&plain, s.solver.options.clone());
+            let mut det = solver_for(&plain, &s.solver.options, "deterministic", &progress);
             det.options.stochastic = false;
             let first = det.solve(&plain, &setup.u_init);
             let moments = MomentDynamics::new(&setup.dynamics);
@@ -281,7 +304,8 @@ pub fn plan(s: &Scenario, method: Method) -> Result<PlanFile, String> {
                 horizon: steps,
                 bounds: setup.bounds.clone(),
             };
-            let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+            let mut solver =
+                solver_for(&problem, &s.solver.options, "open-loop moments", &progress);
             let mut sol = solver.solve(&problem, &first.u);
             sol.iterations += first.iterations;
             sol.solve_time += first.solve_time;
@@ -294,9 +318,10 @@ pub fn plan(s: &Scenario, method: Method) -> Result<PlanFile, String> {
             }
             (sol, 0)
         }
-        Method::Ilqg if s.task.delay_steps() == 0 => {
-            (solve_in_phases(&plain, &s.solver.options, &setup.u_init), 0)
-        }
+        Method::Ilqg if s.task.delay_steps() == 0 => (
+            solve_in_phases(&plain, &s.solver.options, &setup.u_init, &progress),
+            0,
+        ),
         Method::Ilqg => {
             let d = s.task.delay_steps();
             let delayed = Delayed::new(setup.dynamics.clone(), d);
@@ -316,7 +341,7 @@ pub fn plan(s: &Scenario, method: Method) -> Result<PlanFile, String> {
             let u_init: Vec<DVector<f64>> = (0..steps)
                 .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
                 .collect();
-            let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init);
+            let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init, &progress);
             for x in &mut sol.x {
                 *x = x.rows(0, nx).into_owned();
             }
@@ -348,14 +373,15 @@ pub fn solve_in_phases(
     problem: &Problem,
     options: &IlqgOptions,
     u_init: &[DVector<f64>],
+    progress: &Option<ProgressFn>,
 ) -> Solution {
-    let mut solver = Ilqg::new(problem, options.clone());
     if !options.stochastic || problem.dynamics.nw() == 0 {
-        return solver.solve(problem, u_init);
+        return solver_for(problem, options, "ilqg", progress).solve(problem, u_init);
     }
+    let mut solver = solver_for(problem, options, "deterministic", progress);
     solver.options.stochastic = false;
     let first = solver.solve(problem, u_init);
-    solver.options.stochastic = true;
+    let mut solver = solver_for(problem, options, "stochastic", progress);
     let mut second = solver.solve(problem, &first.u);
     second.iterations += first.iterations;
     second.solve_time += first.solve_time;

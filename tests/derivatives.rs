@@ -89,7 +89,11 @@ fn all_models() -> Vec<ArmModel> {
                     sigma: 0.3,
                     component: nx - 1,
                 },
-                Noise::Torque { a: 0.15, b: 0.37 },
+                Noise::Torque {
+                    a: 0.15,
+                    b: 0.37,
+                    sample_time: 0.004,
+                },
             ];
             for field in &fields {
                 for noise in noises {
@@ -309,8 +313,8 @@ fn reference_drift(model: &ArmModel, x: &[f64], u: &[f64], ex: &Exogenous) -> Ve
     xdot
 }
 
-/// `F(x, u)` from DESIGN §2: `σ x_c I`, or the torque noise `(a + b q'_i)` on joint `i` through
-/// `M⁻¹`.
+/// `F(x, u)` from DESIGN §2: `σ x_c I`, or the torque noise `(a + b q'_i) √T_s` on joint `i`
+/// through `M⁻¹`.
 fn reference_diffusion(model: &ArmModel, x: &[f64]) -> DMatrix<f64> {
     let (n, nx) = (model.dof(), model.nx());
     match model.noise {
@@ -318,7 +322,9 @@ fn reference_diffusion(model: &ArmModel, x: &[f64]) -> DMatrix<f64> {
         Noise::StateProportional { sigma, component } => {
             DMatrix::identity(nx, nx) * (sigma * x[component])
         }
-        Noise::Torque { a, b } => {
+        // A torque error of standard deviation (a + b q'_i) per sample of length T_s is a white
+        // noise of intensity (a + b q'_i)² T_s.
+        Noise::Torque { a, b, sample_time } => {
             let mut q = [0.0; 2];
             q[..n].copy_from_slice(&x[..n]);
             let minv = limb(&model.plant, &q, &[0.0; 2])
@@ -327,7 +333,7 @@ fn reference_diffusion(model: &ArmModel, x: &[f64]) -> DMatrix<f64> {
                 .expect("M invertible");
             let mut f = DMatrix::zeros(nx, n);
             for i in 0..n {
-                let e = a + b * x[n + i];
+                let e = (a + b * x[n + i]) * sample_time.sqrt();
                 for j in 0..n {
                     f[(n + j, i)] = minv[(j, i)] * e;
                 }

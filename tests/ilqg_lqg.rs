@@ -303,23 +303,26 @@ fn ilqg_equals_lqg_on_a_linear_quadratic_problem() {
         assert!(sol.stop.converged(), "{tag}: stopped with {:?}", sol.stop);
         // One Newton step solves an LQ problem exactly.
         assert_eq!(sol.iterations, 1, "{tag}: iterations");
-        for k in 0..HORIZON {
-            assert_matrix_rel(&format!("{tag}: L_{k}"), &sol.gains[k], &lqg.gains[k], REL);
-            let scale = u_opt.iter().map(|u| u.amax()).fold(0.0, f64::max);
+        let scale = u_opt.iter().map(|u| u.amax()).fold(0.0, f64::max);
+        assert_eq!(
+            (sol.u.len(), sol.gains.len()),
+            (HORIZON, HORIZON),
+            "{tag}: sizes"
+        );
+        for (k, (gain, expected)) in sol.gains.iter().zip(&lqg.gains).enumerate() {
+            assert_matrix_rel(&format!("{tag}: L_{k}"), gain, expected, REL);
+        }
+        for (k, (u, expected)) in sol.u.iter().zip(&u_opt).enumerate() {
             assert!(
-                (&sol.u[k] - &u_opt[k]).amax() <= REL * scale,
-                "{tag}: u_{k} = {} vs {}",
-                sol.u[k],
-                u_opt[k]
+                (u - expected).amax() <= REL * scale,
+                "{tag}: u_{k} = {u} vs {expected}"
             );
         }
         let xscale = x_opt.iter().map(|x| x.amax()).fold(0.0, f64::max);
-        for k in 0..=HORIZON {
-            assert!(
-                (&sol.x[k] - &x_opt[k]).amax() <= REL * xscale,
-                "{tag}: x_{k}"
-            );
+        for (k, (x, expected)) in sol.x.iter().zip(&x_opt).enumerate() {
+            assert!((x - expected).amax() <= REL * xscale, "{tag}: x_{k}");
         }
+        assert_eq!(sol.x.len(), HORIZON + 1, "{tag}: states");
         assert_rel(&format!("{tag}: cost"), sol.cost, cost_opt, REL);
         assert_rel(
             &format!("{tag}: expected cost"),

@@ -127,6 +127,8 @@ pub fn solve_box_qp(
             }
         }
         if nfree == 0 {
+            // No free block: a factor from an earlier iteration would describe the wrong set.
+            factor = None;
             status = QpStatus::AllClamped;
             break;
         }

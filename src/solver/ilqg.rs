@@ -32,6 +32,9 @@ pub struct IlqgOptions {
     pub mu_min: f64,
     /// Give up above this μ (default 1e10).
     pub mu_max: f64,
+    /// Raise μ after an accepted step shorter than `shrink_below_step` (default true, 0.5).
+    pub damp_short_steps: bool,
+    pub shrink_below_step: f64,
     /// Include the noise terms in the backward pass and the line search (default true). False
     /// gives deterministic DDP on the same plant.
     pub stochastic: bool,
@@ -46,6 +49,8 @@ impl Default for IlqgOptions {
             mu_init: 0.0,
             mu_min: 1e-6,
             mu_max: 1e10,
+            damp_short_steps: true,
+            shrink_below_step: 0.5,
             stochastic: true,
         }
     }
@@ -96,6 +101,21 @@ pub struct Solution {
     pub history: Vec<f64>,
 }
 
+/// A progress callback.
+pub type OnIteration = Box<dyn FnMut(&Progress) + Send>;
+
+/// The state of the solver after an accepted iteration.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    pub iteration: usize,
+    /// The merit (expected cost as the line search sees it) after the step.
+    pub merit: f64,
+    /// Regularisation in force.
+    pub mu: f64,
+    /// Accepted step length.
+    pub alpha: f64,
+}
+
 /// Everything that lives along one trajectory.
 struct Trajectory {
     x: Vec<DVector<f64>>,
@@ -144,6 +164,8 @@ struct Backward {
 /// The ILQG solver with its preallocated workspace; reuse it for problems of the same size.
 pub struct Ilqg {
     pub options: IlqgOptions,
+    /// Called after every accepted iteration (for progress display); must not block.
+    pub on_iteration: Option<OnIteration>,
     nominal: Trajectory,
     candidate: Trajectory,
     ff: Vec<DVector<f64>>,
@@ -167,6 +189,7 @@ impl Ilqg {
         assert!(nu <= MAX_QP, "at most {MAX_QP} controls");
         Ilqg {
             options,
+            on_iteration: None,
             nominal: Trajectory::new(nx, nu, nw, h),
             candidate: Trajectory::new(nx, nu, nw, h),
             ff: (0..h).map(|_| DVector::zeros(nu)).collect(),
@@ -324,7 +347,15 @@ impl Ilqg {
                     linearize(problem, &mut self.nominal);
                     iterations += 1;
                     history.push(after);
-                    if alpha >= 0.5 {
+                    if let Some(cb) = self.on_iteration.as_mut() {
+                        cb(&Progress {
+                            iteration: iterations,
+                            merit: after,
+                            mu,
+                            alpha,
+                        });
+                    }
+                    if alpha >= self.options.shrink_below_step || !self.options.damp_short_steps {
                         // The local model was trusted: lower μ (Tassa's schedule).
                         mu_step = (mu_step / 2.0).min(0.5);
                         mu = if mu * mu_step > self.options.mu_min {

@@ -1,0 +1,138 @@
+//! Every scenario in `config/` loads and plans (with its configured method, ILQG unless it says
+//! otherwise) to a converged solution.
+//!
+//! One test per file, so that each scenario reports on its own (and the harness runs them in
+//! parallel); a further test fails when a file in `config/` has no test here.
+
+use std::path::{Path, PathBuf};
+use vic::config::Scenario;
+use vic::plan::plan;
+
+/// The scenarios, as file stems of `config/*.toml`.
+const SCENARIOS: [&str; 10] = [
+    "icub_elbow",
+    "icub_experiment",
+    "single_joint_delay",
+    "two_link_curl",
+    "two_link_deterministic",
+    "two_link_divergent",
+    "two_link_reach",
+    "two_link_torque_divergent",
+    "two_link_vsa_divergent",
+    "two_link_vsa_light_divergent",
+];
+
+fn config_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("config")
+}
+
+fn check(stem: &str) {
+    let path = config_dir().join(format!("{stem}.toml"));
+    let scenario = Scenario::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
+    // The scenario's own method, as `vic plan` uses by default.
+    let file =
+        plan(&scenario, scenario.solver.method, None).unwrap_or_else(|e| panic!("{stem}: {e}"));
+    let s = &file.summary;
+    let steps = scenario.task.steps;
+    // The plan file is complete and finite.
+    assert_eq!(file.x.len(), steps + 1, "{stem}: states");
+    assert_eq!(file.u.len(), steps, "{stem}: controls");
+    assert_eq!(file.gains.len(), steps, "{stem}: gains");
+    assert!(
+        file.x
+            .iter()
+            .chain(&file.u)
+            .flatten()
+            .all(|v| v.is_finite()),
+        "{stem}: non-finite plan"
+    );
+    assert!(
+        s.cost.is_finite() && s.expected_cost.is_finite(),
+        "{stem}: cost {} / expected {}",
+        s.cost,
+        s.expected_cost
+    );
+    // Planned controls respect the scenario's limits.
+    for (k, u) in file.u.iter().enumerate() {
+        for (j, v) in u.iter().enumerate() {
+            assert!(
+                scenario.bounds.lower[j] <= *v && *v <= scenario.bounds.upper[j],
+                "{stem}: u[{k}][{j}] = {v} outside its limits"
+            );
+        }
+    }
+    assert!(
+        s.converged,
+        "{stem}: not converged: stop {} after {} iterations, cost {:.6e}, expected cost {:.6e}, \
+         final error {:.3} {}, {:.0} ms",
+        s.stop,
+        s.iterations,
+        s.cost,
+        s.expected_cost,
+        s.final_error,
+        s.final_error_unit,
+        s.solve_ms
+    );
+}
+
+#[test]
+fn every_config_file_is_tested() {
+    let mut found: Vec<String> = std::fs::read_dir(config_dir())
+        .expect("config directory")
+        .map(|e| e.expect("directory entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    found.sort();
+    assert_eq!(found, SCENARIOS, "config/*.toml and SCENARIOS differ");
+}
+
+#[test]
+fn icub_elbow() {
+    check("icub_elbow");
+}
+
+#[test]
+fn icub_experiment() {
+    check("icub_experiment");
+}
+
+#[test]
+fn single_joint_delay() {
+    check("single_joint_delay");
+}
+
+#[test]
+fn two_link_curl() {
+    check("two_link_curl");
+}
+
+#[test]
+fn two_link_deterministic() {
+    check("two_link_deterministic");
+}
+
+#[test]
+fn two_link_divergent() {
+    check("two_link_divergent");
+}
+
+#[test]
+fn two_link_reach() {
+    check("two_link_reach");
+}
+
+#[test]
+fn two_link_torque_divergent() {
+    check("two_link_torque_divergent");
+}
+
+#[test]
+fn two_link_vsa_divergent() {
+    check("two_link_vsa_divergent");
+}
+
+#[test]
+fn two_link_vsa_light_divergent() {
+    check("two_link_vsa_light_divergent");
+}
