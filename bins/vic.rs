@@ -30,6 +30,43 @@ enum Command {
     ///
     /// Example: vic simulate --config config/two_link_divergent.toml --plan plan.json --policy open-loop
     Simulate(SimulateArgs),
+    /// Reproduce a figure of the paper: plan and simulate every column, write the plots (PNG and
+    /// SVG) and a JSON of the numbers into --out-dir, print a table.
+    ///
+    /// Example: vic experiment fig1 --trials 20 --out-dir results
+    Experiment(ExperimentArgs),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FigureArg {
+    /// Two-link arm in the divergent field, each actuator type, executed open loop (Fig. 1).
+    Fig1,
+    /// Single joint with a 200 ms feedback delay: feedforward, delayed feedback, stiffness (Fig. 2).
+    Fig2,
+    /// The iCub elbow with the identified noise: predicted versus Monte Carlo expected cost.
+    Icub,
+}
+
+#[derive(clap::Args)]
+struct ExperimentArgs {
+    /// Which experiment.
+    #[arg(value_enum)]
+    figure: FigureArg,
+    /// Monte Carlo trials per column.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(3..))]
+    trials: u64,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Where the plots and the JSON go.
+    #[arg(long, default_value = "results", value_name = "DIR")]
+    out_dir: PathBuf,
+    /// Folder of the scenario files.
+    #[arg(long, default_value = "config", value_name = "DIR")]
+    config_dir: PathBuf,
+    /// Print the JSON document instead of the table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -136,6 +173,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Plan(args) => run_plan(args),
         Command::Simulate(args) => run_simulate(args),
+        Command::Experiment(args) => run_experiment(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -347,4 +385,71 @@ fn write_trials_csv(
         }
     }
     w.flush().map_err(io)
+}
+
+fn run_experiment(args: ExperimentArgs) -> Result<(), Failure> {
+    use std::io::IsTerminal;
+    use vic::experiment::{Figure, run, to_json, write_outputs};
+    let figure = match args.figure {
+        FigureArg::Fig1 => Figure::Fig1,
+        FigureArg::Fig2 => Figure::Fig2,
+        FigureArg::Icub => Figure::Icub,
+    };
+    if !args.config_dir.is_dir() {
+        return Err(Failure::input(format!(
+            "--config-dir {}: not a folder of scenario files",
+            args.config_dir.display()
+        )));
+    }
+    let tty = std::io::stderr().is_terminal();
+    let progress = progress_printer();
+    let run = run(
+        figure,
+        &args.config_dir,
+        args.trials as usize,
+        args.seed,
+        progress,
+        |i, n, name| {
+            if tty {
+                eprintln!("\r\x1b[2K[{}/{n}] {name}", i + 1);
+            }
+        },
+    )
+    .map_err(|e| match e {
+        vic::experiment::ExperimentError::Config(c) => Failure::input(c),
+        other => Failure::runtime(other),
+    })?;
+    if tty {
+        eprint!("\r\x1b[2K");
+    }
+    let files = write_outputs(&run, &args.out_dir).map_err(Failure::runtime)?;
+    if args.json {
+        println!("{}", to_json(&run));
+        return Ok(());
+    }
+    println!(
+        "{:<18} {:>8} {:>12} {:>12} {:>9} {:>13} {:>13} {:>9}",
+        "column", "method", "final std", "RMS error", "diverged", "E[C] MC", "E[C] pred.", "mean K"
+    );
+    for c in &run.columns {
+        let unit = &c.report.unit;
+        println!(
+            "{:<18} {:>8} {:>9.2} {unit:<3}{:>8.2} {unit:<3} {:>8.0} % {:>13.4e} {:>13.4e} {:>9.1}",
+            c.name,
+            c.method,
+            c.report.final_std,
+            c.rms_error,
+            c.diverged_fraction * 100.0,
+            c.expected_cost_mc,
+            c.expected_cost_predicted,
+            c.mean_stiffness
+        );
+    }
+    if figure == Figure::Icub {
+        println!("paper: C* = 0.29 predicted, C = 0.41 measured on the robot");
+    }
+    for f in files {
+        println!("wrote {}", f.display());
+    }
+    Ok(())
 }

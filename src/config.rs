@@ -693,11 +693,13 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
     if let Some(off) = model.actuator.stiffness_offset(dof) {
         let lo = cx.non_negative(a.stiffness_min.unwrap_or(0.0), "actuator", "stiffness_min")?;
         let hi = a.stiffness_max.unwrap_or(f64::INFINITY);
-        if hi.is_nan() || hi <= lo {
+        // Equal limits fix the stiffness (stiffness_max = 0: an impedance actuator without
+        // stiffness, the paper's "delayed feedback without stiffness").
+        if hi.is_nan() || hi < lo {
             return Err(cx.err(
                 "actuator",
                 "stiffness_max",
-                format!("must exceed stiffness_min ({lo}), got {hi}"),
+                format!("must be at least stiffness_min ({lo}), got {hi}"),
             ));
         }
         for i in 0..dof {

@@ -294,7 +294,17 @@ pub fn plan(
             // Warm start from the deterministic optimum, then optimise the open-loop moments.
             let mut det = solver_for(&plain, &s.solver.options, "deterministic", &progress);
             det.options.stochastic = false;
-            let first = det.solve(&plain, &setup.u_init);
+            let mut first = det.solve(&plain, &setup.u_init);
+            if let (Some(off), Ok(k)) = (
+                s.model.actuator.stiffness_offset(s.model.dof()),
+                std::env::var("VIC_SOOC_K0").map(|v| v.parse::<f64>().unwrap()),
+            ) {
+                for u in &mut first.u {
+                    for i in 0..s.model.dof() {
+                        u[off + i] = k;
+                    }
+                }
+            }
             let moments = MomentDynamics::new(&setup.dynamics);
             let cost = MomentCost::new(&setup.cost, steps);
             let problem = Problem {
