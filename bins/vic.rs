@@ -35,6 +35,27 @@ enum Command {
     ///
     /// Example: vic experiment fig1 --trials 20 --out-dir results
     Experiment(ExperimentArgs),
+    /// Regenerate docs/RESULTS.md: run fig1, fig2 and icub, write their figures and numbers into
+    /// --out-dir/figures and the document that sets the paper's claims beside our numbers.
+    ///
+    /// Example: vic results --out-dir docs
+    Results(ResultsArgs),
+}
+
+#[derive(clap::Args)]
+struct ResultsArgs {
+    /// Monte Carlo trials per column.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(3..))]
+    trials: u64,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Where RESULTS.md and figures/ go.
+    #[arg(long, default_value = "docs", value_name = "DIR")]
+    out_dir: PathBuf,
+    /// Folder of the scenario files.
+    #[arg(long, default_value = "config", value_name = "DIR")]
+    config_dir: PathBuf,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -174,6 +195,7 @@ fn main() -> ExitCode {
         Command::Plan(args) => run_plan(args),
         Command::Simulate(args) => run_simulate(args),
         Command::Experiment(args) => run_experiment(args),
+        Command::Results(args) => run_results(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -451,5 +473,49 @@ fn run_experiment(args: ExperimentArgs) -> Result<(), Failure> {
     for f in files {
         println!("wrote {}", f.display());
     }
+    Ok(())
+}
+
+fn run_results(args: ResultsArgs) -> Result<(), Failure> {
+    use std::io::IsTerminal;
+    use vic::experiment::{Figure, results_markdown, run, write_outputs};
+    let tty = std::io::stderr().is_terminal();
+    let mut runs = Vec::new();
+    for figure in [Figure::Fig1, Figure::Fig2, Figure::Icub] {
+        let r = run(
+            figure,
+            &args.config_dir,
+            args.trials as usize,
+            args.seed,
+            progress_printer(),
+            |i, n, name| {
+                if tty {
+                    eprintln!("\r\x1b[2K{} [{}/{n}] {name}", figure.name(), i + 1);
+                }
+            },
+        )
+        .map_err(|e| match e {
+            vic::experiment::ExperimentError::Config(c) => Failure::input(c),
+            other => Failure::runtime(other),
+        })?;
+        for f in write_outputs(&r, &args.out_dir.join("figures")).map_err(Failure::runtime)? {
+            println!("wrote {}", f.display());
+        }
+        runs.push(r);
+    }
+    if tty {
+        eprint!("\r\x1b[2K");
+    }
+    let command = format!(
+        "cargo run --release -- results --trials {} --seed {} --out-dir {}",
+        args.trials,
+        args.seed,
+        args.out_dir.display()
+    );
+    let md = results_markdown(&runs, "figures", &command);
+    let path = args.out_dir.join("RESULTS.md");
+    std::fs::write(&path, md)
+        .map_err(|e| Failure::runtime(format!("cannot write {}: {e}", path.display())))?;
+    println!("wrote {}", path.display());
     Ok(())
 }

@@ -134,6 +134,8 @@ pub struct IlqgSection {
     /// The planning method.
     pub method: crate::plan::Method,
     pub options: IlqgOptions,
+    /// SOOC: fractions of the noise solved in turn, ending at 1 (default [0.1, 0.3, 1.0]).
+    pub noise_continuation: Vec<f64>,
 }
 
 impl Default for IlqgSection {
@@ -141,6 +143,7 @@ impl Default for IlqgSection {
         IlqgSection {
             method: crate::plan::Method::Ilqg,
             options: IlqgOptions::default(),
+            noise_continuation: vec![0.1, 0.3, 1.0],
         }
     }
 }
@@ -157,6 +160,7 @@ struct RawSolver {
     mu_max: Option<f64>,
     stochastic: Option<bool>,
     damp_short_steps: Option<bool>,
+    noise_continuation: Option<Vec<f64>>,
 }
 
 impl RawSolver {
@@ -173,7 +177,22 @@ impl RawSolver {
                 ));
             }
         };
+        let noise_continuation = self
+            .noise_continuation
+            .unwrap_or_else(|| vec![0.1, 0.3, 1.0]);
+        if noise_continuation.last() != Some(&1.0)
+            || noise_continuation
+                .iter()
+                .any(|f| !(f.is_finite() && *f > 0.0))
+        {
+            return Err(cx.err(
+                "solver",
+                "noise_continuation",
+                format!("must be positive fractions ending with 1.0, got {noise_continuation:?}"),
+            ));
+        }
         Ok(IlqgSection {
+            noise_continuation,
             method,
             options: IlqgOptions {
                 max_iterations: self.max_iterations.unwrap_or(d.max_iterations),

@@ -101,8 +101,9 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         let (n, m) = (self.base.nx(), self.base.nu());
         let total = self.nx();
-        let mut guard = self.scratch.lock().expect("scratch lock");
-        let base = &mut guard.0;
+        // Own scratch per call: knots are linearised in parallel.
+        let mut own = Linearization::new(n, m, self.base.nw());
+        let base = &mut own;
         self.base.linearize(k, &x[..n], self.acting(x, u), base);
         lin.a.fill(0.0);
         lin.b.fill(0.0);

@@ -33,6 +33,8 @@ pub struct Report {
     /// Trials that ended further than the divergence threshold from the target (or blew up).
     pub diverged: usize,
     pub diverged_fraction: f64,
+    /// Fraction of trials ending more than 5 cm (arm) or 5° (joint) from the target.
+    pub far_fraction: f64,
     /// Monte Carlo expected cost and its standard error.
     pub expected_cost_mc: f64,
     pub expected_cost_se: f64,
@@ -136,6 +138,13 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         final_error_max: final_errors.iter().copied().fold(0.0, f64::max),
         diverged,
         diverged_fraction: diverged as f64 / count,
+        far_fraction: final_errors
+            .iter()
+            .filter(|e| {
+                !e.is_finite() || **e > 50.0_f64.min(if model.dof() == 1 { 5.0 } else { 50.0 })
+            })
+            .count() as f64
+            / count,
         expected_cost_mc: cost_mean,
         expected_cost_se: (cost_var / count).sqrt(),
     }

@@ -703,9 +703,10 @@ fn minimise_over_direction(coarse: impl Fn(f64) -> f64, fine: impl Fn(f64) -> f6
 fn profile_nll(theta: f64, q: &[f64], e2: &[f64]) -> (f64, f64) {
     let (sin, cos) = theta.sin_cos();
     let (mut ratio, mut log) = (0.0, 0.0);
+    let floor = u2_floor();
     for (&qi, &ei2) in q.iter().zip(e2) {
         let u = cos + sin * qi;
-        let u2 = (u * u).max(u2_floor());
+        let u2 = (u * u).max(floor);
         ratio += ei2 / u2;
         log += u2.ln();
     }

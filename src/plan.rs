@@ -256,6 +256,43 @@ pub fn predict_open_loop(setup: &Setup, acting: &[DVector<f64>]) -> OpenLoopPred
     }
 }
 
+/// SOOC from a warm start, by continuation in the noise level: the open-loop moment problem is
+/// solved at `noise_continuation` fractions of the noise in turn, each from the previous
+/// solution. Started at full noise from the deterministic plan, the solver can settle in poor local
+/// optima (the VSA, whose motor states are noise integrators); the path from small noise follows
+/// the deterministic optimum as it deforms.
+pub fn solve_sooc(
+    setup: &Setup,
+    solver: &crate::config::IlqgSection,
+    warm: &[DVector<f64>],
+    progress: &Option<ProgressFn>,
+) -> Solution {
+    let mut u = warm.to_vec();
+    let mut total: Option<Solution> = None;
+    for &fraction in &solver.noise_continuation {
+        let mut dynamics = setup.dynamics.clone();
+        dynamics.model.noise = dynamics.model.noise.scaled(fraction);
+        let moments = MomentDynamics::new(&dynamics);
+        let cost = MomentCost::new(&setup.cost, u.len());
+        let problem = Problem {
+            dynamics: &moments,
+            cost: &cost,
+            x0: moments.initial_state(&setup.x0),
+            horizon: u.len(),
+            bounds: setup.bounds.clone(),
+        };
+        let mut ilqg = solver_for(&problem, &solver.options, "open-loop moments", progress);
+        let mut sol = ilqg.solve(&problem, &u);
+        u = sol.u.clone();
+        if let Some(prev) = total {
+            sol.iterations += prev.iterations;
+            sol.solve_time += prev.solve_time;
+        }
+        total = Some(sol);
+    }
+    total.expect("at least one continuation stage")
+}
+
 /// A progress report: the phase of the solve and the solver's state after an iteration.
 pub type ProgressFn = Arc<dyn Fn(&str, &Progress) + Send + Sync>;
 
@@ -294,29 +331,8 @@ pub fn plan(
             // Warm start from the deterministic optimum, then optimise the open-loop moments.
             let mut det = solver_for(&plain, &s.solver.options, "deterministic", &progress);
             det.options.stochastic = false;
-            let mut first = det.solve(&plain, &setup.u_init);
-            if let (Some(off), Ok(k)) = (
-                s.model.actuator.stiffness_offset(s.model.dof()),
-                std::env::var("VIC_SOOC_K0").map(|v| v.parse::<f64>().unwrap()),
-            ) {
-                for u in &mut first.u {
-                    for i in 0..s.model.dof() {
-                        u[off + i] = k;
-                    }
-                }
-            }
-            let moments = MomentDynamics::new(&setup.dynamics);
-            let cost = MomentCost::new(&setup.cost, steps);
-            let problem = Problem {
-                dynamics: &moments,
-                cost: &cost,
-                x0: moments.initial_state(&setup.x0),
-                horizon: steps,
-                bounds: setup.bounds.clone(),
-            };
-            let mut solver =
-                solver_for(&problem, &s.solver.options, "open-loop moments", &progress);
-            let mut sol = solver.solve(&problem, &first.u);
+            let first = det.solve(&plain, &setup.u_init);
+            let mut sol = solve_sooc(&setup, &s.solver, &first.u, &progress);
             sol.iterations += first.iterations;
             sol.solve_time += first.solve_time;
             for x in &mut sol.x {

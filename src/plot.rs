@@ -18,6 +18,7 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// One column of a figure: Monte Carlo trials of one condition.
 #[derive(Debug, Clone, Default)]
@@ -68,8 +69,12 @@ pub enum PlotError {
 /// Fig. 1 layout: columns side by side; row A: hand paths in the (x, y) plane (every trial light
 /// grey, the mean thick, ±1 std shaded band across the path, the 95 % ellipse at the end, equal
 /// axis scale, metres), row B: joint angles and velocities vs time (mean ± std shaded, both
-/// joints), row C: the commands (torques and stiffnesses vs time, every trial). Writes both PNG
-/// and SVG.
+/// joints, with the reference angles dashed), row C: the commands (torques, then stiffnesses
+/// when any column has them; every trial, held over each step). Writes both PNG and SVG, each
+/// `28 + 400 × columns` px wide and 1078 px tall (913 without stiffness commands).
+///
+/// `dashed_ellipse`, when given, is drawn dashed next to the solid 95 % ellipse. The legends sit
+/// in the first column, in the panel corner with the fewest data.
 ///
 /// The hand-path view is the same for all columns: the reference paths, plus the spread of the
 /// trials of every column that does not diverge, plus a margin. Time rows share their y ranges.
@@ -80,7 +85,9 @@ pub fn arm_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), 
 
 /// Fig. 2 layout for a single joint: columns side by side; rows: angle [deg] of every trial with
 /// the reference, velocity [deg/s] of every trial, commands (torque, stiffness) of every trial.
-/// Rows share their y ranges across columns. Writes both PNG and SVG.
+/// Rows share their y ranges across columns; a second stiffness panel is added to row C when any
+/// column has stiffness commands. Writes both PNG and SVG, `28 + 400 × columns` px wide and 1003
+/// px tall (768 without stiffness commands).
 pub fn joint_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {
     check_columns(columns, png)?;
     render(&JointFigure::new(columns), png, svg)
@@ -103,8 +110,11 @@ const X_LABEL_AREA_DESC: u32 = 42;
 const MAX_POINTS: usize = 1500;
 /// A column's spread larger than this many times the median column's is an outlier.
 const OUTLIER_FACTOR: f64 = 4.0;
-/// Tail fraction left out on each side when measuring a column's range.
-const TAIL: f64 = 0.005;
+/// Tail fraction left out on each side when measuring a column's range of a time series (none:
+/// a column's own trials all fit unless the column is an outlier).
+const TAIL: f64 = 0.0;
+/// Tail fraction left out on each side when measuring a column's spread of hand positions.
+const HAND_TAIL: f64 = 0.025;
 const RAD_TO_DEG: f64 = 180.0 / std::f64::consts::PI;
 
 const TRIAL_GREY: RGBColor = RGBColor(190, 190, 190);
@@ -219,11 +229,16 @@ struct ArmFigure<'a> {
     stiffness: Option<(f64, f64)>,
 }
 
+/// Per knot: mean and standard deviation.
+type MeanStd = (Vec<f64>, Vec<f64>);
+/// A polygon's vertices in data coordinates.
+type Polygon2 = Vec<(f64, f64)>;
+
 /// Per-column statistics over trials.
 struct ArmStats {
     /// Per joint: mean and std of the angle [deg] and of the velocity [deg/s] at each knot.
-    angle: Vec<(Vec<f64>, Vec<f64>)>,
-    velocity: Vec<(Vec<f64>, Vec<f64>)>,
+    angle: Vec<MeanStd>,
+    velocity: Vec<MeanStd>,
     hand_mean: Vec<(f64, f64)>,
     /// ±1 std across the mean path, as polygons.
     hand_band: Vec<Vec<(f64, f64)>>,
@@ -232,7 +247,7 @@ struct ArmStats {
 impl<'a> ArmFigure<'a> {
     fn new(columns: &'a [ColumnPlot]) -> Self {
         let stats: Vec<ArmStats> = columns.iter().map(arm_stats).collect();
-        let band_values = |pick: fn(&ArmStats) -> &Vec<(Vec<f64>, Vec<f64>)>| -> Vec<Vec<f64>> {
+        let band_values = |pick: fn(&ArmStats) -> &Vec<MeanStd>| -> Vec<Vec<f64>> {
             stats
                 .iter()
                 .map(|s| {
@@ -305,17 +320,15 @@ impl<'a> ArmFigure<'a> {
             .y_labels(6)
             .max_light_lines(0)
             .bold_line_style(GRID)
+            .x_label_formatter(&tick)
+            .y_label_formatter(&tick)
             .label_style((FONT, TICK_SIZE))
             .axis_desc_style((FONT, DESC_SIZE))
             .x_desc("x [m]")
             .y_desc("y [m]")
             .draw()?;
         if col.hand.is_empty() {
-            let style = TextStyle::from((FONT, DESC_SIZE).into_font()).color(&MEAN_GREY);
-            let centre = ((view.x0 + view.x1) / 2.0, (view.y0 + view.y1) / 2.0);
-            let at = chart.backend_coord(&centre);
-            area.draw_text("no hand path", &style, (at.0 - 45, at.1))?;
-            return Ok(());
+            return note(&mut chart, "no hand path");
         }
         for trial in &col.hand {
             lines(
@@ -356,7 +369,14 @@ impl<'a> ArmFigure<'a> {
             if col.ellipse.is_some() || col.dashed_ellipse.is_some() {
                 legend_line(&mut chart, "95 % ellipse", ELLIPSE_RED.stroke_width(2))?;
             }
-            legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+            let drawn: Vec<(f64, f64)> = col
+                .hand
+                .iter()
+                .flatten()
+                .map(|p| (p[0], p[1]))
+                .chain(stats.hand_band.iter().flatten().copied())
+                .collect();
+            legend(&mut chart, quiet_corner(&view, &drawn))?;
         }
         Ok(())
     }
@@ -375,6 +395,7 @@ impl<'a> ArmFigure<'a> {
         } else {
             &self.stats[c].velocity
         };
+        let mut drawn = Vec::new();
         for (j, (mean, sd)) in stats.iter().enumerate() {
             let colour = joint_colour(j);
             let upper: Vec<f64> = mean.iter().zip(sd).map(|(m, s)| m + s).collect();
@@ -384,6 +405,7 @@ impl<'a> ArmFigure<'a> {
                 col.time.iter().zip(&lower).map(|(&t, &y)| (t, y)).collect(),
             ) {
                 fill(chart, &view, &polygon, colour.mix(0.25))?;
+                drawn.extend(polygon);
             }
             lines(
                 chart,
@@ -405,7 +427,7 @@ impl<'a> ArmFigure<'a> {
             }
         }
         if c == 0 && !stats.is_empty() {
-            legend(chart, SeriesLabelPosition::UpperRight)?;
+            legend(chart, quiet_corner(&view, &drawn))?;
         }
         Ok(())
     }
@@ -460,7 +482,7 @@ impl Figure for ArmFigure<'_> {
 
 fn arm_stats(col: &ColumnPlot) -> ArmStats {
     let knots = col.time.len();
-    let joint = |data: &[Vec<Vec<f64>>]| -> Vec<(Vec<f64>, Vec<f64>)> {
+    let joint = |data: &[Vec<Vec<f64>>]| -> Vec<MeanStd> {
         (0..col.dof)
             .map(|j| mean_std(data, knots, |knot| knot.get(j).map(|v| v * RAD_TO_DEG)))
             .collect()
@@ -504,10 +526,7 @@ fn mean_std(
 
 /// Mean hand path and the ±1 std band across it (the std of the hand position along the normal
 /// of the mean path).
-fn hand_statistics(
-    hand: &[Vec<[f64; 2]>],
-    knots: usize,
-) -> (Vec<(f64, f64)>, Vec<Vec<(f64, f64)>>) {
+fn hand_statistics(hand: &[Vec<[f64; 2]>], knots: usize) -> (Vec<(f64, f64)>, Vec<Polygon2>) {
     let mut mean = Vec::with_capacity(knots);
     let mut cov = Vec::with_capacity(knots);
     for k in 0..knots {
@@ -557,10 +576,11 @@ fn hand_statistics(
         let b = mean[(k + window).min(knots - 1)];
         let mut tangent = (b.0 - a.0, b.1 - a.1);
         let norm = |t: (f64, f64)| t.0.hypot(t.1);
-        if !(norm(tangent) > 1e-12) {
+        let usable = |t: (f64, f64)| norm(t).is_finite() && norm(t) > 1e-12;
+        if !usable(tangent) {
             tangent = overall;
         }
-        if !(norm(tangent) > 1e-12) {
+        if !usable(tangent) {
             tangent = (0.0, 1.0);
         }
         let length = norm(tangent);
@@ -591,8 +611,8 @@ fn hand_view(columns: &[ColumnPlot], stats: &[ArmStats]) -> View {
         .zip(stats)
         .map(|(c, s)| {
             let points = c.hand.iter().flatten();
-            let xs = quantile_range(points.clone().map(|p| p[0]).collect(), 0.025);
-            let ys = quantile_range(points.map(|p| p[1]).collect(), 0.025);
+            let xs = quantile_range(points.clone().map(|p| p[0]).collect(), HAND_TAIL);
+            let ys = quantile_range(points.map(|p| p[1]).collect(), HAND_TAIL);
             let mut b = Bounds::default();
             if let (Some(x), Some(y)) = (xs, ys) {
                 b.add((x.0, y.0));
@@ -741,15 +761,23 @@ impl<'a> JointFigure<'a> {
         let col = &self.columns[c];
         let view = View::of(chart);
         let data = if angles { &col.q } else { &col.qd };
+        let mut drawn = Vec::new();
         for j in 0..col.dof {
             let colour = joint_colour(j);
             for trial in data {
-                let points = col
+                let points: Vec<(f64, f64)> = col
                     .time
                     .iter()
                     .zip(trial)
-                    .map(|(&t, knot)| (t, knot.get(j).map_or(f64::NAN, |v| v * RAD_TO_DEG)));
-                lines(chart, &view, points, colour.mix(0.45).stroke_width(1))?;
+                    .map(|(&t, knot)| (t, knot.get(j).map_or(f64::NAN, |v| v * RAD_TO_DEG)))
+                    .collect();
+                lines(
+                    chart,
+                    &view,
+                    points.iter().copied(),
+                    colour.mix(0.45).stroke_width(1),
+                )?;
+                drawn.extend(points);
             }
             if angles {
                 let reference: Vec<(f64, f64)> = col
@@ -761,7 +789,8 @@ impl<'a> JointFigure<'a> {
                 dashed(chart, &view, &reference, BLACK.stroke_width(2))?;
             }
         }
-        if c == 0 {
+        // The legend once, on the first column's angles.
+        if c == 0 && angles {
             if col.dof > 1 {
                 for j in 0..col.dof {
                     legend_line(
@@ -773,10 +802,10 @@ impl<'a> JointFigure<'a> {
             } else {
                 legend_line(chart, "trials", joint_colour(0).mix(0.6).stroke_width(1))?;
             }
-            if angles && !col.reference_q.is_empty() {
+            if !col.reference_q.is_empty() {
                 legend_dashed(chart, "reference", BLACK.stroke_width(2))?;
             }
-            legend(chart, SeriesLabelPosition::LowerRight)?;
+            legend(chart, quiet_corner(&view, &drawn))?;
         }
         Ok(())
     }
@@ -841,6 +870,13 @@ enum Commands {
 }
 
 impl Commands {
+    fn name(self) -> &'static str {
+        match self {
+            Commands::Torque => "torque",
+            Commands::Stiffness => "stiffness",
+        }
+    }
+
     fn desc(self) -> &'static str {
         match self {
             Commands::Torque => "torque [N m]",
@@ -901,17 +937,10 @@ fn draw_commands<'c, DB: DrawingBackend + 'c>(
     let view = View::of(chart);
     let range = kind.indices(col);
     if range.is_empty() {
-        let style = TextStyle::from((FONT, DESC_SIZE).into_font()).color(&MEAN_GREY);
-        let centre = ((view.x0 + view.x1) / 2.0, (view.y0 + view.y1) / 2.0);
-        let at = chart.backend_coord(&centre);
-        chart.plotting_area().strip_coord_spec().draw_text(
-            "no stiffness control",
-            &style,
-            (at.0 - 70, at.1 - 8),
-        )?;
-        return Ok(());
+        return note(chart, &format!("no {} commands", kind.name()));
     }
     let alpha = if col.u.len() > 1 { 0.45 } else { 1.0 };
+    let mut drawn = Vec::new();
     for i in range.clone() {
         let colour = joint_colour(i - range.start);
         for trial in &col.u {
@@ -931,14 +960,20 @@ fn draw_commands<'c, DB: DrawingBackend + 'c>(
                 points.push((t0, v));
                 points.push((t1, v));
             }
-            lines(chart, &view, points, colour.mix(alpha).stroke_width(2))?;
+            lines(
+                chart,
+                &view,
+                points.iter().copied(),
+                colour.mix(alpha).stroke_width(2),
+            )?;
+            drawn.extend(points);
         }
         if with_legend {
             legend_line(chart, &control_name(col, i), colour.stroke_width(2))?;
         }
     }
     if with_legend {
-        legend(chart, SeriesLabelPosition::UpperRight)?;
+        legend(chart, quiet_corner(&view, &drawn))?;
     }
     Ok(())
 }
@@ -968,6 +1003,8 @@ fn time_chart<'a, DB: DrawingBackend>(
         .y_labels(5)
         .max_light_lines(0)
         .bold_line_style(GRID)
+        .x_label_formatter(&tick)
+        .y_label_formatter(&tick)
         .label_style((FONT, TICK_SIZE))
         .axis_desc_style((FONT, DESC_SIZE))
         .y_desc(y_desc);
@@ -986,7 +1023,7 @@ fn titled<DB: DrawingBackend>(
     let (width, _) = area.dim_in_pixel();
     let mut size = TITLE_SIZE;
     let style = loop {
-        let style = TextStyle::from((FONT, size).into_font().style(FontStyle::Bold));
+        let style = TextStyle::from(bold(size));
         let (w, _) = area.estimate_text_size(title, &style)?;
         if w + 16 <= width || size <= 9.0 {
             break style;
@@ -1002,7 +1039,7 @@ fn row_letters<DB: DrawingBackend>(
     starts: &[i32],
     offsets: &[i32],
 ) -> DrawResult<(), DB> {
-    let style = TextStyle::from((FONT, 20.0).into_font().style(FontStyle::Bold));
+    let style = TextStyle::from(bold(20.0));
     for ((letter, &y), &dy) in ["A", "B", "C"].iter().zip(starts).zip(offsets) {
         gutter.draw_text(letter, &style, (7, y + 4 + dy))?;
     }
@@ -1020,6 +1057,55 @@ fn breakpoints(heights: &[u32]) -> Vec<i32> {
         .collect()
 }
 
+/// DejaVu Sans Bold (`FontDesc::style` would keep the regular face's glyphs).
+fn bold(size: f64) -> FontDesc<'static> {
+    FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Bold)
+}
+
+/// Tick labels with as many decimals as the value needs: "0.35", "100", "-2".
+fn tick(v: &f64) -> String {
+    let s = format!("{v:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".to_string()
+    } else {
+        s.to_string()
+    }
+}
+
+/// A grey note centred in a panel that has nothing to show.
+fn note<'c, DB: DrawingBackend + 'c>(chart: &mut Chart<'c, DB>, text: &str) -> DrawResult<(), DB> {
+    let view = View::of(chart);
+    let style = TextStyle::from((FONT, DESC_SIZE).into_font())
+        .color(&MEAN_GREY)
+        .pos(Pos::new(HPos::Center, VPos::Center));
+    let centre = ((view.x0 + view.x1) / 2.0, (view.y0 + view.y1) / 2.0);
+    chart.draw_series(std::iter::once(Text::new(text.to_string(), centre, style)))?;
+    Ok(())
+}
+
+/// The corner of `view` with the fewest of `points` (the legend goes there).
+fn quiet_corner(view: &View, points: &[(f64, f64)]) -> SeriesLabelPosition {
+    let (w, h) = (0.4 * (view.x1 - view.x0), 0.4 * (view.y1 - view.y0));
+    let corners = [
+        (SeriesLabelPosition::UpperRight, view.x1 - w, view.y1 - h),
+        (SeriesLabelPosition::UpperLeft, view.x0, view.y1 - h),
+        (SeriesLabelPosition::LowerRight, view.x1 - w, view.y0),
+        (SeriesLabelPosition::LowerLeft, view.x0, view.y0),
+    ];
+    let mut best = (usize::MAX, SeriesLabelPosition::UpperRight);
+    for (position, x0, y0) in corners {
+        let count = points
+            .iter()
+            .filter(|p| (x0..=x0 + w).contains(&p.0) && (y0..=y0 + h).contains(&p.1))
+            .count();
+        if count < best.0 {
+            best = (count, position);
+        }
+    }
+    best.1
+}
+
 fn joint_colour(j: usize) -> RGBColor {
     JOINT_COLOURS[j % JOINT_COLOURS.len()]
 }
@@ -1028,21 +1114,16 @@ fn thin(colour: &RGBColor) -> ShapeStyle {
     colour.stroke_width(1)
 }
 
+/// The span of all knot times (0..1 s when there is none).
 fn time_range(columns: &[ColumnPlot]) -> (f64, f64) {
-    let times = columns.iter().flat_map(|c| c.time.iter().copied());
-    match Bounds::of(times.map(|t| (t, 0.0))).size() {
-        Some(_) => {
-            let b = Bounds::of(
-                columns
-                    .iter()
-                    .flat_map(|c| c.time.iter().map(|&t| (t, 0.0))),
-            );
-            if b.x1 > b.x0 {
-                (b.x0, b.x1)
-            } else {
-                (b.x0, b.x0 + 1.0)
-            }
-        }
+    let b = Bounds::of(
+        columns
+            .iter()
+            .flat_map(|c| c.time.iter().map(|&t| (t, 0.0))),
+    );
+    match b.size() {
+        Some(span) if span > 0.0 => (b.x0, b.x1),
+        Some(_) => (b.x0, b.x0 + 1.0),
         None => (0.0, 1.0),
     }
 }
@@ -1535,6 +1616,24 @@ mod tests {
         let wild = vec![-100.0, 100.0];
         let (lo, hi) = shared_range(vec![calm.clone(), wild, calm], &[], false);
         assert!(lo > -1.0 && hi < 2.0, "{lo}..{hi}");
+    }
+
+    #[test]
+    fn ticks_show_the_decimals_they_need() {
+        assert_eq!(tick(&0.30000000000000004), "0.3");
+        assert_eq!(tick(&0.35), "0.35");
+        assert_eq!(tick(&100.0), "100");
+        assert_eq!(tick(&-0.0), "0");
+        assert_eq!(tick(&-2.5), "-2.5");
+    }
+
+    #[test]
+    fn the_legend_goes_where_the_data_is_not() {
+        let rising: Vec<(f64, f64)> = (0..=10).map(|i| (0.1 * i as f64, 0.1 * i as f64)).collect();
+        assert!(matches!(
+            quiet_corner(&UNIT, &rising),
+            SeriesLabelPosition::UpperLeft
+        ));
     }
 
     #[test]

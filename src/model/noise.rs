@@ -29,3 +29,21 @@ impl Noise {
         }
     }
 }
+
+impl Noise {
+    /// The same noise model with its intensity multiplied by `factor` (standard deviations scale).
+    pub fn scaled(self, factor: f64) -> Noise {
+        match self {
+            Noise::None => Noise::None,
+            Noise::StateProportional { sigma, component } => Noise::StateProportional {
+                sigma: sigma * factor,
+                component,
+            },
+            Noise::Torque { a, b, sample_time } => Noise::Torque {
+                a: a * factor,
+                b: b * factor,
+                sample_time,
+            },
+        }
+    }
+}

@@ -637,15 +637,22 @@ fn rollout(
 
 /// Linearises the dynamics and differentiates the cost along `traj`.
 fn linearize(problem: &Problem, traj: &mut Trajectory) {
-    for k in 0..problem.horizon {
-        let (x, u) = (traj.x[k].as_slice(), traj.u[k].as_slice());
-        problem.dynamics.linearize(k, x, u, &mut traj.lin[k]);
-        problem
-            .cost
-            .running_derivatives(k, x, u, &mut traj.derivs[k]);
-    }
-    problem.cost.terminal_derivatives(
-        traj.x[problem.horizon].as_slice(),
-        &mut traj.derivs[problem.horizon],
-    );
+    use rayon::prelude::*;
+    let h = problem.horizon;
+    let (xs, us) = (&traj.x, &traj.u);
+    // Knots are independent: linearise them in parallel. Each knot's result is computed the same
+    // way whatever the thread count, so the solution does not depend on it.
+    traj.lin[..h]
+        .par_iter_mut()
+        .zip(traj.derivs[..h].par_iter_mut())
+        .enumerate()
+        .with_min_len(8)
+        .for_each(|(k, (lin, d))| {
+            let (x, u) = (xs[k].as_slice(), us[k].as_slice());
+            problem.dynamics.linearize(k, x, u, lin);
+            problem.cost.running_derivatives(k, x, u, d);
+        });
+    problem
+        .cost
+        .terminal_derivatives(xs[h].as_slice(), &mut traj.derivs[h]);
 }

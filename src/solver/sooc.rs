@@ -65,6 +65,22 @@ struct Scratch {
     e: DMatrix<f64>,
 }
 
+impl Scratch {
+    fn new(n: usize, m: usize, p: usize) -> Self {
+        let z = |r, c| DMatrix::zeros(r, c);
+        Scratch {
+            lin: Linearization::new(n, m, p),
+            p: z(n, n),
+            next: z(n, n),
+            t1: z(n, n),
+            da: z(n, n),
+            dcx: z(n, n),
+            dc: vec![0.0; n],
+            e: z(n, n),
+        }
+    }
+}
+
 /// The mean-and-covariance dynamics of an [`EulerModel`] executed open loop: a deterministic
 /// [`Dynamics`] on `z = (m, vech P)` of dimension `n + n(n+1)/2`.
 pub struct MomentDynamics<'a> {
@@ -75,19 +91,9 @@ pub struct MomentDynamics<'a> {
 impl<'a> MomentDynamics<'a> {
     pub fn new(base: &'a EulerModel) -> Self {
         let (n, m, p) = (base.nx(), base.nu(), base.nw());
-        let z = |r, c| DMatrix::zeros(r, c);
         MomentDynamics {
             base,
-            scratch: Mutex::new(Scratch {
-                lin: Linearization::new(n, m, p),
-                p: z(n, n),
-                next: z(n, n),
-                t1: z(n, n),
-                da: z(n, n),
-                dcx: z(n, n),
-                dc: vec![0.0; n],
-                e: z(n, n),
-            }),
+            scratch: Mutex::new(Scratch::new(n, m, p)),
         }
     }
 
@@ -172,8 +178,9 @@ impl Dynamics for MomentDynamics<'_> {
         let base = self.base;
         let (n, m, nw) = (base.nx(), base.nu(), base.nw());
         let pairs_len = vech_len(n);
-        let mut guard = self.scratch.lock().expect("scratch lock");
-        let s = &mut *guard;
+        // Own scratch per call: knots are linearised in parallel.
+        let mut own = Scratch::new(n, m, nw);
+        let s = &mut own;
         base.linearize(k, &z[..n], u, &mut s.lin);
         unpack(n, &z[n..], &mut s.p);
         lin.noise = NoiseKind::None;
