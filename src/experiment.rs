@@ -178,8 +178,16 @@ pub struct ExperimentRun {
     pub trials: usize,
     pub seed: u64,
     pub columns: Vec<ColumnResult>,
-    /// Per column: the plan, the scenario it ran on and the trials.
-    pub data: Vec<(PlanFile, Scenario, Vec<Trial>)>,
+    /// Per column: the plan, the scenario it ran on, the execution and the trials.
+    pub data: Vec<ColumnData>,
+}
+
+/// What a column ran: enough to plot it or to run it again with another seed.
+pub struct ColumnData {
+    pub plan: PlanFile,
+    pub scenario: Scenario,
+    pub policy: Policy,
+    pub trials: Vec<Trial>,
 }
 
 /// Errors of an experiment: a scenario that does not load, a plan that cannot be made.
@@ -223,41 +231,111 @@ pub fn run(
             ),
         };
         let trial_data = run_trials(&set, &exe, policy, trials, seed);
-        let arm = set.dynamics.model.dof() == 2;
-        let report = summarize(&set, &trial_data, if arm { 50.0 } else { 10.0 });
-        let s = &plan_file.summary;
-        out.push(ColumnResult {
-            name: spec.name.into(),
-            description: spec.what.into(),
-            scenario: spec.file.into(),
-            method: spec.method.name().into(),
-            policy: match policy {
-                Policy::OpenLoop => "open-loop".into(),
-                Policy::Feedback => "feedback".into(),
-                Policy::DelayedFeedback { latency_steps } => {
-                    format!("delayed-feedback ({latency_steps} steps)")
-                }
-            },
-            final_std_mm: arm.then_some(report.final_std),
-            final_std_deg: (!arm).then_some(report.final_std),
-            rms_error: report.rms_error,
-            diverged_fraction: report.diverged_fraction,
-            expected_cost_mc: report.expected_cost_mc,
-            expected_cost_predicted: predicted,
-            plan_converged: s.converged,
-            plan_iterations: s.iterations,
-            plan_solve_ms: s.solve_ms,
-            max_stiffness: s.max_stiffness,
-            mean_stiffness: s.mean_stiffness,
-            report,
+        out.push(column_result(
+            spec.name,
+            spec.what,
+            spec.file,
+            spec.method,
+            &plan_file,
+            &set,
+            policy,
+            predicted,
+            &trial_data,
+        ));
+        data.push(ColumnData {
+            plan: plan_file,
+            scenario,
+            policy,
+            trials: trial_data,
         });
-        data.push((plan_file, scenario, trial_data));
     }
     Ok(ExperimentRun {
         figure,
         trials,
         seed,
         columns: out,
+        data,
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn column_result(
+    name: &str,
+    what: &str,
+    file: &str,
+    method: Method,
+    plan_file: &PlanFile,
+    set: &crate::plan::Setup,
+    policy: Policy,
+    predicted: f64,
+    trials: &[Trial],
+) -> ColumnResult {
+    let arm = set.dynamics.model.dof() == 2;
+    let report = summarize(set, trials, if arm { 50.0 } else { 10.0 });
+    let s = &plan_file.summary;
+    ColumnResult {
+        name: name.into(),
+        description: what.into(),
+        scenario: file.into(),
+        method: method.name().into(),
+        policy: match policy {
+            Policy::OpenLoop => "open-loop".into(),
+            Policy::Feedback => "feedback".into(),
+            Policy::DelayedFeedback { latency_steps } => {
+                format!("delayed-feedback ({latency_steps} steps)")
+            }
+        },
+        final_std_mm: arm.then_some(report.final_std),
+        final_std_deg: (!arm).then_some(report.final_std),
+        rms_error: report.rms_error,
+        diverged_fraction: report.diverged_fraction,
+        expected_cost_mc: report.expected_cost_mc,
+        expected_cost_predicted: predicted,
+        plan_converged: s.converged,
+        plan_iterations: s.iterations,
+        plan_solve_ms: s.solve_ms,
+        max_stiffness: s.max_stiffness,
+        mean_stiffness: s.mean_stiffness,
+        report,
+    }
+}
+
+/// The same experiment with the same plans, simulated again with another seed.
+pub fn resimulate(run: &ExperimentRun, seed: u64) -> Result<ExperimentRun, ExperimentError> {
+    let mut columns = Vec::new();
+    let mut data = Vec::new();
+    for (c, d) in run.columns.iter().zip(&run.data) {
+        let set = setup(&d.scenario).map_err(ExperimentError::Plan)?;
+        let exe = Executable::from_plan(&d.plan, &set).map_err(ExperimentError::Plan)?;
+        let trials = run_trials(&set, &exe, d.policy, run.trials, seed);
+        let method = if c.method == "sooc" {
+            Method::Sooc
+        } else {
+            Method::Ilqg
+        };
+        columns.push(column_result(
+            &c.name,
+            &c.description,
+            &c.scenario,
+            method,
+            &d.plan,
+            &set,
+            d.policy,
+            c.expected_cost_predicted,
+            &trials,
+        ));
+        data.push(ColumnData {
+            plan: d.plan.clone(),
+            scenario: d.scenario.clone(),
+            policy: d.policy,
+            trials,
+        });
+    }
+    Ok(ExperimentRun {
+        figure: run.figure,
+        trials: run.trials,
+        seed,
+        columns,
         data,
     })
 }
@@ -385,9 +463,7 @@ pub fn write_outputs(run: &ExperimentRun, dir: &Path) -> Result<Vec<PathBuf>, St
         .columns
         .iter()
         .zip(&run.data)
-        .map(|(c, (plan, scenario, trials))| {
-            column_plot(&c.name.replace('_', " "), plan, scenario, trials)
-        })
+        .map(|(c, d)| column_plot(&c.name.replace('_', " "), &d.plan, &d.scenario, &d.trials))
         .collect();
     let png = dir.join(format!("{name}.png"));
     let svg = dir.join(format!("{name}.svg"));

@@ -256,6 +256,9 @@ pub fn predict_open_loop(setup: &Setup, acting: &[DVector<f64>]) -> OpenLoopPred
     }
 }
 
+/// Iteration limit of the intermediate stages of the noise continuation.
+const INTERMEDIATE_ITERATIONS: usize = 60;
+
 /// SOOC from a warm start, by continuation in the noise level: the open-loop moment problem is
 /// solved at `noise_continuation` fractions of the noise in turn, each from the previous
 /// solution. Started at full noise from the deterministic plan, the solver can settle in poor local
@@ -269,7 +272,8 @@ pub fn solve_sooc(
 ) -> Solution {
     let mut u = warm.to_vec();
     let mut total: Option<Solution> = None;
-    for &fraction in &solver.noise_continuation {
+    let stages = solver.noise_continuation.len();
+    for (stage, &fraction) in solver.noise_continuation.iter().enumerate() {
         let mut dynamics = setup.dynamics.clone();
         dynamics.model.noise = dynamics.model.noise.scaled(fraction);
         let moments = MomentDynamics::new(&dynamics);
@@ -281,7 +285,12 @@ pub fn solve_sooc(
             horizon: u.len(),
             bounds: setup.bounds.clone(),
         };
-        let mut ilqg = solver_for(&problem, &solver.options, "open-loop moments", progress);
+        let mut options = solver.options.clone();
+        if stage + 1 < stages {
+            // Intermediate noise levels only need to bring the plan near the next one's basin.
+            options.max_iterations = options.max_iterations.min(INTERMEDIATE_ITERATIONS);
+        }
+        let mut ilqg = solver_for(&problem, &options, "open-loop moments", progress);
         let mut sol = ilqg.solve(&problem, &u);
         u = sol.u.clone();
         if let Some(prev) = total {
@@ -332,9 +341,25 @@ pub fn plan(
             let mut det = solver_for(&plain, &s.solver.options, "deterministic", &progress);
             det.options.stochastic = false;
             let first = det.solve(&plain, &setup.u_init);
-            let mut sol = solve_sooc(&setup, &s.solver, &first.u, &progress);
+            // The deterministic optimum has almost no stiffness (it buys nothing without noise),
+            // and from there the open-loop problem starts in an unstable field with a huge
+            // variance. Start the stiffness from the configured initial value instead.
+            let mut warm = first.u.clone();
+            if let Some(off) = s.model.actuator.stiffness_offset(s.model.dof())
+                && s.initial_stiffness > 0.0
+            {
+                for u in &mut warm {
+                    for i in 0..s.model.dof() {
+                        u[off + i] = s.initial_stiffness;
+                    }
+                    setup.bounds.clamp(u.as_mut_slice());
+                }
+            }
+            let mut sol = solve_sooc(&setup, &s.solver, &warm, &progress);
             sol.iterations += first.iterations;
             sol.solve_time += first.solve_time;
+            // `cost` is the noise-free cost of the plan; `expected_cost` the moment problem's.
+            sol.cost = plain.rollout(&sol.u).1;
             for x in &mut sol.x {
                 *x = x.rows(0, nx).into_owned();
             }

@@ -15,6 +15,10 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
 
+/// Regularisation, relative to the mean diagonal of the value Hessian `S_0`, below which the
+/// backward pass's model is trusted for a convergence verdict.
+const TRUSTED_MU: f64 = 1e-3;
+
 /// Solver settings. Defaults suit the paper's problems.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -306,8 +310,10 @@ impl Ilqg {
 
             // The merit of the current nominal under the new gains, for a like-for-like comparison.
             let merit_now = self.merit(problem, stochastic, false);
-            // Nothing left to gain at first order: the predicted improvement is negligible.
-            if -(dv1 + dv2) < self.options.tolerance * merit_now.abs() {
+            // Nothing left to gain at first order: the predicted improvement of an (almost)
+            // undamped Newton step is negligible.
+            let trusted_mu = TRUSTED_MU * self.value_scale();
+            if mu <= trusted_mu && -(dv1 + dv2) < self.options.tolerance * merit_now.abs() {
                 stop = StopReason::SmallImprovement;
                 break;
             }
@@ -369,7 +375,10 @@ impl Ilqg {
                         mu_step = (mu_step * 2.0).max(2.0);
                         mu = (mu * mu_step).max(self.options.mu_min);
                     }
-                    if (before - after) / after.abs().max(1e-300) < self.options.tolerance {
+                    // A small improvement means convergence only after a long step with little
+                    // regularisation; a short, heavily damped step improves little anywhere.
+                    let trusted = alpha >= self.options.shrink_below_step && mu <= trusted_mu;
+                    if trusted && (before - after) / after.abs().max(1e-300) < self.options.tolerance {
                         // One more backward pass so that the gains and s_0 belong to this nominal.
                         finish_after_backward = true;
                     }
@@ -434,6 +443,14 @@ impl Ilqg {
             }
         }
         traj.cost + noise
+    }
+
+    /// Mean magnitude of the diagonal of the value Hessian at the first knot of the last backward
+    /// pass: the scale against which the regularisation μ is large or small.
+    fn value_scale(&self) -> f64 {
+        let s = &self.bw.s_mat;
+        let n = s.nrows().max(1);
+        (0..s.nrows()).map(|i| s[(i, i)].abs()).sum::<f64>() / n as f64
     }
 
     /// One backward pass at the nominal with regularisation `mu`. Returns the predicted expected
