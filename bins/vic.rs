@@ -40,6 +40,45 @@ enum Command {
     ///
     /// Example: vic results --out-dir docs
     Results(ResultsArgs),
+    /// Identify the joint's torque noise from a log, the paper's procedure (Sec. III-B): bin the
+    /// torque error by velocity, fit its mean and standard deviation with polynomials, estimate
+    /// (a, b) of e = (a + b q') η by maximum likelihood and test the residual η for normality
+    /// (Jarque–Bera).
+    ///
+    /// The log is CSV with the columns t,q,qd,qdd,tau_ff,stiffness,damping,q_d,qd_d (any order;
+    /// extra columns must start with x_). The joint's parameters come from --config (a single-joint
+    /// scenario), else the iCub forearm's.
+    ///
+    /// Example: vic identify --log elbow.csv --config config/icub_experiment.toml
+    Identify(IdentifyArgs),
+}
+
+#[derive(clap::Args)]
+struct IdentifyArgs {
+    /// The log (CSV).
+    #[arg(long, value_name = "FILE.csv")]
+    log: PathBuf,
+    /// Single-joint scenario whose [plant] gives J, m, l_c and g (default: the iCub forearm).
+    #[arg(long, short, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Number of velocity bins.
+    #[arg(long, default_value_t = 20)]
+    bins: usize,
+    /// Fewest samples a bin needs to be used.
+    #[arg(long, default_value_t = 30)]
+    min_bin_count: usize,
+    /// Degree of the polynomial fitted to the mean error (the paper: 1).
+    #[arg(long, default_value_t = 1)]
+    mean_degree: usize,
+    /// Degree of the polynomial fitted to the error's standard deviation (the paper: 2).
+    #[arg(long, default_value_t = 2)]
+    std_degree: usize,
+    /// Subtract the fitted mean error before estimating (a, b).
+    #[arg(long)]
+    subtract_mean: bool,
+    /// Print one JSON object instead of the readable report.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -196,6 +235,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => run_simulate(args),
         Command::Experiment(args) => run_experiment(args),
         Command::Results(args) => run_results(args),
+        Command::Identify(args) => run_identify(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -517,5 +557,50 @@ fn run_results(args: ResultsArgs) -> Result<(), Failure> {
     std::fs::write(&path, md)
         .map_err(|e| Failure::runtime(format!("cannot write {}: {e}", path.display())))?;
     println!("wrote {}", path.display());
+    Ok(())
+}
+
+fn run_identify(args: IdentifyArgs) -> Result<(), Failure> {
+    use vic::identify::{IdentifyOptions, JointParams, identify, read_log_file};
+    use vic::model::Plant;
+    let joint = match &args.config {
+        None => JointParams::ICUB_FOREARM,
+        Some(path) => {
+            let s = Scenario::load(path, &[]).map_err(Failure::input)?;
+            match &s.model.plant {
+                Plant::SingleJoint(p) => JointParams {
+                    inertia: p.inertia,
+                    mass: p.mass,
+                    com: p.com,
+                    gravity: p.gravity,
+                },
+                Plant::TwoLink(_) => {
+                    return Err(Failure::input(format!(
+                        "{}: [plant] kind: identification needs a single joint",
+                        path.display()
+                    )));
+                }
+            }
+        }
+    };
+    let rows = read_log_file(&args.log)
+        .map_err(|e| Failure::input(format!("{}: {e}", args.log.display())))?;
+    let options = IdentifyOptions {
+        bins: args.bins,
+        min_bin_count: args.min_bin_count,
+        mean_degree: args.mean_degree,
+        std_degree: args.std_degree,
+        subtract_mean: args.subtract_mean,
+    };
+    let report = identify(&rows, &joint, &options)
+        .map_err(|e| Failure::input(format!("{}: {e}", args.log.display())))?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string(&report).map_err(Failure::runtime)?
+        );
+    } else {
+        println!("{report}");
+    }
     Ok(())
 }

@@ -14,7 +14,10 @@
 //!    standard deviation `σ_e` are fitted by least-squares polynomials of the velocity
 //!    ([`polyfit`]); in Fig. 3(a) `σ_e` is quadratic and `ē` linear.
 //! 4. The parameters `(a, b)` of the state-dependent noise of Eq. 16, `e = (a + b q̇) η` with
-//!    `η ~ N(0, 1)`, are estimated by maximum likelihood ([`fit_noise_ml`]).
+//!    `η ~ N(0, 1)`, are estimated by maximum likelihood ([`fit_noise_ml`]), and cross-checked by
+//!    a least-squares fit of `|e|` ([`fit_noise_moments`]). The model has zero mean: if the
+//!    errors have a systematic part, [`IdentifyOptions::subtract_mean`] removes a fitted mean
+//!    polynomial first.
 //! 5. The normalised residuals `η_i = e_i / (a + b q̇_i)` are tested for normality with the
 //!    Jarque–Bera test ([`jarque_bera`]). (The paper prints `η = (a + b q̇)/e`, a typo: `η` is the
 //!    error divided by its standard deviation.) The paper found `(a, b) = (0.15, 0.37)`.
@@ -84,23 +87,23 @@ pub const EXTRA_COLUMN_PREFIX: &str = "x_";
 /// One sample of a joint log. See [the log format](self#log-format) for units.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct LogRow {
-    /// Time [s].
+    /// Time (s).
     pub t: f64,
-    /// Joint angle [rad].
+    /// Joint angle (rad).
     pub q: f64,
-    /// Joint velocity [rad/s].
+    /// Joint velocity (rad/s).
     pub qd: f64,
-    /// Joint acceleration [rad/s²].
+    /// Joint acceleration (rad/s²).
     pub qdd: f64,
-    /// Feedforward torque [N·m].
+    /// Feedforward torque (N·m).
     pub tau_ff: f64,
-    /// Stiffness gain `K_P` [N·m/rad].
+    /// Stiffness gain `K_P` (N·m/rad).
     pub stiffness: f64,
-    /// Damping gain `K_D` [N·m·s/rad].
+    /// Damping gain `K_D` (N·m·s/rad).
     pub damping: f64,
-    /// Desired angle [rad].
+    /// Desired angle (rad).
     pub q_d: f64,
-    /// Desired velocity [rad/s].
+    /// Desired velocity (rad/s).
     pub qd_d: f64,
 }
 
@@ -346,13 +349,13 @@ pub fn write_log<W: Write + ?Sized>(writer: &mut W, rows: &[LogRow]) -> io::Resu
 /// Rigid-body parameters of the single joint of Eq. 15.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct JointParams {
-    /// Moment of inertia `J` [kg·m²].
+    /// Moment of inertia `J` (kg·m²).
     pub inertia: f64,
-    /// Mass `m` [kg].
+    /// Mass `m` (kg).
     pub mass: f64,
-    /// Distance from the joint to the centre of mass `l_c` [m].
+    /// Distance from the joint to the centre of mass `l_c` (m).
     pub com: f64,
-    /// Gravity acceleration `g` [m/s²].
+    /// Gravity acceleration `g` (m/s²).
     pub gravity: f64,
 }
 
@@ -388,11 +391,11 @@ pub fn torque_error(row: &LogRow, joint: &JointParams) -> f64 {
 /// Statistics of the torque error over one velocity bin.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct VelocityBin {
-    /// Lower edge of the bin [rad/s].
+    /// Lower edge of the bin (rad/s).
     pub lo: f64,
-    /// Upper edge of the bin [rad/s].
+    /// Upper edge of the bin (rad/s).
     pub hi: f64,
-    /// Mean velocity of the samples in the bin [rad/s] (the abscissa of the fits).
+    /// Mean velocity of the samples in the bin (rad/s), the abscissa of the fits.
     pub velocity: f64,
     /// Number of samples.
     pub count: usize,
@@ -616,7 +619,7 @@ fn polyfit_weighted(
 pub struct NoiseFit {
     /// Constant part `a` (made non-negative: `(a, b)` and `(−a, −b)` are the same model).
     pub a: f64,
-    /// Velocity-dependent part `b` [per rad/s].
+    /// Velocity-dependent part `b` (per rad/s).
     pub b: f64,
     /// Standard error of `a` from the observed Fisher information (`None` if it is singular).
     pub a_std_error: Option<f64>,
@@ -627,12 +630,21 @@ pub struct NoiseFit {
     pub neg_log_likelihood: f64,
     /// Number of samples.
     pub samples: usize,
+    /// Smallest modelled standard deviation, [`STD_FLOOR`]` · √(a² + (b q̇_max)²)`.
+    pub std_floor: f64,
 }
 
 impl NoiseFit {
-    /// Standard deviation of the error predicted at velocity `qd`: `|a + b q̇|`.
+    /// Standard deviation of the error predicted at velocity `qd`: `|a + b q̇|` (at least
+    /// [`NoiseFit::std_floor`]).
     pub fn std_at(&self, qd: f64) -> f64 {
-        (self.a + self.b * qd).abs()
+        (self.a + self.b * qd).abs().max(self.std_floor)
+    }
+
+    /// The normalised residual `η = e / (a + b q̇)` (the denominator at least
+    /// [`NoiseFit::std_floor`] in magnitude, with its sign).
+    pub fn eta(&self, qd: f64, e: f64) -> f64 {
+        e / self.std_at(qd).copysign(self.a + self.b * qd)
     }
 }
 
@@ -643,19 +655,17 @@ impl NoiseFit {
 pub struct MomentFit {
     /// Constant part `a` (non-negative).
     pub a: f64,
-    /// Velocity-dependent part `b` [per rad/s].
+    /// Velocity-dependent part `b` (per rad/s).
     pub b: f64,
 }
 
-/// Floor on `u²` in the profile likelihood, so that a sample with `e = 0` exactly cannot make
-/// the likelihood unbounded when `a + b q̇` crosses zero at its velocity.
-const U2_FLOOR: f64 = 1e-24;
-fn u2_floor() -> f64 {
-    std::env::var("VIC_U2")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(U2_FLOOR)
-}
+/// Numerical safeguard: the modelled standard deviation is floored at `STD_FLOOR · r`, with
+/// `r = √(a² + (b q̇_max)²)` and `q̇_max = max|q̇_i|` (that is, `|a + b q̇|` is replaced by
+/// `STD_FLOOR · r` within about `STD_FLOOR · q̇_max` rad/s of its zero crossing). Without it,
+/// every sample with a tiny `|e_i|` near the crossing is a narrow, deep well of the likelihood
+/// (its `ln|a + b q̇_i|` term tends to −∞ as the crossing moves onto it) that can capture the
+/// optimum and spoil the normalised residuals of its neighbours.
+pub const STD_FLOOR: f64 = 1e-3;
 
 /// Number of directions of the coarse grid of [`minimise_over_direction`].
 const COARSE_DIRECTIONS: usize = 4096;
@@ -698,18 +708,26 @@ fn minimise_over_direction(coarse: impl Fn(f64) -> f64, fine: impl Fn(f64) -> f6
 }
 
 /// Mean negative log-likelihood (without the constants) profiled over the scale `r`, for the
-/// direction `θ`: `(a, b̃) = r (cos θ, sin θ)`, `u_i = cos θ + q̃_i sin θ`, `r² = mean e_i²/u_i²`,
-/// `nll = ln r + mean ln|u_i|`. Returns `(nll, r)`.
+/// direction `θ`: `(a, b̃) = r (cos θ, sin θ)`, `u_i = max(|cos θ + q̃_i sin θ|, STD_FLOOR)`,
+/// `r² = mean e_i²/u_i²`, `nll = ln r + mean ln u_i`. Returns `(nll, r)`.
 fn profile_nll(theta: f64, q: &[f64], e2: &[f64]) -> (f64, f64) {
     let (sin, cos) = theta.sin_cos();
+    let floor = STD_FLOOR * STD_FLOOR;
     let (mut ratio, mut log) = (0.0, 0.0);
-    let floor = u2_floor();
+    // Σ ln u² as the logarithm of running products (u² ∈ [1e-6, 2]), flushed before they leave
+    // [1e-150, 1e150]: one logarithm per ~50 samples instead of one per sample.
+    let mut product = 1.0_f64;
     for (&qi, &ei2) in q.iter().zip(e2) {
         let u = cos + sin * qi;
         let u2 = (u * u).max(floor);
         ratio += ei2 / u2;
-        log += u2.ln();
+        product *= u2;
+        if !(1e-150..=1e150).contains(&product) {
+            log += product.ln();
+            product = 1.0;
+        }
     }
+    log += product.ln();
     let n = q.len() as f64;
     let r2 = ratio / n;
     (0.5 * r2.ln() + 0.5 * log / n, r2.sqrt())
@@ -760,11 +778,13 @@ fn from_polar(r: f64, theta: f64, v_scale: f64) -> (f64, f64) {
 /// the scale `r` is eliminated in closed form (`r² = mean e_i²/u_i²`), and the one-dimensional
 /// profile in `θ ∈ [0, π)` is minimised globally: a grid of 4096 directions (on at most 20 000
 /// evenly strided samples), then nested zooming grids on all samples down to 1e-14 rad. The
-/// result is the optimum to rounding, whatever the sign changes of `a + b q̇` over the data.
+/// search is global over the direction, whatever the sign changes of `a + b q̇` over the data. The modelled deviation is floored at
+/// [`STD_FLOOR`] times the scale of the model (a numerical safeguard, see there).
 ///
-/// The model has no noise floor: near the zero crossing of `a + b q̇` the few samples with the
-/// smallest predicted deviation weigh most, so an offset left in `e` there (e.g. an imperfectly
-/// subtracted mean) biases the estimate; compare with [`fit_noise_moments`].
+/// Apart from that floor the model has no noise floor: near the zero crossing of `a + b q̇` the
+/// few samples with the smallest predicted deviation weigh most, so an offset left in `e` there
+/// (e.g. an imperfectly subtracted mean) biases the estimate; compare with
+/// [`fit_noise_moments`]. On 20 000 samples the fit takes a fraction of a second.
 pub fn fit_noise_ml(qd: &[f64], e: &[f64]) -> Result<NoiseFit, IdentifyError> {
     let (q, v_scale) = scaled_velocities(qd, e)?;
     let n = q.len();
@@ -783,12 +803,13 @@ pub fn fit_noise_ml(qd: &[f64], e: &[f64]) -> Result<NoiseFit, IdentifyError> {
     }
     let r = profile_nll(theta, &q, &e2).1;
     let (a, b) = from_polar(r, theta, v_scale);
+    let std_floor = STD_FLOOR * r;
 
     // Negative log-likelihood and observed information in (a, b).
     let mut nll = 0.0;
     let mut info = Matrix2::zeros();
     for (&v, &err) in qd.iter().zip(e) {
-        let s2 = ((a + b * v) * (a + b * v)).max(u2_floor() * r * r);
+        let s2 = ((a + b * v) * (a + b * v)).max(std_floor * std_floor);
         nll += 0.5 * s2.ln() + err * err / (2.0 * s2);
         let curvature = -1.0 / s2 + 3.0 * err * err / (s2 * s2);
         info += curvature * Matrix2::new(1.0, v, v, v * v);
@@ -807,6 +828,7 @@ pub fn fit_noise_ml(qd: &[f64], e: &[f64]) -> Result<NoiseFit, IdentifyError> {
         b_std_error,
         neg_log_likelihood: nll,
         samples: n,
+        std_floor,
     })
 }
 
@@ -926,10 +948,11 @@ pub struct IdentifyOptions {
     /// Degree of the polynomial fitted to the bin standard deviations `σ_e(q̇)` (2, quadratic as
     /// in Fig. 3).
     pub std_degree: usize,
-    /// Subtract the fitted mean polynomial `ē(q̇_i)` from every error before the
-    /// maximum-likelihood fit and the normality test (false). The noise model of Eq. 16 has zero
+    /// Subtract a fitted mean polynomial `ē(q̇_i)` (degree `mean_degree`) from every error
+    /// before the noise fits and the normality test (false). The noise model of Eq. 16 has zero
     /// mean; switch this on when the mean fit shows a systematic error, as in Fig. 3 where
-    /// `ē = 0.213 q̇ − 0.049`.
+    /// `ē = 0.213 q̇ − 0.049`. The subtracted polynomial is refitted on all samples by weighted
+    /// least squares (see [`IdentifyReport::subtracted_mean`]), not the bin fit itself.
     pub subtract_mean: bool,
 }
 
@@ -954,7 +977,7 @@ pub struct IdentifyReport {
     pub joint: Option<JointParams>,
     /// Options used.
     pub options: IdentifyOptions,
-    /// Smallest and largest velocity [rad/s].
+    /// Smallest and largest velocity (rad/s).
     pub velocity_range: [f64; 2],
     /// Mean of the torque error over all samples.
     pub error_mean: f64,
@@ -966,10 +989,17 @@ pub struct IdentifyReport {
     pub mean_fit: PolyFit,
     /// Fit of the bin standard deviations `σ_e(q̇)`.
     pub std_fit: PolyFit,
-    /// Whether `ē(q̇)` was subtracted before the noise fit.
-    pub mean_subtracted: bool,
+    /// The mean polynomial subtracted from the errors before the noise fits, if
+    /// [`IdentifyOptions::subtract_mean`]: a weighted least-squares fit on all samples with
+    /// weights `1/σ_i²` (`σ_i` from the moment estimate, floored at 1 % of its root mean square).
+    /// Close to `mean_fit`, but accurate where the noise is small, which the maximum-likelihood
+    /// fit needs.
+    pub subtracted_mean: Option<Polynomial>,
     /// Maximum-likelihood `(a, b)` of `e = (a + b q̇) η`.
     pub noise: NoiseFit,
+    /// Least-squares fit of `|e| ≈ √(2/π) |a + b q̇|`: a cross-check of `noise` (a large
+    /// difference points at a noise floor or an unmodelled mean).
+    pub noise_moments: MomentFit,
     /// Jarque–Bera test of `η_i = e_i / (a + b q̇_i)`.
     pub jarque_bera: JarqueBera,
     /// Whether the Jarque–Bera test accepts normality of `η` at the 5 % level (`p ≥ 0.05`).
@@ -1022,7 +1052,7 @@ pub fn identify_samples(
     let mean_fit = fit_bins(options.mean_degree, "mean", |b| b.mean)?;
     let std_fit = fit_bins(options.std_degree, "standard deviation", |b| b.std)?;
 
-    let subtracted = if options.subtract_mean {
+    let subtracted_mean = if options.subtract_mean {
         Some(refine_mean(
             qd,
             e,
@@ -1032,7 +1062,7 @@ pub fn identify_samples(
     } else {
         None
     };
-    let residual: Vec<f64> = match &subtracted {
+    let residual: Vec<f64> = match &subtracted_mean {
         Some(mean) => qd
             .iter()
             .zip(e)
@@ -1041,10 +1071,11 @@ pub fn identify_samples(
         None => e.to_vec(),
     };
     let noise = fit_noise_ml(qd, &residual)?;
+    let noise_moments = fit_noise_moments(qd, &residual)?;
     let eta: Vec<f64> = qd
         .iter()
         .zip(&residual)
-        .map(|(&v, &err)| err / (noise.a + noise.b * v))
+        .map(|(&v, &err)| noise.eta(v, err))
         .collect();
     let jarque_bera = jarque_bera(&eta)?;
 
@@ -1062,8 +1093,9 @@ pub fn identify_samples(
         bins,
         mean_fit,
         std_fit,
-        mean_subtracted: options.subtract_mean,
+        subtracted_mean,
         noise,
+        noise_moments,
         normal_at_5_percent: !jarque_bera.rejects_normality(0.05),
         jarque_bera,
     })
@@ -1106,19 +1138,22 @@ impl fmt::Display for IdentifyReport {
             "std fit:   sigma_e = {}   (R² {:.3})",
             self.std_fit.polynomial, self.std_fit.r_squared
         )?;
+        if let Some(mean) = &self.subtracted_mean {
+            writeln!(f, "subtracted mean (weighted fit on all samples): {mean}")?;
+        }
         let se = |s: Option<f64>| s.map_or_else(|| "?".to_owned(), |s| format!("{s:.4}"));
         writeln!(
             f,
-            "noise e = (a + b q') eta{}: a = {:.4} ± {}, b = {:.4} ± {}",
-            if self.mean_subtracted {
-                " (mean fit subtracted)"
-            } else {
-                ""
-            },
+            "noise e = (a + b q') eta, maximum likelihood: a = {:.4} ± {}, b = {:.4} ± {}",
             self.noise.a,
             se(self.noise.a_std_error),
             self.noise.b,
             se(self.noise.b_std_error)
+        )?;
+        writeln!(
+            f,
+            "  cross-check, |e| ~ sqrt(2/pi) |a + b q'|: a = {:.4}, b = {:.4}",
+            self.noise_moments.a, self.noise_moments.b
         )?;
         write!(
             f,
@@ -1136,9 +1171,18 @@ impl fmt::Display for IdentifyReport {
     }
 }
 
+/// Weights of the generalised least-squares mean fit are `1/max(σ_i², (MEAN_WEIGHT_FLOOR σ_rms)²)`.
+const MEAN_WEIGHT_FLOOR: f64 = 0.01;
+
 /// The mean polynomial subtracted by [`IdentifyOptions::subtract_mean`]: refitted on all samples
-/// by weighted least squares, with weights `1/σ_i²` from the moment estimate of the noise on the
-/// errors minus the bin fit (feasible generalised least squares).
+/// by weighted least squares with weights `1/σ_i²`, `σ_i` from the moment estimate
+/// ([`fit_noise_moments`]) of the noise of the errors minus the bin fit, floored at 1 % of its
+/// root mean square (feasible generalised least squares).
+///
+/// Subtracting the bin fit itself is not accurate enough: its error (a few thousandths of the
+/// error scale) is of the order of the noise near the zero crossing of `a + b q̇`, where the
+/// maximum-likelihood fit is most sensitive, and biases `(a, b)` by tens of percent. The weighted
+/// fit is most accurate precisely there.
 fn refine_mean(
     qd: &[f64],
     e: &[f64],
@@ -1151,30 +1195,13 @@ fn refine_mean(
         .map(|(&v, &err)| err - bin_fit.eval(v))
         .collect();
     let moments = fit_noise_moments(qd, &centred)?;
-    let floor_frac: f64 = std::env::var("VIC_FLOOR")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0.05);
-    let iters: usize = std::env::var("VIC_ITERS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1);
     let s2: Vec<f64> = qd
         .iter()
         .map(|&v| (moments.a + moments.b * v).powi(2))
         .collect();
-    let floor2 = floor_frac * floor_frac * s2.iter().sum::<f64>() / s2.len() as f64;
+    let floor2 = MEAN_WEIGHT_FLOOR * MEAN_WEIGHT_FLOOR * s2.iter().sum::<f64>() / s2.len() as f64;
     let weights: Vec<f64> = s2.iter().map(|s2| 1.0 / s2.max(floor2)).collect();
-    let mut p = polyfit_weighted(qd, e, Some(&weights), degree)?.polynomial;
-    for _ in 1..iters {
-        let centred: Vec<f64> = qd.iter().zip(e).map(|(&v, &err)| err - p.eval(v)).collect();
-        let ml = fit_noise_ml(qd, &centred)?;
-        let s2: Vec<f64> = qd.iter().map(|&v| (ml.a + ml.b * v).powi(2)).collect();
-        let floor2 = floor_frac * floor_frac * s2.iter().sum::<f64>() / s2.len() as f64;
-        let weights: Vec<f64> = s2.iter().map(|s2| 1.0 / s2.max(floor2)).collect();
-        p = polyfit_weighted(qd, e, Some(&weights), degree)?.polynomial;
-    }
-    Ok(p)
+    Ok(polyfit_weighted(qd, e, Some(&weights), degree)?.polynomial)
 }
 
 fn check_samples(qd: &[f64], e: &[f64]) -> Result<(), IdentifyError> {

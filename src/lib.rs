@@ -16,6 +16,7 @@ pub mod delay;
 pub mod dynamics;
 pub mod evaluation;
 pub mod experiment;
+pub mod identify;
 pub mod model;
 pub mod plan;
 pub mod plot;

@@ -1,9 +1,7 @@
 //! Noise identification (paper §III-B, Fig. 3a): the CSV log format, the polynomial fits, the
 //! maximum-likelihood `(a, b)` of `e = (a + b q̇) η` and the Jarque–Bera test.
 
-#[allow(dead_code)]
-#[path = "../src/identify.rs"]
-mod identify;
+use vic::identify;
 
 use identify::*;
 use rand::rngs::StdRng;
@@ -83,6 +81,14 @@ fn ml_recovers_known_a_b_within_5_percent() {
 }
 
 #[test]
+fn moment_fit_recovers_known_a_b() {
+    let (qd, e) = synthetic_errors(20_000, 4);
+    let fit = fit_noise_moments(&qd, &e).unwrap();
+    assert_within(fit.a, A, 0.1, "a");
+    assert_within(fit.b, B, 0.1, "b");
+}
+
+#[test]
 fn ml_sign_convention_and_pure_additive_noise() {
     // (a, b) and (−a, −b) are the same model: the fit reports a ≥ 0.
     let (qd, e) = synthetic_errors(5_000, 7);
@@ -159,23 +165,41 @@ fn a_wrong_noise_model_is_rejected_by_jarque_bera() {
 
 #[test]
 fn subtracting_the_mean_fit_handles_a_biased_error() {
-    // The mean of Fig. 3: ē = 0.213 q̇ − 0.049 added to the noise.
-    let (qd, mut e) = synthetic_errors(20_000, 31);
-    for (err, &v) in e.iter_mut().zip(&qd) {
-        *err += 0.213 * v - 0.049;
-    }
+    // The mean of Fig. 3, ē = 0.213 q̇ − 0.049, added to the noise.
+    let biased = |seed| {
+        let (qd, mut e) = synthetic_errors(20_000, seed);
+        for (err, &v) in e.iter_mut().zip(&qd) {
+            *err += 0.213 * v - 0.049;
+        }
+        (qd, e)
+    };
     let options = IdentifyOptions {
         subtract_mean: true,
         ..IdentifyOptions::default()
     };
-    let report = identify_samples(&qd, &e, &options).unwrap();
-    let mean = &report.mean_fit.polynomial.coefficients;
-    assert!(
-        (mean[0] + 0.049).abs() < 0.02 && (mean[1] - 0.213).abs() < 0.02,
-        "{report}"
-    );
-    assert_within(report.noise.a, A, 0.05, "a");
-    assert_within(report.noise.b, B, 0.05, "b");
+    for seed in [31, 32, 33] {
+        let (qd, e) = biased(seed);
+        let report = identify_samples(&qd, &e, &options).unwrap();
+        let mean = &report.mean_fit.polynomial.coefficients;
+        assert!(
+            (mean[0] + 0.049).abs() < 0.02 && (mean[1] - 0.213).abs() < 0.02,
+            "{report}"
+        );
+        let subtracted = &report.subtracted_mean.as_ref().unwrap().coefficients;
+        assert!(
+            (subtracted[0] + 0.049).abs() < 0.005 && (subtracted[1] - 0.213).abs() < 0.005,
+            "{report}"
+        );
+        assert_within(report.noise.a, A, 0.05, "a");
+        assert_within(report.noise.b, B, 0.05, "b");
+        assert_within(report.noise_moments.a, A, 0.1, "moment a");
+        assert_within(report.noise_moments.b, B, 0.1, "moment b");
+    }
+    // Without the subtraction the zero-mean model does not fit: normality is rejected.
+    let (qd, e) = biased(34);
+    let report = identify_samples(&qd, &e, &IdentifyOptions::default()).unwrap();
+    assert!(report.subtracted_mean.is_none());
+    assert!(!report.normal_at_5_percent, "{report}");
 }
 
 #[test]
