@@ -378,7 +378,9 @@ impl Ilqg {
                     // A small improvement means convergence only after a long step with little
                     // regularisation; a short, heavily damped step improves little anywhere.
                     let trusted = alpha >= self.options.shrink_below_step && mu <= trusted_mu;
-                    if trusted && (before - after) / after.abs().max(1e-300) < self.options.tolerance {
+                    if trusted
+                        && (before - after) / after.abs().max(1e-300) < self.options.tolerance
+                    {
                         // One more backward pass so that the gains and s_0 belong to this nominal.
                         finish_after_backward = true;
                     }
