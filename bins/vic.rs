@@ -170,6 +170,9 @@ struct SimulateArgs {
     /// Write every trial's states and commands to this CSV file.
     #[arg(long, value_name = "FILE")]
     csv: Option<PathBuf>,
+    /// Plot the trials (paths or angles, velocities, commands) to this PNG (and an SVG beside it).
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
     /// Print one JSON object instead of the readable report.
     #[arg(long)]
     json: bool,
@@ -371,6 +374,17 @@ fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
     let report = vic::evaluation::summarize(&setup, &trials, divergence);
     if let Some(path) = &args.csv {
         write_trials_csv(path, &plan, &trials).map_err(Failure::runtime)?;
+    }
+    if let Some(png) = &args.plot {
+        let title = format!("{:?}", policy);
+        let column = vic::experiment::column_plot(&title, &plan, &scenario, &trials);
+        let svg = png.with_extension("svg");
+        let draw = if scenario.model.dof() == 2 {
+            vic::plot::arm_figure(&[column], png, &svg)
+        } else {
+            vic::plot::joint_figure(&[column], png, &svg)
+        };
+        draw.map_err(Failure::runtime)?;
     }
     let predicted = match policy {
         Policy::OpenLoop => plan.summary.open_loop_expected_cost,
