@@ -51,7 +51,7 @@ fn solvers(c: &mut Criterion) {
         c,
         "two_link_reach_box",
         "two_link_reach.toml",
-        &["actuator.torque_limit=1.5"],
+        &["actuator.torque_limit=0.25"],
     );
     bench_plain(c, "two_link_divergent_ilqg", "two_link_divergent.toml", &[]);
     bench_plain(c, "single_joint_ilqg", "icub_elbow.toml", &[]);
