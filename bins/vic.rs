@@ -40,6 +40,12 @@ enum Command {
     ///
     /// Example: vic results --out-dir docs
     Results(ResultsArgs),
+    /// Run the real-time pair: start a board and a planner in a fresh namespace, run the
+    /// `stiffness` and `delayed-feedback` strategies with the same noise seeds, print the
+    /// comparison and the board's timing, and shut everything down.
+    ///
+    /// Example: vic demo --latency-ms 200 --trials 3
+    Demo(DemoArgs),
     /// Identify the joint's torque noise from a log, the paper's procedure (Sec. III-B): bin the
     /// torque error by velocity, fit its mean and standard deviation with polynomials, estimate
     /// (a, b) of e = (a + b q') η by maximum likelihood and test the residual η for normality
@@ -237,6 +243,7 @@ fn main() -> ExitCode {
         Command::Plan(args) => run_plan(args),
         Command::Simulate(args) => run_simulate(args),
         Command::Experiment(args) => run_experiment(args),
+        Command::Demo(args) => run_demo(args),
         Command::Results(args) => run_results(args),
         Command::Identify(args) => run_identify(args),
     };
@@ -615,6 +622,321 @@ fn run_identify(args: IdentifyArgs) -> Result<(), Failure> {
         );
     } else {
         println!("{report}");
+    }
+    Ok(())
+}
+
+#[derive(clap::Args)]
+struct DemoArgs {
+    /// Scenario file (TOML): a two-link or single-joint plant with the impedance actuator.
+    #[arg(
+        long,
+        short,
+        value_name = "FILE",
+        default_value = "config/two_link_divergent.toml"
+    )]
+    config: PathBuf,
+    /// Override a configuration key (repeatable), for the plans and the board alike.
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    overrides: Vec<String>,
+    /// Feedback latency of the central controller [ms] (a whole number of plan steps).
+    #[arg(long, default_value_t = 200.0)]
+    latency_ms: f64,
+    /// Trials per strategy.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    trials: u64,
+    /// Seed of the board's noise (the same for every strategy).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Keep the plans in this folder and reuse them on the next run (default: plan afresh).
+    #[arg(long, value_name = "DIR")]
+    plans_dir: Option<PathBuf>,
+    /// Use this plan for the `stiffness` strategy instead of planning (SOOC, `vic plan --out`).
+    #[arg(long, value_name = "FILE")]
+    stiffness_plan: Option<PathBuf>,
+    /// Use this plan for `delayed-feedback` instead of planning (ILQG for the latency, zero
+    /// stiffness).
+    #[arg(long, value_name = "FILE")]
+    feedback_plan: Option<PathBuf>,
+    /// Board spin before each deadline [µs] (0: sleep only).
+    #[arg(long, default_value_t = 0)]
+    spin_us: u64,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Child processes and a namespace that must not outlive the demo, whatever happens.
+struct DemoGuard {
+    namespace: String,
+    children: Vec<std::process::Child>,
+}
+
+impl DemoGuard {
+    fn terminate(child: &mut std::process::Child) {
+        if let Ok(None) = child.try_wait() {
+            // SAFETY: kill(2) on the pid of a child we spawned and have not reaped.
+            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+            let t0 = std::time::Instant::now();
+            while let Ok(None) = child.try_wait() {
+                if t0.elapsed() > std::time::Duration::from_secs(3) {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    break;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+        }
+    }
+}
+
+impl Drop for DemoGuard {
+    fn drop(&mut self) {
+        for c in &mut self.children {
+            Self::terminate(c);
+        }
+        vic::transport::remove_namespace(&self.namespace);
+    }
+}
+
+fn sibling_binary(name: &str) -> Result<PathBuf, Failure> {
+    let exe = std::env::current_exe().map_err(Failure::runtime)?;
+    let path = exe.with_file_name(name);
+    if path.is_file() {
+        Ok(path)
+    } else {
+        Err(Failure::runtime(format!(
+            "{} not found next to {} (build it with cargo build --bins)",
+            name,
+            exe.display()
+        )))
+    }
+}
+
+/// Makes (or reuses from `dir`) the plan of one strategy.
+fn demo_plan(
+    config: &std::path::Path,
+    overrides: &[String],
+    method: vic::plan::Method,
+    dir: &std::path::Path,
+    reuse: bool,
+) -> Result<PathBuf, Failure> {
+    use std::hash::{Hash, Hasher};
+    let text = std::fs::read_to_string(config)
+        .map_err(|e| Failure::input(format!("{}: cannot read: {e}", config.display())))?;
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    (text, overrides, method.name(), vic::plan::PLAN_VERSION).hash(&mut h);
+    let path = dir.join(format!("{}-{:016x}.json", method.name(), h.finish()));
+    if reuse && path.is_file() {
+        return Ok(path);
+    }
+    let scenario = Scenario::load(config, overrides).map_err(Failure::input)?;
+    let plan = plan(&scenario, method, None)
+        .map_err(|e| Failure::input(format!("{}: {e}", config.display())))?;
+    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+    std::fs::write(
+        &tmp,
+        serde_json::to_string(&plan).map_err(Failure::runtime)?,
+    )
+    .and_then(|_| std::fs::rename(&tmp, &path))
+    .map_err(|e| Failure::runtime(format!("cannot write {}: {e}", path.display())))?;
+    Ok(path)
+}
+
+fn run_demo(args: DemoArgs) -> Result<(), Failure> {
+    use std::process::{Command as Proc, Stdio};
+    let scenario = Scenario::load(&args.config, &args.overrides).map_err(Failure::input)?;
+    let dt_ms = scenario.task.dt * 1000.0;
+    let steps = args.latency_ms / dt_ms;
+    if !(steps >= 0.0 && (steps - steps.round()).abs() < 1e-6) {
+        return Err(Failure::input(format!(
+            "--latency-ms {}: not a whole number of {dt_ms} ms plan steps",
+            args.latency_ms
+        )));
+    }
+    let board_bin = sibling_binary("vic-board")?;
+    let planner_bin = sibling_binary("vic-planner")?;
+    let namespace = format!("demo{}", std::process::id());
+    let tmp_dir = std::env::temp_dir().join(format!("vic-{namespace}"));
+    let (dir, reuse) = match &args.plans_dir {
+        Some(d) => (d.clone(), true),
+        None => (tmp_dir.clone(), false),
+    };
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::runtime(format!("cannot create {}: {e}", dir.display())))?;
+    let mut df_overrides = args.overrides.clone();
+    df_overrides.push("actuator.stiffness_max=0".into());
+    df_overrides.push(format!("task.delay_ms={}", args.latency_ms));
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        eprintln!("planning (SOOC for stiffness, ILQG for delayed feedback) ...");
+    }
+    let (sooc, ilqg) = std::thread::scope(|s| {
+        let a = s.spawn(|| {
+            if let Some(p) = &args.stiffness_plan {
+                return Ok(p.clone());
+            }
+            demo_plan(
+                &args.config,
+                &args.overrides,
+                vic::plan::Method::Sooc,
+                &dir,
+                reuse,
+            )
+        });
+        let b = s.spawn(|| {
+            if let Some(p) = &args.feedback_plan {
+                return Ok(p.clone());
+            }
+            demo_plan(
+                &args.config,
+                &df_overrides,
+                vic::plan::Method::Ilqg,
+                &dir,
+                reuse,
+            )
+        });
+        (a.join(), b.join())
+    });
+    let sooc = sooc.map_err(|_| Failure::runtime("planning panicked"))??;
+    let ilqg = ilqg.map_err(|_| Failure::runtime("planning panicked"))??;
+
+    let mut guard = DemoGuard {
+        namespace: namespace.clone(),
+        children: Vec::new(),
+    };
+    let mut board = Proc::new(&board_bin);
+    board
+        .arg("--config")
+        .arg(&args.config)
+        .args(["--namespace", &namespace, "--json"])
+        .args(["--spin-us", &args.spin_us.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    for o in &args.overrides {
+        board.args(["--set", o]);
+    }
+    guard.children.push(
+        board
+            .spawn()
+            .map_err(|e| Failure::runtime(format!("cannot start {}: {e}", board_bin.display())))?,
+    );
+    let mut results = Vec::new();
+    for (name, plan_path) in [("stiffness", &sooc), ("delayed-feedback", &ilqg)] {
+        let mut p = Proc::new(&planner_bin);
+        p.arg("--config")
+            .arg(&args.config)
+            .arg("--plan")
+            .arg(plan_path)
+            .args(["--strategy", name, "--namespace", &namespace, "--json"])
+            .args(["--trials", &args.trials.to_string()])
+            .args(["--seed", &args.seed.to_string()])
+            .args(["--latency-ms", &args.latency_ms.to_string()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit());
+        for o in &args.overrides {
+            p.args(["--set", o]);
+        }
+        let out = p
+            .output()
+            .map_err(|e| Failure::runtime(format!("cannot run {}: {e}", planner_bin.display())))?;
+        if !out.status.success() {
+            return Err(Failure::runtime(format!(
+                "vic-planner --strategy {name} failed ({})",
+                out.status
+            )));
+        }
+        let r: vic::central::StrategyResult = serde_json::from_slice(&out.stdout)
+            .map_err(|e| Failure::runtime(format!("vic-planner printed no result: {e}")))?;
+        results.push(r);
+    }
+    // Stop the board: it prints its statistics at the end of the current tick.
+    let mut child = guard.children.pop().expect("the board");
+    DemoGuard::terminate(&mut child);
+    let mut stdout = String::new();
+    if let Some(mut s) = child.stdout.take() {
+        use std::io::Read;
+        let _ = s.read_to_string(&mut stdout);
+    }
+    let stats: serde_json::Value = serde_json::from_str(stdout.trim())
+        .map_err(|e| Failure::runtime(format!("the board printed no statistics: {e}")))?;
+    drop(guard);
+    if args.plans_dir.is_none() {
+        let _ = std::fs::remove_dir_all(&tmp_dir);
+    }
+    let leftover = vic::transport::namespace_files(&namespace);
+    let strategies: Vec<serde_json::Value> = results
+        .iter()
+        .map(|r| {
+            let mut v = serde_json::to_value(r).unwrap_or_default();
+            v["jitter_us"] = stats["jitter_us"].clone();
+            v["work_us"] = stats["work_us"].clone();
+            v["command_age_us"] = stats["command_age_us"].clone();
+            v["late_ticks"] = stats["late_ticks"].clone();
+            v
+        })
+        .collect();
+    if args.json {
+        let doc = serde_json::json!({
+            "config": args.config.display().to_string(),
+            "overrides": args.overrides,
+            "latency_ms": args.latency_ms,
+            "trials": args.trials,
+            "seed": args.seed,
+            "strategies": strategies,
+            "board": stats,
+            "leftover_shm_files": leftover,
+        });
+        println!("{doc}");
+        return Ok(());
+    }
+    let unit = results.first().map_or("mm".to_string(), |r| r.unit.clone());
+    println!(
+        "{:<17} {:>8} {:>10} {:>12} {:>10} {:>9} {:>26} {:>6}",
+        "strategy",
+        "latency",
+        "RMS error",
+        "final error",
+        "max error",
+        "diverged",
+        "jitter p50/p99/max [µs]",
+        "late"
+    );
+    let j = &stats["jitter_us"];
+    let f = |v: f64| {
+        if v >= 1e9 {
+            "diverged".to_string()
+        } else {
+            format!("{v:.2} {unit}")
+        }
+    };
+    for r in &results {
+        println!(
+            "{:<17} {:>5} ms {:>10} {:>12} {:>10} {:>5} / {:<2} {:>8.1} /{:>7.1} /{:>8.1} {:>6}",
+            r.name,
+            r.latency_ms,
+            f(r.rms_error),
+            f(r.final_error_max),
+            f(r.max_error),
+            r.diverged,
+            r.trials,
+            j["p50"].as_f64().unwrap_or(f64::NAN),
+            j["p99"].as_f64().unwrap_or(f64::NAN),
+            j["max"].as_f64().unwrap_or(f64::NAN),
+            stats["late_ticks"]
+        );
+    }
+    let w = &stats["work_us"];
+    let a = &stats["command_age_us"];
+    println!(
+        "board: {} ticks, work p50 {:.1} / p99 {:.1} µs, command age p50 {:.0} / p99 {:.0} µs; final error = max over trials",
+        stats["ticks"],
+        w["p50"].as_f64().unwrap_or(f64::NAN),
+        w["p99"].as_f64().unwrap_or(f64::NAN),
+        a["p50"].as_f64().unwrap_or(f64::NAN),
+        a["p99"].as_f64().unwrap_or(f64::NAN),
+    );
+    if !leftover.is_empty() {
+        eprintln!("vic: warning: files left in /dev/shm: {leftover:?}");
     }
     Ok(())
 }

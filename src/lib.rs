@@ -10,6 +10,8 @@
 // Index loops read like the equations they implement; iterator chains over several arrays do not.
 #![allow(clippy::needless_range_loop)]
 
+pub mod board;
+pub mod central;
 pub mod config;
 pub mod cost;
 pub mod delay;
@@ -20,7 +22,9 @@ pub mod identify;
 pub mod model;
 pub mod plan;
 pub mod plot;
+pub mod realtime;
 pub mod reference;
 pub mod scalar;
 pub mod simulation;
 pub mod solver;
+pub mod transport;

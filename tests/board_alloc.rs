@@ -1,0 +1,99 @@
+//! A board tick allocates nothing: a counting global allocator watches `Board::step`.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::path::Path;
+use vic::board::{Board, BoardConfig, Inputs};
+use vic::config::Scenario;
+use vic::transport::{CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind};
+
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations() -> u64 {
+    ALLOCATIONS.with(|c| c.get())
+}
+
+#[test]
+fn a_board_step_does_not_allocate() {
+    let path = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/two_link_divergent.toml"
+    ));
+    let scenario = Scenario::load(path, &[]).unwrap();
+    let setup = vic::plan::setup(&scenario).unwrap();
+    let q0 = [setup.x0[0], setup.x0[1]];
+    let mut board = Board::new(scenario.model.clone(), BoardConfig::default(), &q0).unwrap();
+    let mut inputs = Inputs::default();
+    let ms = 1_000_000u64;
+    let reset = Control {
+        version: vic::transport::PROTOCOL_VERSION,
+        kind: ControlKind::Reset as u32,
+        trial: 0,
+        seed: 3,
+        start_ns: 0,
+        q0,
+        ..Default::default()
+    };
+    let mut slice = CommandSlice {
+        joints: 2,
+        knot_dt_ns: 10 * ms,
+        count: 20,
+        ..Default::default()
+    };
+    for k in &mut slice.knots[..20] {
+        k.q_d = q0;
+        k.stiffness = [80.0, 80.0];
+    }
+    let pulse = Disturbance {
+        version: vic::transport::PROTOCOL_VERSION,
+        kind: DisturbanceKind::Pulse as u32,
+        seq: 1,
+        torque: [0.5, 0.0],
+        duration_ns: 5 * ms,
+        ..Default::default()
+    };
+    let before = allocations();
+    let mut now = 0;
+    for tick in 0..1000u64 {
+        if tick == 0 {
+            inputs.push_control(&reset);
+        }
+        if tick % 20 == 0 {
+            slice.seq = tick + 1;
+            slice.start_ns = tick * ms;
+            inputs.push_command(&slice);
+        }
+        if tick == 100 {
+            inputs.push_disturbance(&pulse);
+        }
+        // Every fifth tick is late by three periods.
+        now += if tick % 5 == 4 { 3 * ms } else { ms };
+        let out = board.step(now, &mut inputs);
+        std::hint::black_box(out);
+    }
+    let after = allocations();
+    assert_eq!(after - before, 0, "Board::step allocated");
+    assert_eq!(board.counters.rejected, 0);
+    assert!(board.state().iter().all(|v| v.is_finite()));
+}
