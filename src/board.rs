@@ -17,7 +17,6 @@ use crate::transport::{
     CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Interpolation, Knot,
     MAX_JOINTS, MAX_KNOTS, Mode, PROTOCOL_VERSION, StateMsg,
 };
-use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -167,13 +166,9 @@ pub struct Board {
     pub counters: Counters,
 }
 
-/// The random stream of one trial: SplitMix64 of the seed and the trial index.
-pub fn trial_rng(seed: u64, trial: u64) -> Xoshiro256PlusPlus {
-    let mut z = seed ^ trial.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    Xoshiro256PlusPlus::seed_from_u64(z ^ (z >> 31))
-}
+/// The random stream of one trial: the Monte Carlo's, so that live and offline trials with the
+/// same seed draw the same noise.
+pub use crate::simulation::trial_rng;
 
 impl Board {
     /// A board for `model` (impedance actuator, type 2), at rest at `q0`.

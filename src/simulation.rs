@@ -107,7 +107,7 @@ pub struct Trial {
 }
 
 /// The random stream of one trial: SplitMix64 of the seed and the trial index.
-fn trial_rng(seed: u64, trial: u64) -> Xoshiro256PlusPlus {
+pub fn trial_rng(seed: u64, trial: u64) -> Xoshiro256PlusPlus {
     let mut z = seed ^ trial.wrapping_mul(0x9E37_79B9_7F4A_7C15);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);

@@ -6,40 +6,25 @@
 //!   (and `pending` for `k < d`), with and without noise.
 //! * Its linearisation agrees with central finite differences of its step and noise gain.
 
+mod common;
+
 use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 use vic::delay::Delayed;
 use vic::dynamics::{Dynamics, EulerModel, Linearization};
-use vic::model::{
-    Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
-};
+use vic::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 
 const DT: f64 = 0.01;
 const HORIZON: usize = 15;
 
 fn single_joint() -> Plant {
-    Plant::SingleJoint(SingleJoint {
-        inertia: 5.08e-3,
-        mass: 0.812,
-        com: 0.103,
-        length: 0.273,
-        gravity: 9.81,
-        viscosity: 0.0,
-    })
+    Plant::SingleJoint(common::icub_forearm())
 }
 
 fn two_link() -> Plant {
-    Plant::TwoLink(TwoLink {
-        l1: 0.30,
-        l2: 0.33,
-        s2: 0.16,
-        m2: 1.0,
-        i1: 0.025,
-        i2: 0.045,
-        viscosity: [[0.05, 0.025], [0.025, 0.05]],
-    })
+    Plant::TwoLink(common::two_link())
 }
 
 /// Models covering both plants, every actuator and every noise kind.

@@ -7,6 +7,8 @@
 //! * [`EulerModel::linearize`] (`A = I + Δ f_x`, `B = Δ f_u`, `c = √Δ F`, `Cx`, `Cu`) against
 //!   central finite differences of [`EulerModel::step`] and [`EulerModel::noise_gain`].
 
+mod common;
+
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
@@ -19,26 +21,15 @@ use vic::model::{
 const POINTS: usize = 6;
 
 fn single_joint() -> SingleJoint {
+    // A little viscosity, so that its term is differentiated too.
     SingleJoint {
-        inertia: 5.08e-3,
-        mass: 0.812,
-        com: 0.103,
-        length: 0.273,
-        gravity: 9.81,
         viscosity: 0.02,
+        ..common::icub_forearm()
     }
 }
 
 fn two_link() -> TwoLink {
-    TwoLink {
-        l1: 0.30,
-        l2: 0.33,
-        s2: 0.16,
-        m2: 1.0,
-        i1: 0.025,
-        i2: 0.045,
-        viscosity: [[0.05, 0.025], [0.025, 0.05]],
-    }
+    common::two_link()
 }
 
 /// Every valid combination of plant, actuator, field and noise.

@@ -12,6 +12,8 @@
 //!   stiffness against the field, and executed open loop it spreads far less than a torque-only
 //!   plan.
 
+mod common;
+
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
@@ -465,25 +467,14 @@ fn moment_rollout_is_exact_on_a_linear_plant_with_state_noise() {
 // ---------------------------------------------------------------------------------------------
 
 fn two_link() -> TwoLink {
-    TwoLink {
-        l1: 0.30,
-        l2: 0.33,
-        s2: 0.16,
-        m2: 1.0,
-        i1: 0.025,
-        i2: 0.045,
-        viscosity: [[0.05, 0.025], [0.025, 0.05]],
-    }
+    common::two_link()
 }
 
 fn icub_joint() -> SingleJoint {
+    // A little viscosity, so that its term is differentiated too.
     SingleJoint {
-        inertia: 5.08e-3,
-        mass: 0.812,
-        com: 0.103,
-        length: 0.273,
-        gravity: 9.81,
         viscosity: 0.02,
+        ..common::icub_forearm()
     }
 }
 

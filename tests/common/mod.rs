@@ -1,0 +1,33 @@
+//! The paper's limbs for the tests, read from the scenario files so that their numbers live in one
+//! place (config/).
+#![allow(dead_code)] // each test binary uses a part
+
+use std::path::Path;
+use vic::config::Scenario;
+use vic::model::{Plant, SingleJoint, TwoLink};
+
+fn plant(file: &str) -> Plant {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(file);
+    Scenario::load(&path, &[])
+        .expect("scenario loads")
+        .model
+        .plant
+}
+
+/// Li & Todorov's two-link arm (config/two_link_divergent.toml).
+pub fn two_link() -> TwoLink {
+    match plant("two_link_divergent.toml") {
+        Plant::TwoLink(p) => p,
+        other => panic!("expected a two-link arm, got {other:?}"),
+    }
+}
+
+/// The iCub forearm (config/icub_elbow.toml).
+pub fn icub_forearm() -> SingleJoint {
+    match plant("icub_elbow.toml") {
+        Plant::SingleJoint(p) => p,
+        other => panic!("expected a single joint, got {other:?}"),
+    }
+}
