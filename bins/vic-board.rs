@@ -40,9 +40,11 @@ struct Args {
     /// lower jitter).
     #[arg(long, default_value_t = 0)]
     spin_us: u64,
-    /// Stiffness of the safe hold when no valid command covers the present [N m/rad].
-    #[arg(long, default_value_t = 100.0)]
-    hold_stiffness: f64,
+    /// Stiffness of the safe hold [N m/rad] (default: the scenario's board.hold_stiffness, 100).
+    /// The other limits (watchdog, ramp, joint and speed limits, disturbance limits) are keys
+    /// of the scenario's [board] section: --set board.watchdog=0.1
+    #[arg(long, value_name = "N_M_PER_RAD")]
+    hold_stiffness: Option<f64>,
     /// Stop after this many seconds (0: run until SIGINT/SIGTERM).
     #[arg(long, default_value_t = 0.0)]
     duration_s: f64,
@@ -72,35 +74,10 @@ fn run(args: Args) -> Result<(), (u8, String)> {
         Scenario::load(&args.config, &args.overrides).map_err(|e| input(e.to_string()))?;
     let setup = vic::plan::setup(&scenario).map_err(|e| input(e.to_string()))?;
     let period_ns = 1_000_000_000 / args.rate_hz;
-    let stiffness_max = scenario
-        .bounds
-        .upper
-        .get(scenario.model.dof())
-        .copied()
-        .unwrap_or(f64::INFINITY);
-    let torque_max = scenario.bounds.upper[0]
-        .abs()
-        .max(scenario.bounds.lower[0].abs());
-    let cfg = BoardConfig {
-        period_ns,
-        // The scenario's integration step (Δ / substeps), or finer.
-        substeps: ((period_ns as f64 * 1e-9) / (scenario.task.dt / scenario.task.substeps as f64))
-            .ceil()
-            .max(1.0) as usize,
-        integrator: scenario.task.integrator,
-        hold_stiffness: args.hold_stiffness,
-        stiffness_max: if stiffness_max.is_finite() {
-            stiffness_max
-        } else {
-            1e4
-        },
-        torque_max: if torque_max.is_finite() {
-            torque_max
-        } else {
-            1e4
-        },
-        ..BoardConfig::default()
-    };
+    let mut cfg = BoardConfig::from_scenario(&scenario, period_ns);
+    if let Some(k) = args.hold_stiffness {
+        cfg.hold_stiffness = k;
+    }
     let mut board =
         Board::new(scenario.model.clone(), cfg, &setup.x0).map_err(|e| input(e.to_string()))?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -110,6 +87,12 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             .map_err(|e| (1, format!("cannot install the signal handler: {e}")))?;
     }
     let ep = Endpoint::open(&args.namespace, Role::Board).map_err(|e| (1, e.to_string()))?;
+    if ep.cleaned_dead_nodes > 0 {
+        eprintln!(
+            "vic-board: removed the resources of {} dead process(es) in namespace \"{}\"",
+            ep.cleaned_dead_nodes, args.namespace
+        );
+    }
     if !vic::realtime::lock_memory() {
         eprintln!("vic-board: warning: mlockall failed; page faults may add jitter");
     }
@@ -132,12 +115,13 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             )
         };
         println!(
-            "ticks        {} ({} late, {} periods missed, {} lost), {} rejected messages, {} safe-hold ticks",
+            "ticks        {} ({} late, {} periods missed, {} lost), {} rejected messages {:?}, {} safe-hold ticks",
             stats.ticks,
             stats.late_ticks,
             stats.missed_periods,
             stats.lost_periods,
             stats.rejected_messages,
+            stats.rejected_by_reason,
             stats.safe_hold_ticks
         );
         p("jitter", &stats.jitter_us);

@@ -161,11 +161,8 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     let mut central = Central::new(track, strategy, timing);
     let records = if args.lockstep {
         let s = Scenario::load(&args.config, &args.overrides).map_err(|e| input(e.to_string()))?;
-        let cfg = vic::board::BoardConfig {
-            substeps: 1,
-            integrator: s.task.integrator,
-            ..Default::default()
-        };
+        // The board the live daemon would run (same limits), at 1 kHz.
+        let cfg = vic::board::BoardConfig::from_scenario(&s, 1_000_000);
         let mut board = vic::board::Board::new(s.model.clone(), cfg, &setup.x0).map_err(input)?;
         lockstep(
             &mut board,

@@ -46,6 +46,23 @@ enum Command {
     ///
     /// Example: vic demo --latency-ms 200 --trials 3
     Demo(DemoArgs),
+    /// Send a disturbance to a running board and report the tick that applied it (read from its
+    /// state stream), or fail (exit 1) when no board answers or it rejects the disturbance.
+    ///
+    /// Examples: vic inject pulse --torque 2,0 --duration-ms 50;  vic inject field --beta 0;
+    /// vic inject load --torque 0,0.5;  vic inject noise --factor 2
+    Inject(InjectArgs),
+    /// One snapshot of a running board's telemetry: mode (running / safe-hold / fault), tick
+    /// rate, jitter, work time, command age, tracking error, stiffness, disturbances, rejected
+    /// messages by reason.
+    ///
+    /// Example: vic status --namespace lab1 --json
+    Status(StatusArgs),
+    /// Watch a running board live: a refreshing view on a terminal, one line per interval when
+    /// piped. Stops on Ctrl-C (or after --count snapshots).
+    ///
+    /// Example: vic monitor --namespace lab1
+    Monitor(MonitorArgs),
     /// Identify the joint's torque noise from a log, the paper's procedure (Sec. III-B): bin the
     /// torque error by velocity, fit its mean and standard deviation with polynomials, estimate
     /// (a, b) of e = (a + b q') η by maximum likelihood and test the residual η for normality
@@ -244,6 +261,9 @@ fn main() -> ExitCode {
         Command::Simulate(args) => run_simulate(args),
         Command::Experiment(args) => run_experiment(args),
         Command::Demo(args) => run_demo(args),
+        Command::Inject(args) => run_inject(args),
+        Command::Status(args) => run_status(args),
+        Command::Monitor(args) => run_monitor(args),
         Command::Results(args) => run_results(args),
         Command::Identify(args) => run_identify(args),
     };
@@ -623,6 +643,223 @@ fn run_identify(args: IdentifyArgs) -> Result<(), Failure> {
     } else {
         println!("{report}");
     }
+    Ok(())
+}
+
+#[derive(clap::Args)]
+struct InjectArgs {
+    #[command(subcommand)]
+    what: InjectWhat,
+    /// Namespace of the board.
+    #[arg(long, global = true, default_value = vic::transport::DEFAULT_NAMESPACE)]
+    namespace: String,
+    /// Seconds to wait for the board and its acknowledgement.
+    #[arg(long, global = true, default_value_t = 2.0)]
+    timeout_s: f64,
+    /// Print the acknowledgement as JSON.
+    #[arg(long, global = true)]
+    json: bool,
+}
+
+#[derive(Subcommand)]
+enum InjectWhat {
+    /// A torque pulse on the joints.
+    Pulse {
+        /// Joint torques [N m], comma-separated (one per joint; missing joints get 0).
+        #[arg(
+            long,
+            value_name = "T1[,T2]",
+            value_delimiter = ',',
+            allow_negative_numbers = true
+        )]
+        torque: Vec<f64>,
+        /// Pulse duration [ms].
+        #[arg(long, default_value_t = 50.0)]
+        duration_ms: f64,
+    },
+    /// A steady load torque until changed (all zeros remove it).
+    Load {
+        /// Joint torques [N m], comma-separated.
+        #[arg(
+            long,
+            value_name = "T1[,T2]",
+            value_delimiter = ',',
+            allow_negative_numbers = true
+        )]
+        torque: Vec<f64>,
+    },
+    /// Switch the divergent force field on (β > 0) or off (0). Two-link arm only.
+    Field {
+        /// β [N/m].
+        #[arg(long, allow_negative_numbers = true)]
+        beta: f64,
+    },
+    /// Scale the plant noise (1: as configured, 0: none).
+    Noise {
+        #[arg(long, allow_negative_numbers = true)]
+        factor: f64,
+    },
+}
+
+fn joint_torques(v: &[f64]) -> Result<[f64; 2], Failure> {
+    if v.is_empty() || v.len() > 2 || v.iter().any(|x| !x.is_finite()) {
+        return Err(Failure::input(format!(
+            "--torque {v:?}: give one or two finite joint torques in N m, e.g. --torque 1.5,0"
+        )));
+    }
+    let mut t = [0.0; 2];
+    t[..v.len()].copy_from_slice(v);
+    Ok(t)
+}
+
+fn run_inject(args: InjectArgs) -> Result<(), Failure> {
+    use vic::operator::{OperatorError, Request};
+    vic::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
+    if !(args.timeout_s.is_finite() && args.timeout_s > 0.0) {
+        return Err(Failure::input(format!(
+            "--timeout-s {}: must be a positive number of seconds",
+            args.timeout_s
+        )));
+    }
+    let request = match &args.what {
+        InjectWhat::Pulse {
+            torque,
+            duration_ms,
+        } => {
+            if !(duration_ms.is_finite() && *duration_ms > 0.0) {
+                return Err(Failure::input(format!(
+                    "--duration-ms {duration_ms}: must be a positive number of milliseconds"
+                )));
+            }
+            Request::Pulse {
+                torque: joint_torques(torque)?,
+                duration: duration_ms / 1e3,
+            }
+        }
+        InjectWhat::Load { torque } => Request::Load {
+            torque: joint_torques(torque)?,
+        },
+        InjectWhat::Field { beta } => {
+            if !beta.is_finite() {
+                return Err(Failure::input("--beta must be a finite number of N/m"));
+            }
+            Request::Field { beta: *beta }
+        }
+        InjectWhat::Noise { factor } => {
+            if !(factor.is_finite() && *factor >= 0.0) {
+                return Err(Failure::input(format!("--factor {factor}: must be ≥ 0")));
+            }
+            Request::Noise { factor: *factor }
+        }
+    };
+    let ack = vic::operator::inject(
+        &args.namespace,
+        request,
+        std::time::Duration::from_secs_f64(args.timeout_s),
+    )
+    .map_err(|e| match e {
+        OperatorError::Transport(e) => Failure::runtime(e),
+        e => Failure::runtime(e),
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string(&ack).map_err(Failure::runtime)?);
+    } else {
+        let effect = match ack.effect_after_ticks {
+            Some(0) => ", in effect at that tick".to_string(),
+            Some(n) => format!(", in effect {n} tick(s) later"),
+            None => String::new(),
+        };
+        println!(
+            "applied by the board in \"{}\" at tick {} ({:.0} µs after sending{effect}); mode {}, τ_ext {:?} N m",
+            ack.namespace, ack.tick, ack.latency_us, ack.mode, ack.tau_ext
+        );
+    }
+    Ok(())
+}
+
+#[derive(clap::Args)]
+struct StatusArgs {
+    /// Namespace of the board.
+    #[arg(long, default_value = vic::transport::DEFAULT_NAMESPACE)]
+    namespace: String,
+    /// Seconds to wait for the board's telemetry (it publishes at 10 Hz).
+    #[arg(long, default_value_t = 1.0)]
+    timeout_s: f64,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+fn run_status(args: StatusArgs) -> Result<(), Failure> {
+    vic::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
+    if !(args.timeout_s.is_finite() && args.timeout_s > 0.0) {
+        return Err(Failure::input("--timeout-s must be a positive number"));
+    }
+    let s = vic::operator::status(
+        &args.namespace,
+        std::time::Duration::from_secs_f64(args.timeout_s),
+    )
+    .map_err(Failure::runtime)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&s).map_err(Failure::runtime)?);
+    } else {
+        println!("{}", s.render());
+    }
+    Ok(())
+}
+
+#[derive(clap::Args)]
+struct MonitorArgs {
+    /// Namespace of the board.
+    #[arg(long, default_value = vic::transport::DEFAULT_NAMESPACE)]
+    namespace: String,
+    /// Seconds between snapshots.
+    #[arg(long, default_value_t = 1.0)]
+    interval_s: f64,
+    /// Stop after this many snapshots (default: until Ctrl-C).
+    #[arg(long)]
+    count: Option<u64>,
+}
+
+fn run_monitor(args: MonitorArgs) -> Result<(), Failure> {
+    use std::io::{IsTerminal, Write};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    vic::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
+    if !(args.interval_s.is_finite() && args.interval_s >= 0.1) {
+        return Err(Failure::input("--interval-s must be at least 0.1"));
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+            .map_err(|e| Failure::runtime(format!("cannot install the signal handler: {e}")))?;
+    }
+    let tty = std::io::stdout().is_terminal();
+    let mut shown = 0u64;
+    vic::operator::monitor(
+        &args.namespace,
+        std::time::Duration::from_secs_f64(args.interval_s),
+        &stop,
+        |s| {
+            let mut out = std::io::stdout().lock();
+            let text = match s {
+                Some(s) if tty => s.render(),
+                Some(s) => s.line(),
+                None => format!("no board in namespace \"{}\" (waiting)", args.namespace),
+            };
+            // On a terminal: clear and redraw in place.
+            let ok = if tty {
+                write!(out, "\x1b[H\x1b[2J{text}\n(Ctrl-C to quit)\n")
+            } else {
+                writeln!(out, "{text}")
+            };
+            let _ = out.flush();
+            shown += 1;
+            ok.is_ok() && args.count.is_none_or(|c| shown < c)
+        },
+    )
+    .map_err(Failure::runtime)?;
     Ok(())
 }
 

@@ -5,6 +5,14 @@
 //! arrived, and publishes what comes out. The same code runs in the 1 kHz loop of `vic-board`, in
 //! the lockstep mode (a simulated clock) and in tests. A step allocates nothing.
 //!
+//! Safety (what the board promises whatever arrives): every message is validated before use and
+//! a rejected one is counted by [`Rejection`] and never reaches the plant; when no valid command
+//! covers the present, the last one stays in force for [`BoardConfig::watchdog_ns`], then the
+//! board ramps to a *safe hold* (the current position, the hold stiffness, gravity and field
+//! compensated) and resumes when valid commands cover the present again; leaving the joint or
+//! speed limits latches a [`Mode::Fault`] (ramp to the hold, commands refused) that only a reset
+//! clears.
+//!
 //! Time: `step(now)` takes the tick's *deadline* (a whole number of periods). The plant follows
 //! the clock: when ticks were missed, the step integrates every elapsed period (up to
 //! [`BoardConfig::max_catch_up`]) with the law evaluated each period, as the plant would have
@@ -15,7 +23,7 @@ use crate::model::{ArmModel, Exogenous, Field, Noise};
 use crate::scalar::{MAX_NW, MAX_NX};
 use crate::transport::{
     CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Interpolation, Knot,
-    MAX_JOINTS, MAX_KNOTS, Mode, PROTOCOL_VERSION, StateMsg,
+    MAX_JOINTS, MAX_KNOTS, Mode, PROTOCOL_VERSION, REJECTION_REASONS, StateMsg,
 };
 use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, StandardNormal};
@@ -30,6 +38,22 @@ pub struct BoardConfig {
     pub integrator: Integrator,
     /// Stiffness of the safe hold [N m/rad] (default 100).
     pub hold_stiffness: f64,
+    /// How long the last command stays in force once none covers the present [ns] (default 50 ms).
+    pub watchdog_ns: u64,
+    /// Duration of the ramp into the safe hold [ns] (default 100 ms).
+    pub ramp_ns: u64,
+    /// Plant guard: joint range [rad] and speed limit [rad/s].
+    pub joint_min: [f64; MAX_JOINTS],
+    pub joint_max: [f64; MAX_JOINTS],
+    pub velocity_max: f64,
+    /// Messages stamped later than the board's clock by more than this are rejected [ns].
+    pub future_tolerance_ns: u64,
+    /// Largest disturbances accepted.
+    pub max_pulse_torque: f64,
+    pub max_load_torque: f64,
+    pub max_pulse_ns: u64,
+    pub max_field_beta: f64,
+    pub max_noise_factor: f64,
     /// Largest stiffness a command may ask for [N m/rad] (from the scenario's bounds).
     pub stiffness_max: f64,
     /// Largest feedforward torque magnitude a command may ask for [N m].
@@ -45,8 +69,56 @@ impl Default for BoardConfig {
             substeps: 1,
             integrator: Integrator::SemiImplicit,
             hold_stiffness: 100.0,
+            watchdog_ns: 50_000_000,
+            ramp_ns: 100_000_000,
+            joint_min: [-std::f64::consts::PI; MAX_JOINTS],
+            joint_max: [std::f64::consts::PI; MAX_JOINTS],
+            velocity_max: 20.0,
+            future_tolerance_ns: 5_000_000,
+            max_pulse_torque: 20.0,
+            max_load_torque: 10.0,
+            max_pulse_ns: 2_000_000_000,
+            max_field_beta: 500.0,
+            max_noise_factor: 10.0,
             stiffness_max: 1e4,
             torque_max: 1e4,
+            max_catch_up: 50,
+        }
+    }
+}
+
+impl BoardConfig {
+    /// The board of a scenario at `period_ns`: its `[board]` limits, its stiffness and torque
+    /// bounds, and enough sub-steps to integrate at least as finely as the planner did.
+    pub fn from_scenario(s: &crate::config::Scenario, period_ns: u64) -> BoardConfig {
+        let dof = s.model.dof();
+        let b = &s.board;
+        let finite_or = |v: f64, d: f64| if v.is_finite() { v } else { d };
+        let ns = |sec: f64| (sec * 1e9).round() as u64;
+        let mut joint_min = [-std::f64::consts::PI; MAX_JOINTS];
+        let mut joint_max = [std::f64::consts::PI; MAX_JOINTS];
+        joint_min[..dof].copy_from_slice(&b.joint_min[..dof]);
+        joint_max[..dof].copy_from_slice(&b.joint_max[..dof]);
+        BoardConfig {
+            period_ns,
+            substeps: ((period_ns as f64 * 1e-9) / (s.task.dt / s.task.substeps as f64))
+                .ceil()
+                .max(1.0) as usize,
+            integrator: s.task.integrator,
+            hold_stiffness: b.hold_stiffness,
+            watchdog_ns: ns(b.watchdog),
+            ramp_ns: ns(b.ramp),
+            joint_min,
+            joint_max,
+            velocity_max: b.velocity_max,
+            future_tolerance_ns: ns(b.future_tolerance),
+            max_pulse_torque: b.max_pulse_torque,
+            max_load_torque: b.max_load_torque,
+            max_pulse_ns: ns(b.max_pulse_duration),
+            max_field_beta: b.max_field_beta,
+            max_noise_factor: b.max_noise_factor,
+            stiffness_max: finite_or(s.bounds.upper.get(dof).copied().unwrap_or(1e4), 1e4),
+            torque_max: finite_or(s.bounds.upper[0].abs().max(s.bounds.lower[0].abs()), 1e4),
             max_catch_up: 50,
         }
     }
@@ -63,6 +135,9 @@ pub struct Inputs {
     disturbances: [Disturbance; 4],
     n_disturbances: usize,
     overflow: u64,
+    /// When the messages were taken [ns, monotonic] (0: the step's deadline). Time stamps later
+    /// than this by more than the tolerance are rejected.
+    pub received_ns: u64,
 }
 
 impl Inputs {
@@ -110,23 +185,118 @@ pub struct Outputs {
 pub struct Counters {
     pub ticks: u64,
     pub rejected: u64,
+    /// Rejected messages by [`Rejection`] (index `reason as usize`).
+    pub rejected_by: [u64; REJECTION_REASONS],
     pub safe_hold_ticks: u64,
+    /// Times the watchdog expired and the board ramped to its safe hold.
+    pub watchdog_trips: u64,
+    /// Times the plant guard latched a fault.
+    pub faults: u64,
     /// Periods not integrated because a step would have exceeded `max_catch_up`.
     pub lost_periods: u64,
     pub resets: u64,
 }
 
-/// Why a command slice was rejected.
+/// Why a message was rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(usize)]
 pub enum Rejection {
-    Version,
-    Joints,
-    Shape,
-    NotFinite,
-    StiffnessOutOfBounds,
-    TorqueOutOfBounds,
-    WrongTrial,
-    OutOfOrder,
+    /// Another protocol version.
+    Version = 0,
+    /// Another number of joints.
+    Joints = 1,
+    /// Knot count, knot interval or interpolation out of range.
+    Shape = 2,
+    /// A number that is NaN or infinite.
+    NotFinite = 3,
+    /// Stiffness below 0 or above the actuator's maximum.
+    StiffnessOutOfBounds = 4,
+    /// Feedforward torque beyond the actuator's limit.
+    TorqueOutOfBounds = 5,
+    /// The damping that the actuator's law gives this stiffness is negative (unstable joint).
+    DampingUnstable = 6,
+    /// A command for another trial, or with no trial reset.
+    WrongTrial = 7,
+    /// A sequence number that repeats or goes backwards.
+    OutOfOrder = 8,
+    /// A time stamp later than the board's clock beyond the tolerance.
+    FutureTimestamp = 9,
+    /// A disturbance beyond the configured limits.
+    DisturbanceOutOfBounds = 10,
+    /// An unknown disturbance or control kind.
+    UnknownKind = 11,
+    /// More messages in one tick than the board takes.
+    Overflow = 12,
+    /// A command while the plant guard's fault is latched (only a reset clears it).
+    Faulted = 13,
+}
+
+impl Rejection {
+    pub const ALL: [Rejection; 14] = [
+        Rejection::Version,
+        Rejection::Joints,
+        Rejection::Shape,
+        Rejection::NotFinite,
+        Rejection::StiffnessOutOfBounds,
+        Rejection::TorqueOutOfBounds,
+        Rejection::DampingUnstable,
+        Rejection::WrongTrial,
+        Rejection::OutOfOrder,
+        Rejection::FutureTimestamp,
+        Rejection::DisturbanceOutOfBounds,
+        Rejection::UnknownKind,
+        Rejection::Overflow,
+        Rejection::Faulted,
+    ];
+    /// Name for reports and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Rejection::Version => "version",
+            Rejection::Joints => "joints",
+            Rejection::Shape => "shape",
+            Rejection::NotFinite => "not-finite",
+            Rejection::StiffnessOutOfBounds => "stiffness-out-of-bounds",
+            Rejection::TorqueOutOfBounds => "torque-out-of-bounds",
+            Rejection::DampingUnstable => "damping-unstable",
+            Rejection::WrongTrial => "wrong-trial",
+            Rejection::OutOfOrder => "out-of-order",
+            Rejection::FutureTimestamp => "future-timestamp",
+            Rejection::DisturbanceOutOfBounds => "disturbance-out-of-bounds",
+            Rejection::UnknownKind => "unknown-kind",
+            Rejection::Overflow => "overflow",
+            Rejection::Faulted => "faulted",
+        }
+    }
+}
+
+/// Why the plant guard latched a fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum FaultReason {
+    None = 0,
+    JointLimit = 1,
+    VelocityLimit = 2,
+    /// The state stopped being finite: the plant is frozen rather than held.
+    NotFinite = 3,
+}
+
+impl FaultReason {
+    pub fn from_u32(v: u32) -> FaultReason {
+        match v {
+            0 => FaultReason::None,
+            1 => FaultReason::JointLimit,
+            2 => FaultReason::VelocityLimit,
+            _ => FaultReason::NotFinite,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultReason::None => "none",
+            FaultReason::JointLimit => "joint-limit",
+            FaultReason::VelocityLimit => "velocity-limit",
+            FaultReason::NotFinite => "not-finite",
+        }
+    }
 }
 
 const SLICES: usize = 4;
@@ -136,6 +306,7 @@ pub struct Board {
     model: ArmModel,
     base_noise: Noise,
     base_field: Field,
+    damping: crate::model::Damping,
     cfg: BoardConfig,
     dof: usize,
     nx: usize,
@@ -143,6 +314,7 @@ pub struct Board {
     tau: [f64; MAX_JOINTS],
     stiffness: [f64; MAX_JOINTS],
     mode: Mode,
+    fault: FaultReason,
     trial: u32,
     /// Monotonic time at which the pending trial starts (None: no trial pending or running).
     start_ns: Option<u64>,
@@ -153,8 +325,15 @@ pub struct Board {
     slice_valid: [bool; SLICES],
     next_slot: usize,
     last_command_seq: u64,
+    last_control_seq: u64,
     used_command_seq: u64,
-    hold: Knot,
+    /// The knot last taken from a valid command, and the trial time it covered last.
+    last_knot: Knot,
+    last_cover_ns: u64,
+    /// The safe hold: ramp from `hold_from` to `hold_to` starting at trial time `hold_start_ns`.
+    hold_from: Knot,
+    hold_to: Knot,
+    hold_start_ns: u64,
     rng: Xoshiro256PlusPlus,
     pulse: [f64; MAX_JOINTS],
     pulse_until_ns: u64,
@@ -162,6 +341,8 @@ pub struct Board {
     noise_factor: f64,
     disturbance_seq: u64,
     disturbance_tick: u64,
+    /// A disturbance or control was applied at the last step (the loop wakes listeners).
+    applied: bool,
     tick: u64,
     pub counters: Counters,
 }
@@ -173,25 +354,33 @@ pub use crate::simulation::trial_rng;
 impl Board {
     /// A board for `model` (impedance actuator, type 2), at rest at `q0`.
     pub fn new(model: ArmModel, cfg: BoardConfig, q0: &[f64]) -> Result<Board, String> {
-        if !matches!(model.actuator, crate::model::Actuator::Impedance { .. }) {
-            return Err(format!(
-                "the board runs the impedance law (actuator type 2); this scenario has a {} actuator",
-                model.actuator.name()
-            ));
-        }
+        let damping = match model.actuator {
+            crate::model::Actuator::Impedance { damping } => damping,
+            _ => {
+                return Err(format!(
+                    "the board runs the impedance law (actuator type 2); this scenario has a {} \
+                     actuator",
+                    model.actuator.name()
+                ));
+            }
+        };
         if cfg.period_ns == 0 || cfg.substeps == 0 {
             return Err("the board period and sub-steps must be positive".into());
+        }
+        if !(cfg.hold_stiffness.is_finite() && damping.gain(cfg.hold_stiffness) >= 0.0) {
+            return Err(format!(
+                "hold stiffness {}: its damping under the actuator's law must be ≥ 0",
+                cfg.hold_stiffness
+            ));
         }
         let dof = model.dof();
         let nx = model.nx();
         let mut x = [0.0; MAX_NX];
         x[..dof].copy_from_slice(&q0[..dof]);
-        let mut hold = Knot::default();
-        hold.q_d[..dof].copy_from_slice(&q0[..dof]);
-        hold.stiffness = [cfg.hold_stiffness; MAX_JOINTS];
-        Ok(Board {
+        let mut b = Board {
             base_noise: model.noise,
             base_field: model.field,
+            damping,
             model,
             cfg,
             dof,
@@ -200,6 +389,7 @@ impl Board {
             tau: [0.0; MAX_JOINTS],
             stiffness: [0.0; MAX_JOINTS],
             mode: Mode::Idle,
+            fault: FaultReason::None,
             trial: 0,
             start_ns: None,
             plant_ns: 0,
@@ -208,8 +398,13 @@ impl Board {
             slice_valid: [false; SLICES],
             next_slot: 0,
             last_command_seq: 0,
+            last_control_seq: 0,
             used_command_seq: 0,
-            hold,
+            last_knot: Knot::default(),
+            last_cover_ns: 0,
+            hold_from: Knot::default(),
+            hold_to: Knot::default(),
+            hold_start_ns: 0,
             rng: trial_rng(0, 0),
             pulse: [0.0; MAX_JOINTS],
             pulse_until_ns: 0,
@@ -217,13 +412,23 @@ impl Board {
             noise_factor: 1.0,
             disturbance_seq: 0,
             disturbance_tick: 0,
+            applied: false,
             tick: 0,
             counters: Counters::default(),
-        })
+        };
+        b.last_knot = b.hold_target();
+        Ok(b)
     }
 
     pub fn mode(&self) -> Mode {
         self.mode
+    }
+    /// Why the fault is latched ([`FaultReason::None`] outside [`Mode::Fault`]).
+    pub fn fault(&self) -> FaultReason {
+        self.fault
+    }
+    pub fn config(&self) -> &BoardConfig {
+        &self.cfg
     }
     pub fn trial(&self) -> u32 {
         self.trial
@@ -234,6 +439,14 @@ impl Board {
     }
     pub fn stiffness(&self) -> [f64; MAX_JOINTS] {
         self.stiffness
+    }
+    /// Whether the last step applied a disturbance or control request.
+    pub fn applied(&self) -> bool {
+        self.applied
+    }
+    /// Sequence number and tick of the last disturbance applied.
+    pub fn last_disturbance(&self) -> (u64, u64) {
+        (self.disturbance_seq, self.disturbance_tick)
     }
     /// External torque now in force [N m].
     pub fn tau_ext(&self, now_ns: u64) -> [f64; MAX_JOINTS] {
@@ -256,7 +469,13 @@ impl Board {
         self.noise_factor
     }
 
-    /// Checks a command slice; `Ok` when it may be used.
+    fn reject(&mut self, r: Rejection) {
+        self.counters.rejected += 1;
+        self.counters.rejected_by[r as usize] += 1;
+    }
+
+    /// Checks a command slice; `Ok` when it may be used. (Its time stamp is checked in
+    /// [`Board::step`], against the clock.)
     pub fn validate(&self, c: &CommandSlice) -> Result<(), Rejection> {
         if c.version != PROTOCOL_VERSION {
             return Err(Rejection::Version);
@@ -268,8 +487,14 @@ impl Board {
             || c.count as usize > MAX_KNOTS
             || c.knot_dt_ns == 0
             || c.interpolation > Interpolation::Linear as u32
+            || c.start_ns
+                .checked_add(c.count as u64 * c.knot_dt_ns)
+                .is_none()
         {
             return Err(Rejection::Shape);
+        }
+        if self.mode == Mode::Fault {
+            return Err(Rejection::Faulted);
         }
         if c.trial != self.trial || self.start_ns.is_none() {
             return Err(Rejection::WrongTrial);
@@ -286,6 +511,11 @@ impl Board {
                 if k.stiffness[i] < 0.0 || k.stiffness[i] > self.cfg.stiffness_max * (1.0 + 1e-9) {
                     return Err(Rejection::StiffnessOutOfBounds);
                 }
+                // The damping follows the stiffness by the actuator's law; an affine law can
+                // make it negative for small stiffness (the iCub's), an unstable joint.
+                if self.damping.gain(k.stiffness[i]) < 0.0 {
+                    return Err(Rejection::DampingUnstable);
+                }
                 if k.tau_ff[i].abs() > self.cfg.torque_max {
                     return Err(Rejection::TorqueOutOfBounds);
                 }
@@ -294,79 +524,150 @@ impl Board {
         Ok(())
     }
 
-    fn apply_control(&mut self, c: &Control) {
-        if c.version != PROTOCOL_VERSION
-            || c.q0[..self.dof]
-                .iter()
-                .chain(&c.qd0[..self.dof])
-                .any(|v| !v.is_finite())
+    fn in_future(&self, time_ns: u64, clock_ns: u64) -> bool {
+        time_ns > clock_ns.saturating_add(self.cfg.future_tolerance_ns)
+    }
+
+    fn check_control(&self, c: &Control, clock_ns: u64) -> Result<(), Rejection> {
+        if c.version != PROTOCOL_VERSION {
+            return Err(Rejection::Version);
+        }
+        if c.kind != ControlKind::Reset as u32 && c.kind != ControlKind::Stop as u32 {
+            return Err(Rejection::UnknownKind);
+        }
+        if c.q0[..self.dof]
+            .iter()
+            .chain(&c.qd0[..self.dof])
+            .any(|v| !v.is_finite())
         {
-            self.counters.rejected += 1;
+            return Err(Rejection::NotFinite);
+        }
+        if c.seq <= self.last_control_seq {
+            return Err(Rejection::OutOfOrder);
+        }
+        if self.in_future(c.time_ns, clock_ns) {
+            return Err(Rejection::FutureTimestamp);
+        }
+        if c.kind == ControlKind::Reset as u32 {
+            let q = &c.q0[..self.dof];
+            let inside = (0..self.dof)
+                .all(|i| q[i] >= self.cfg.joint_min[i] && q[i] <= self.cfg.joint_max[i])
+                && c.qd0[..self.dof]
+                    .iter()
+                    .all(|v| v.abs() <= self.cfg.velocity_max);
+            if !inside {
+                return Err(Rejection::DisturbanceOutOfBounds);
+            }
+        }
+        Ok(())
+    }
+
+    fn apply_control(&mut self, c: &Control, clock_ns: u64) {
+        if let Err(r) = self.check_control(c, clock_ns) {
+            self.reject(r);
             return;
         }
-        match c.kind {
-            k if k == ControlKind::Reset as u32 => {
-                self.x = [0.0; MAX_NX];
-                self.x[..self.dof].copy_from_slice(&c.q0[..self.dof]);
-                self.x[self.dof..2 * self.dof].copy_from_slice(&c.qd0[..self.dof]);
-                self.trial = c.trial;
-                self.start_ns = Some(c.start_ns);
-                self.mode = Mode::Idle;
-                self.trial_time_ns = 0;
-                self.slice_valid = [false; SLICES];
-                self.last_command_seq = 0;
-                self.used_command_seq = 0;
-                self.rng = trial_rng(c.seed, c.trial as u64);
-                self.tau = [0.0; MAX_JOINTS];
-                self.stiffness = [0.0; MAX_JOINTS];
-                self.counters.resets += 1;
-            }
-            k if k == ControlKind::Stop as u32 => {
+        self.last_control_seq = c.seq;
+        self.applied = true;
+        if c.kind == ControlKind::Reset as u32 {
+            // The explicit reset: the only way out of a latched fault.
+            self.x = [0.0; MAX_NX];
+            self.x[..self.dof].copy_from_slice(&c.q0[..self.dof]);
+            self.x[self.dof..2 * self.dof].copy_from_slice(&c.qd0[..self.dof]);
+            self.trial = c.trial;
+            self.start_ns = Some(c.start_ns);
+            self.mode = Mode::Idle;
+            self.fault = FaultReason::None;
+            self.trial_time_ns = 0;
+            self.slice_valid = [false; SLICES];
+            self.last_command_seq = 0;
+            self.used_command_seq = 0;
+            self.last_knot = self.hold_target();
+            self.last_cover_ns = 0;
+            self.rng = trial_rng(c.seed, c.trial as u64);
+            self.tau = [0.0; MAX_JOINTS];
+            self.stiffness = [0.0; MAX_JOINTS];
+            self.counters.resets += 1;
+        } else {
+            // Stop freezes the plant; a latched fault stays latched (and held).
+            self.slice_valid = [false; SLICES];
+            if self.mode != Mode::Fault {
                 self.mode = Mode::Idle;
                 self.start_ns = None;
-                self.slice_valid = [false; SLICES];
             }
-            _ => self.counters.rejected += 1,
         }
     }
 
-    fn apply_disturbance(&mut self, d: &Disturbance, now_ns: u64) {
-        let finite = d.torque.iter().all(|v| v.is_finite()) && d.value.is_finite();
-        let Some(kind) = DisturbanceKind::from_u32(d.kind).filter(|_| finite) else {
-            self.counters.rejected += 1;
-            return;
-        };
+    fn check_disturbance(
+        &self,
+        d: &Disturbance,
+        clock_ns: u64,
+    ) -> Result<DisturbanceKind, Rejection> {
         if d.version != PROTOCOL_VERSION {
-            self.counters.rejected += 1;
-            return;
+            return Err(Rejection::Version);
         }
+        let kind = DisturbanceKind::from_u32(d.kind).ok_or(Rejection::UnknownKind)?;
+        if !(d.torque.iter().all(|v| v.is_finite()) && d.value.is_finite()) {
+            return Err(Rejection::NotFinite);
+        }
+        if d.seq <= self.disturbance_seq {
+            return Err(Rejection::OutOfOrder);
+        }
+        if self.in_future(d.time_ns, clock_ns) {
+            return Err(Rejection::FutureTimestamp);
+        }
+        let torque = d.torque[..self.dof]
+            .iter()
+            .fold(0.0_f64, |m, v| m.max(v.abs()));
+        let ok = match kind {
+            DisturbanceKind::Pulse => {
+                torque <= self.cfg.max_pulse_torque && d.duration_ns <= self.cfg.max_pulse_ns
+            }
+            DisturbanceKind::Load => torque <= self.cfg.max_load_torque,
+            // The divergent field is a hand-space field: a two-link arm only.
+            DisturbanceKind::Field => {
+                d.value.abs() <= self.cfg.max_field_beta && (d.value == 0.0 || self.dof == 2)
+            }
+            DisturbanceKind::Noise => d.value >= 0.0 && d.value <= self.cfg.max_noise_factor,
+        };
+        if ok {
+            Ok(kind)
+        } else {
+            Err(Rejection::DisturbanceOutOfBounds)
+        }
+    }
+
+    fn apply_disturbance(&mut self, d: &Disturbance, now_ns: u64, clock_ns: u64) {
+        let kind = match self.check_disturbance(d, clock_ns) {
+            Ok(k) => k,
+            Err(r) => {
+                self.reject(r);
+                return;
+            }
+        };
+        let mut torque = [0.0; MAX_JOINTS];
+        torque[..self.dof].copy_from_slice(&d.torque[..self.dof]);
         match kind {
             DisturbanceKind::Pulse => {
-                self.pulse = d.torque;
+                self.pulse = torque;
                 self.pulse_until_ns = now_ns + d.duration_ns;
             }
-            DisturbanceKind::Load => self.load = d.torque,
+            DisturbanceKind::Load => self.load = torque,
             DisturbanceKind::Field => {
                 self.model.field = if d.value == 0.0 {
                     Field::None
-                } else if self.dof == 2 {
-                    Field::Divergent { beta: d.value }
                 } else {
-                    self.counters.rejected += 1;
-                    return;
+                    Field::Divergent { beta: d.value }
                 };
             }
             DisturbanceKind::Noise => {
-                if d.value < 0.0 {
-                    self.counters.rejected += 1;
-                    return;
-                }
                 self.noise_factor = d.value;
                 self.model.noise = self.base_noise.scaled(d.value);
             }
         }
         self.disturbance_seq = d.seq;
         self.disturbance_tick = self.tick;
+        self.applied = true;
     }
 
     /// Restores the configured field and noise and removes loads and pulses.
@@ -398,15 +699,67 @@ impl Board {
         let mut k = c.knots[i];
         if c.interpolation == Interpolation::Linear as u32 && i + 1 < c.count as usize {
             let a = (offset - i as u64 * c.knot_dt_ns) as f64 / c.knot_dt_ns as f64;
-            let n = &c.knots[i + 1];
-            for j in 0..MAX_JOINTS {
-                k.tau_ff[j] += a * (n.tau_ff[j] - k.tau_ff[j]);
-                k.stiffness[j] += a * (n.stiffness[j] - k.stiffness[j]);
-                k.q_d[j] += a * (n.q_d[j] - k.q_d[j]);
-                k.qd_d[j] += a * (n.qd_d[j] - k.qd_d[j]);
-            }
+            k = lerp(&k, &c.knots[i + 1], a);
         }
         Some((k, c.time_ns, c.seq))
+    }
+
+    /// The safe hold at the present position: the hold stiffness, no velocity, the torque that
+    /// balances gravity and the field there.
+    fn hold_target(&self) -> Knot {
+        let dof = self.dof;
+        let mut k = Knot::default();
+        k.q_d[..dof].copy_from_slice(&self.x[..dof]);
+        k.stiffness[..dof]
+            .iter_mut()
+            .for_each(|v| *v = self.cfg.hold_stiffness);
+        let g = self.model.inverse_dynamics(
+            &self.x[..dof],
+            &[0.0; MAX_JOINTS][..dof],
+            &[0.0; MAX_JOINTS][..dof],
+        );
+        for i in 0..dof {
+            // Clamped to the actuator's torque range, like any command.
+            k.tau_ff[i] = g[i].clamp(-self.cfg.torque_max, self.cfg.torque_max);
+        }
+        k
+    }
+
+    /// Starts the ramp from the knot in use to the safe hold at trial time `t`.
+    fn begin_hold(&mut self, from: Knot, t: u64) {
+        self.hold_from = from;
+        self.hold_to = self.hold_target();
+        self.hold_start_ns = t;
+    }
+
+    /// The knot of the safe-hold ramp at trial time `t` (linear in every input, so the joint
+    /// torque stays continuous).
+    fn hold_knot(&self, t: u64) -> Knot {
+        let a = if self.cfg.ramp_ns == 0 {
+            1.0
+        } else {
+            (t.saturating_sub(self.hold_start_ns) as f64 / self.cfg.ramp_ns as f64).min(1.0)
+        };
+        lerp(&self.hold_from, &self.hold_to, a)
+    }
+
+    /// The plant guard: `Some(reason)` when the state has left the configured limits.
+    fn guard(&self) -> Option<FaultReason> {
+        let dof = self.dof;
+        if !self.x[..self.nx].iter().all(|v| v.is_finite()) {
+            return Some(FaultReason::NotFinite);
+        }
+        if (0..dof).any(|i| self.x[i] < self.cfg.joint_min[i] || self.x[i] > self.cfg.joint_max[i])
+        {
+            return Some(FaultReason::JointLimit);
+        }
+        if self.x[dof..2 * dof]
+            .iter()
+            .any(|v| v.abs() > self.cfg.velocity_max)
+        {
+            return Some(FaultReason::VelocityLimit);
+        }
+        None
     }
 
     /// One plant period under knot `k`: Eq. 4 through [`ArmModel::f`], [`flow`], then the noise
@@ -454,35 +807,77 @@ impl Board {
         self.x = next;
     }
 
+    /// The knot for plant period at trial time `t`: the valid command covering it; else the last
+    /// one while the watchdog runs; else the safe-hold ramp.
+    fn knot_for(&mut self, t: u64, now_p: u64, out: &mut Outputs) -> Knot {
+        if self.mode == Mode::Fault {
+            return self.hold_knot(t);
+        }
+        if let Some((k, sent, seq)) = self.command_at(t) {
+            self.mode = Mode::Running;
+            self.used_command_seq = seq;
+            self.last_knot = k;
+            self.last_cover_ns = t;
+            out.command_age_ns = Some(now_p.saturating_sub(sent));
+            return k;
+        }
+        if self.mode != Mode::SafeHold {
+            if t < self.last_cover_ns + self.cfg.watchdog_ns {
+                return self.last_knot;
+            }
+            self.mode = Mode::SafeHold;
+            self.counters.watchdog_trips += 1;
+            let from = self.last_knot;
+            self.begin_hold(from, t);
+        }
+        self.counters.safe_hold_ticks += 1;
+        self.hold_knot(t)
+    }
+
     /// One tick at the deadline `now_ns`: take the messages in `inputs` (emptied), then integrate
     /// the plant over the periods elapsed since the last step.
     pub fn step(&mut self, now_ns: u64, inputs: &mut Inputs) -> Outputs {
         self.tick += 1;
         self.counters.ticks += 1;
-        self.counters.rejected += inputs.overflow;
+        self.applied = false;
+        for _ in 0..inputs.overflow {
+            self.reject(Rejection::Overflow);
+        }
         inputs.overflow = 0;
+        let clock = if inputs.received_ns == 0 {
+            now_ns
+        } else {
+            inputs.received_ns.max(now_ns)
+        };
         for i in 0..inputs.n_controls {
             let c = inputs.controls[i];
-            self.apply_control(&c);
+            self.apply_control(&c, clock);
         }
         inputs.n_controls = 0;
         for i in 0..inputs.n_disturbances {
             let d = inputs.disturbances[i];
-            self.apply_disturbance(&d, now_ns);
+            self.apply_disturbance(&d, now_ns, clock);
         }
         inputs.n_disturbances = 0;
         for i in 0..inputs.n_commands {
-            match self.validate(&inputs.commands[i]) {
+            let c = inputs.commands[i];
+            let verdict = if self.in_future(c.time_ns, clock) {
+                Err(Rejection::FutureTimestamp)
+            } else {
+                self.validate(&c)
+            };
+            match verdict {
                 Ok(()) => {
-                    self.slices[self.next_slot] = inputs.commands[i];
+                    self.slices[self.next_slot] = c;
                     self.slice_valid[self.next_slot] = true;
                     self.next_slot = (self.next_slot + 1) % SLICES;
-                    self.last_command_seq = inputs.commands[i].seq;
+                    self.last_command_seq = c.seq;
                 }
-                Err(_) => self.counters.rejected += 1,
+                Err(r) => self.reject(r),
             }
         }
         inputs.n_commands = 0;
+        inputs.received_ns = 0;
 
         let mut out = Outputs::default();
         match (self.mode, self.start_ns) {
@@ -492,42 +887,38 @@ impl Board {
                 self.plant_ns = now_ns;
                 self.trial_time_ns = 0;
             }
-            (Mode::Running | Mode::SafeHold, _) => {
+            (Mode::Fault, _) if self.fault == FaultReason::NotFinite => {
+                // Nothing to hold: the state is lost. Frozen until a reset.
+                self.plant_ns = now_ns;
+            }
+            (Mode::Running | Mode::SafeHold | Mode::Fault, _) => {
                 let elapsed = now_ns.saturating_sub(self.plant_ns) / self.cfg.period_ns;
                 let periods = elapsed.min(self.cfg.max_catch_up);
                 self.counters.lost_periods += elapsed - periods;
                 for p in 0..periods {
                     let t = self.trial_time_ns;
                     let now_p = now_ns - (periods - 1 - p) * self.cfg.period_ns;
-                    let knot = match self.command_at(t) {
-                        Some((k, sent, seq)) => {
-                            self.mode = Mode::Running;
-                            self.used_command_seq = seq;
-                            out.command_age_ns = Some(now_p.saturating_sub(sent));
-                            k
-                        }
-                        None => {
-                            if self.mode != Mode::SafeHold {
-                                self.mode = Mode::SafeHold;
-                                self.hold.q_d[..self.dof].copy_from_slice(&self.x[..self.dof]);
-                                self.hold.qd_d = [0.0; MAX_JOINTS];
-                                self.hold.tau_ff = [0.0; MAX_JOINTS];
-                                self.hold.stiffness = [self.cfg.hold_stiffness; MAX_JOINTS];
-                            }
-                            self.counters.safe_hold_ticks += 1;
-                            self.hold
-                        }
-                    };
+                    let knot = self.knot_for(t, now_p, &mut out);
+                    let before = self.x;
                     self.integrate(&knot, now_p);
                     out.tracking_error = (0..self.dof)
                         .map(|i| (self.x[i] - knot.q_d[i]).powi(2))
                         .sum::<f64>()
                         .sqrt();
                     self.trial_time_ns += self.cfg.period_ns;
-                    if !self.x[..self.nx].iter().all(|v| v.is_finite()) {
+                    if self.mode != Mode::Fault
+                        && let Some(reason) = self.guard()
+                    {
                         self.mode = Mode::Fault;
-                        self.start_ns = None;
-                        break;
+                        self.fault = reason;
+                        self.counters.faults += 1;
+                        self.slice_valid = [false; SLICES];
+                        if reason == FaultReason::NotFinite {
+                            // Keep the last finite state for the record.
+                            self.x = before;
+                            break;
+                        }
+                        self.begin_hold(knot, self.trial_time_ns);
                     }
                 }
                 self.plant_ns = now_ns;
@@ -549,6 +940,7 @@ impl Board {
             command_seq: self.used_command_seq,
             disturbance_seq: self.disturbance_seq,
             disturbance_tick: self.disturbance_tick,
+            watchdog_deadline_ns: self.last_cover_ns + self.cfg.watchdog_ns,
             ..Default::default()
         };
         s.q[..dof].copy_from_slice(&self.x[..dof]);
@@ -556,6 +948,18 @@ impl Board {
         out.state = s;
         out
     }
+}
+
+/// `a + t (b − a)` for every input of a knot.
+fn lerp(a: &Knot, b: &Knot, t: f64) -> Knot {
+    let mut k = *a;
+    for j in 0..MAX_JOINTS {
+        k.tau_ff[j] += t * (b.tau_ff[j] - a.tau_ff[j]);
+        k.stiffness[j] += t * (b.stiffness[j] - a.stiffness[j]);
+        k.q_d[j] += t * (b.q_d[j] - a.q_d[j]);
+        k.qd_d[j] += t * (b.qd_d[j] - a.qd_d[j]);
+    }
+    k
 }
 
 #[cfg(test)]
@@ -579,7 +983,12 @@ mod tests {
         let s = scenario();
         let setup = crate::plan::setup(&s).unwrap();
         let q0 = [setup.x0[0], setup.x0[1]];
-        let b = Board::new(s.model.clone(), BoardConfig::default(), &q0).unwrap();
+        let b = Board::new(
+            s.model.clone(),
+            BoardConfig::from_scenario(&s, 1_000_000),
+            &q0,
+        )
+        .unwrap();
         (b, q0)
     }
 
@@ -614,8 +1023,9 @@ mod tests {
     }
 
     #[test]
-    fn runs_commands_then_falls_back_to_safe_hold() {
+    fn watchdog_keeps_the_last_command_then_ramps_to_the_safe_hold() {
         let (mut b, q0) = board();
+        let cfg = b.config().clone();
         let mut inp = Inputs::default();
         let ms = 1_000_000;
         inp.push_control(&reset(q0, 5 * ms));
@@ -625,17 +1035,194 @@ mod tests {
         let o = b.step(5 * ms, &mut inp);
         assert_eq!(o.state.mode, Mode::Running as u32);
         assert_eq!(o.state.trial_time_ns, 0);
-        for t in 6..=105 {
+        // The slice covers trial time [0, 100 ms); the last covered period starts at 99 ms.
+        let mut t = 5;
+        let mut entered = None;
+        while t < 5 + 400 {
+            t += 1;
             let o = b.step(t * ms, &mut inp);
-            assert_eq!(o.state.mode, Mode::Running as u32, "tick {t}");
             assert_eq!(o.periods, 1);
+            if o.state.mode == Mode::SafeHold as u32 && entered.is_none() {
+                entered = Some(o.state.trial_time_ns);
+            }
+            if o.state.trial_time_ns <= 100 * ms {
+                assert_eq!(
+                    o.state.stiffness,
+                    [150.0, 150.0],
+                    "the command while covered"
+                );
+            } else if entered.is_none() {
+                // Within the watchdog the last command stays in force.
+                assert_eq!(o.state.stiffness, [150.0, 150.0], "tick {t}");
+                assert_eq!(o.state.mode, Mode::Running as u32);
+            }
         }
-        // The slice covered 100 ms of trial time: now the board holds.
-        let o = b.step(106 * ms, &mut inp);
-        assert_eq!(o.state.mode, Mode::SafeHold as u32);
-        assert_eq!(b.counters.safe_hold_ticks, 1);
+        // Safe hold entered within 2 ticks of the timeout (last cover + watchdog), after it.
+        let timeout = 99 * ms + cfg.watchdog_ns;
+        let entered = entered.expect("the board never entered the safe hold");
+        assert!(
+            entered > timeout && entered <= timeout + 2 * ms,
+            "entered at {entered} ns, timeout {timeout} ns"
+        );
+        assert_eq!(b.counters.watchdog_trips, 1);
+        // After the ramp the hold stiffness is in force.
+        assert_eq!(b.stiffness(), [cfg.hold_stiffness; 2]);
         // The hand stays near the start under the stiff hold in the divergent field.
-        assert!((o.state.q[0] - q0[0]).abs() < 0.05);
+        assert!((b.state()[0] - q0[0]).abs() < 0.05);
+        // Fresh valid commands covering the present resume the movement.
+        let now_trial = b.trial_time_ns;
+        inp.push_command(&hold_slice(q0, 2, now_trial, 120.0));
+        let o = b.step((t + 1) * ms, &mut inp);
+        assert_eq!(o.state.mode, Mode::Running as u32);
+        assert_eq!(o.state.stiffness, [120.0, 120.0]);
+    }
+
+    #[test]
+    fn the_hold_ramps_the_stiffness_over_the_configured_time() {
+        let (mut b, q0) = board();
+        let cfg = b.config().clone();
+        let mut inp = Inputs::default();
+        let ms = 1_000_000;
+        inp.push_control(&reset(q0, 0));
+        inp.push_command(&hold_slice(q0, 1, 0, 20.0));
+        b.step(0, &mut inp);
+        let mut ramp = Vec::new();
+        for t in 1..500u64 {
+            let o = b.step(t * ms, &mut inp);
+            if o.state.mode == Mode::SafeHold as u32 {
+                ramp.push(o.state.stiffness[0]);
+            }
+        }
+        // From 20 to the hold stiffness, linearly over the ramp, never above it.
+        let ticks = (cfg.ramp_ns / ms) as usize;
+        assert!(ramp.len() > ticks + 10, "{} hold ticks", ramp.len());
+        let mid = ramp[ticks / 2];
+        let expect = 20.0 + 0.5 * (cfg.hold_stiffness - 20.0);
+        assert!(
+            (mid - expect).abs() < 0.02 * cfg.hold_stiffness,
+            "{mid} vs {expect}"
+        );
+        assert!(ramp.windows(2).all(|w| w[1] >= w[0]), "not monotone");
+        assert_eq!(ramp[ticks + 5], cfg.hold_stiffness);
+    }
+
+    #[test]
+    fn the_plant_guard_latches_until_a_reset() {
+        let s = scenario();
+        let setup = crate::plan::setup(&s).unwrap();
+        let q0 = [setup.x0[0], setup.x0[1]];
+        let cfg = BoardConfig {
+            velocity_max: 0.5,
+            ..BoardConfig::from_scenario(&s, 1_000_000)
+        };
+        let mut b = Board::new(s.model.clone(), cfg, &q0).unwrap();
+        let mut inp = Inputs::default();
+        let ms = 1_000_000;
+        inp.push_control(&reset(q0, 0));
+        inp.push_command(&hold_slice(q0, 1, 0, 0.0));
+        b.step(0, &mut inp);
+        // A hard pulse with no stiffness: the shoulder speeds past 0.5 rad/s.
+        inp.push_disturbance(&Disturbance {
+            version: PROTOCOL_VERSION,
+            kind: DisturbanceKind::Pulse as u32,
+            seq: 1,
+            torque: [5.0, 0.0],
+            duration_ns: 20 * ms,
+            ..Default::default()
+        });
+        let mut tripped = None;
+        for t in 1..60 {
+            let o = b.step(t * ms, &mut inp);
+            if o.state.mode == Mode::Fault as u32 && tripped.is_none() {
+                tripped = Some(t);
+                assert!(o.state.qd[0].abs() > 0.5, "tripped before the limit");
+            }
+        }
+        assert!(tripped.is_some(), "the guard never tripped");
+        assert_eq!(b.fault(), FaultReason::VelocityLimit);
+        // Latched: valid commands are refused and counted, the hold stays.
+        inp.push_command(&hold_slice(q0, 2, 60 * ms, 50.0));
+        b.step(60 * ms, &mut inp);
+        assert_eq!(b.mode(), Mode::Fault);
+        assert_eq!(b.counters.rejected_by[Rejection::Faulted as usize], 1);
+        // The hold settles the arm: 300 ms later it is slow again, still latched.
+        for t in 61..400 {
+            b.step(t * ms, &mut inp);
+        }
+        assert!(b.state()[2].abs() < 0.1, "not held: {:?}", b.state());
+        assert_eq!(b.mode(), Mode::Fault);
+        assert_eq!(b.stiffness(), [b.config().hold_stiffness; 2]);
+        // Stop does not clear it either; only a reset does.
+        let mut stop = reset(q0, 0);
+        stop.kind = ControlKind::Stop as u32;
+        stop.seq = 2;
+        inp.push_control(&stop);
+        b.step(400 * ms, &mut inp);
+        assert_eq!(b.mode(), Mode::Fault);
+        let mut again = reset(q0, 401 * ms);
+        again.seq = 3;
+        inp.push_control(&again);
+        b.step(401 * ms, &mut inp);
+        assert_eq!(b.mode(), Mode::Running);
+        assert_eq!(b.fault(), FaultReason::None);
+    }
+
+    #[test]
+    fn rejections_are_counted_by_reason_and_the_last_valid_command_stays() {
+        let (mut b, q0) = board();
+        let mut inp = Inputs::default();
+        let ms = 1_000_000;
+        inp.push_control(&reset(q0, 0));
+        inp.push_command(&hold_slice(q0, 5, 0, 60.0));
+        b.step(0, &mut inp);
+        let mut future = hold_slice(q0, 6, 0, 90.0);
+        future.time_ns = 1_000 * ms;
+        inp.push_command(&future);
+        let mut nan = hold_slice(q0, 7, 0, 90.0);
+        nan.knots[0].q_d[0] = f64::INFINITY;
+        inp.push_command(&nan);
+        inp.push_command(&hold_slice(q0, 5, 0, 90.0)); // a replay
+        inp.push_command(&hold_slice(q0, 8, 0, 500.0)); // above stiffness_max = 200
+        inp.push_command(&hold_slice(q0, 9, 0, 90.0)); // one too many this tick
+        let o = b.step(ms, &mut inp);
+        assert_eq!(
+            o.state.stiffness,
+            [60.0, 60.0],
+            "an invalid command reached the plant"
+        );
+        let by = b.counters.rejected_by;
+        assert_eq!(by[Rejection::FutureTimestamp as usize], 1);
+        assert_eq!(by[Rejection::NotFinite as usize], 1);
+        assert_eq!(by[Rejection::OutOfOrder as usize], 1);
+        assert_eq!(by[Rejection::StiffnessOutOfBounds as usize], 1);
+        assert_eq!(by[Rejection::Overflow as usize], 1);
+        assert_eq!(b.counters.rejected, 5);
+        // Disturbances beyond the limits, repeated or from the future are refused.
+        let pulse = |seq: u64, torque: f64, time_ns: u64| Disturbance {
+            version: PROTOCOL_VERSION,
+            kind: DisturbanceKind::Pulse as u32,
+            seq,
+            time_ns,
+            torque: [torque, 0.0],
+            duration_ns: 5 * ms,
+            ..Default::default()
+        };
+        inp.push_disturbance(&pulse(10, 1e3, 0));
+        inp.push_disturbance(&pulse(11, 1.0, 10_000 * ms));
+        inp.push_disturbance(&pulse(12, 1.0, 0));
+        inp.push_disturbance(&pulse(12, 1.0, 0));
+        let o = b.step(2 * ms, &mut inp);
+        let by = b.counters.rejected_by;
+        assert_eq!(by[Rejection::DisturbanceOutOfBounds as usize], 1);
+        assert_eq!(by[Rejection::FutureTimestamp as usize], 2);
+        assert_eq!(by[Rejection::OutOfOrder as usize], 2);
+        assert_eq!(o.state.disturbance_seq, 12);
+        assert_eq!(o.state.tau_ext, [1.0, 0.0]);
+        // A repeated reset (same sequence number) is refused too.
+        inp.push_control(&reset(q0, 0));
+        b.step(3 * ms, &mut inp);
+        assert_eq!(b.counters.rejected_by[Rejection::OutOfOrder as usize], 3);
+        assert_eq!(b.counters.resets, 1);
     }
 
     #[test]
@@ -663,6 +1250,23 @@ mod tests {
         inp.push_command(&hold_slice(q0, 2, 0, 50.0));
         b.step(1_000_000, &mut inp);
         assert_eq!(b.counters.rejected, 1, "the repeated sequence number");
+        // The iCub's affine damping law (K_D = 0.075 K_P − 0.0015) is unstable below
+        // K_P = 0.02: such a stiffness is refused.
+        let mut icub = b.model.clone();
+        icub.actuator = crate::model::Actuator::Impedance {
+            damping: crate::model::Damping::Affine {
+                slope: 0.075,
+                offset: -0.0015,
+            },
+        };
+        let mut c = Board::new(icub, BoardConfig::default(), &q0).unwrap();
+        c.start_ns = Some(0);
+        c.trial = 1;
+        assert_eq!(
+            c.validate(&hold_slice(q0, 3, 0, 0.01)),
+            Err(Rejection::DampingUnstable)
+        );
+        assert_eq!(c.validate(&hold_slice(q0, 3, 0, 0.03)), Ok(()));
     }
 
     #[test]

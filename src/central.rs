@@ -158,7 +158,10 @@ pub struct Central {
     pub timing: Timing,
     trial: u32,
     start_ns: u64,
+    /// Sequence numbers continue upward from the controller's start time, also across restarts
+    /// ([`crate::transport::session_seq`]); the board refuses numbers that go backwards.
     seq: u64,
+    control_seq: u64,
     recorded: Vec<Option<[f64; MAX_NX]>>,
     seen: Vec<Option<[f64; MAX_NX]>>,
     latest_seen: Option<usize>,
@@ -179,7 +182,8 @@ impl Central {
             timing,
             trial: 0,
             start_ns: 0,
-            seq: 0,
+            seq: crate::transport::session_seq(),
+            control_seq: crate::transport::session_seq(),
             recorded: vec![None; n + 1],
             seen: vec![None; n + 1],
             latest_seen: None,
@@ -209,10 +213,11 @@ impl Central {
         self.safe_hold = false;
         self.fault = false;
         let dof = self.track.dof;
+        self.control_seq += 1;
         let mut c = Control {
             version: PROTOCOL_VERSION,
             kind: ControlKind::Reset as u32,
-            seq: trial as u64 + 1,
+            seq: self.control_seq,
             time_ns: now_ns,
             trial,
             seed,
@@ -231,10 +236,12 @@ impl Central {
     }
 
     /// The request that stops the trial.
-    pub fn stop(&self, now_ns: u64) -> Control {
+    pub fn stop(&mut self, now_ns: u64) -> Control {
+        self.control_seq += 1;
         Control {
             version: PROTOCOL_VERSION,
             kind: ControlKind::Stop as u32,
+            seq: self.control_seq,
             time_ns: now_ns,
             trial: self.trial,
             ..Default::default()
@@ -491,17 +498,27 @@ pub fn run_live(
     use crate::transport::monotonic_ns;
     use std::sync::atomic::Ordering;
     crate::realtime::set_timer_slack_1ns();
-    let t0 = std::time::Instant::now();
-    while ep.latest_state().is_none() {
-        if t0.elapsed() > board_timeout || stop.load(Ordering::Relaxed) {
-            return Err(format!("no board in namespace \"{}\"", ep.namespace()));
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
     let mut records = Vec::with_capacity(trials);
     let mut out = Vec::new();
     let movement_ns = central.track.steps as u64 * central.track.dt_ns;
+    let mut last_state_ns = 0;
     for trial in 0..trials as u32 {
+        // A board must be there (again, if it was restarted after a crash): wait for its
+        // telemetry, woken by its events rather than polling.
+        if ep.latest_state().is_none() && monotonic_ns().saturating_sub(last_state_ns) > 200_000_000
+        {
+            let t0 = std::time::Instant::now();
+            loop {
+                if crate::transport::wait_for_telemetry(ep, std::time::Duration::from_millis(100))
+                    .is_some()
+                {
+                    break;
+                }
+                if t0.elapsed() > board_timeout || stop.load(Ordering::Relaxed) {
+                    return Err(format!("no board in namespace \"{}\"", ep.namespace()));
+                }
+            }
+        }
         let now = monotonic_ns();
         // Start on a whole millisecond, once the first slice has crossed the command line.
         let start =
@@ -513,7 +530,9 @@ pub fn run_live(
         loop {
             let wake = periodic.wait();
             let now = monotonic_ns();
-            ep.drain_states(|s| central.on_state(s, now));
+            if ep.drain_states(|s| central.on_state(s, now)) > 0 {
+                last_state_ns = now;
+            }
             out.clear();
             central.poll(wake.deadline_ns.max(now), &mut out);
             for c in &out {

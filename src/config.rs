@@ -1,5 +1,5 @@
 //! Scenario files: TOML with sections `[plant]`, `[actuator]`, `[field]`, `[noise]`, `[cost]`,
-//! `[task]` and `[solver]`, plus `--set section.key=value` overrides. Every number of the paper lives
+//! `[task]`, `[solver]` and `[board]` (the live board's limits), plus `--set section.key=value` overrides. Every number of the paper lives
 //! in these files; the code holds no physical constant.
 //!
 //! Loading happens in two stages, like ripgrep's flags: the file is read into plain structs that
@@ -44,6 +44,8 @@ struct RawConfig {
     task: Option<RawTask>,
     #[serde(default)]
     solver: RawSolver,
+    #[serde(default)]
+    board: RawBoard,
 }
 
 #[derive(Debug, Deserialize)]
@@ -209,6 +211,129 @@ impl RawSolver {
     }
 }
 
+/// The `[board]` section: the live board's safety limits (every key optional; defaults below).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoardSection {
+    /// How long the last valid command stays in force once no command covers the present [s]
+    /// before the board ramps to its safe hold (default 0.05).
+    pub watchdog: f64,
+    /// Duration of the ramp into the safe hold [s] (default 0.1).
+    pub ramp: f64,
+    /// Stiffness of the safe hold [N m/rad] (default 100).
+    pub hold_stiffness: f64,
+    /// Plant guard: joint range [rad] and speed limit [rad/s]; leaving them latches a fault that
+    /// only a reset clears (defaults ±π, 20 rad/s).
+    pub joint_min: Vec<f64>,
+    pub joint_max: Vec<f64>,
+    pub velocity_max: f64,
+    /// A message stamped later than the board's clock by more than this is rejected [s]
+    /// (default 0.005).
+    pub future_tolerance: f64,
+    /// Largest disturbances the board accepts: pulse and load torque [N m], pulse duration [s],
+    /// field β [N/m], noise factor (defaults 20, 10, 2, 500, 10).
+    pub max_pulse_torque: f64,
+    pub max_load_torque: f64,
+    pub max_pulse_duration: f64,
+    pub max_field_beta: f64,
+    pub max_noise_factor: f64,
+}
+
+impl BoardSection {
+    fn defaults(dof: usize) -> Self {
+        BoardSection {
+            watchdog: 0.05,
+            ramp: 0.1,
+            hold_stiffness: 100.0,
+            joint_min: vec![-std::f64::consts::PI; dof],
+            joint_max: vec![std::f64::consts::PI; dof],
+            velocity_max: 20.0,
+            future_tolerance: 0.005,
+            max_pulse_torque: 20.0,
+            max_load_torque: 10.0,
+            max_pulse_duration: 2.0,
+            max_field_beta: 500.0,
+            max_noise_factor: 10.0,
+        }
+    }
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBoard {
+    watchdog: Option<f64>,
+    ramp: Option<f64>,
+    hold_stiffness: Option<f64>,
+    joint_min: Option<Vec<f64>>,
+    joint_max: Option<Vec<f64>>,
+    velocity_max: Option<f64>,
+    future_tolerance: Option<f64>,
+    max_pulse_torque: Option<f64>,
+    max_load_torque: Option<f64>,
+    max_pulse_duration: Option<f64>,
+    max_field_beta: Option<f64>,
+    max_noise_factor: Option<f64>,
+}
+
+impl RawBoard {
+    fn resolve(self, dof: usize, cx: &Ctx) -> Result<BoardSection, ConfigError> {
+        let d = BoardSection::defaults(dof);
+        let pos =
+            |v: Option<f64>, dflt: f64, key: &str| cx.positive(v.unwrap_or(dflt), "board", key);
+        let nonneg =
+            |v: Option<f64>, dflt: f64, key: &str| cx.non_negative(v.unwrap_or(dflt), "board", key);
+        let range = |v: Option<Vec<f64>>, dflt: Vec<f64>, key: &str| {
+            let v = v.unwrap_or(dflt);
+            if v.len() != dof || v.iter().any(|x| !x.is_finite()) {
+                return Err(cx.err(
+                    "board",
+                    key,
+                    format!("must be {dof} finite angle(s) [rad], got {v:?}"),
+                ));
+            }
+            Ok(v)
+        };
+        let joint_min = range(self.joint_min, d.joint_min, "joint_min")?;
+        let joint_max = range(self.joint_max, d.joint_max, "joint_max")?;
+        if joint_min.iter().zip(&joint_max).any(|(a, b)| a >= b) {
+            return Err(cx.err(
+                "board",
+                "joint_max",
+                format!("must exceed joint_min {joint_min:?} joint by joint, got {joint_max:?}"),
+            ));
+        }
+        Ok(BoardSection {
+            watchdog: nonneg(self.watchdog, d.watchdog, "watchdog")?,
+            ramp: nonneg(self.ramp, d.ramp, "ramp")?,
+            hold_stiffness: pos(self.hold_stiffness, d.hold_stiffness, "hold_stiffness")?,
+            joint_min,
+            joint_max,
+            velocity_max: pos(self.velocity_max, d.velocity_max, "velocity_max")?,
+            future_tolerance: nonneg(
+                self.future_tolerance,
+                d.future_tolerance,
+                "future_tolerance",
+            )?,
+            max_pulse_torque: nonneg(
+                self.max_pulse_torque,
+                d.max_pulse_torque,
+                "max_pulse_torque",
+            )?,
+            max_load_torque: nonneg(self.max_load_torque, d.max_load_torque, "max_load_torque")?,
+            max_pulse_duration: nonneg(
+                self.max_pulse_duration,
+                d.max_pulse_duration,
+                "max_pulse_duration",
+            )?,
+            max_field_beta: nonneg(self.max_field_beta, d.max_field_beta, "max_field_beta")?,
+            max_noise_factor: nonneg(
+                self.max_noise_factor,
+                d.max_noise_factor,
+                "max_noise_factor",
+            )?,
+        })
+    }
+}
+
 /// The reference movement.
 #[derive(Debug, Clone, PartialEq)]
 pub enum TaskPath {
@@ -263,6 +388,8 @@ pub struct Scenario {
     pub bounds: Bounds,
     pub initial_stiffness: f64,
     pub solver: IlqgSection,
+    /// The live board's limits (`[board]`).
+    pub board: BoardSection,
     /// The configuration after overrides, as resolved (written into plan files).
     pub resolved: toml::Table,
 }
@@ -743,6 +870,7 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
     cx.non_negative(o.tolerance, "solver", "tolerance")?;
     cx.non_negative(o.mu_init, "solver", "mu_init")?;
     cx.positive(o.mu_max, "solver", "mu_max")?;
+    let board = raw.board.resolve(dof, &cx)?;
 
     Ok(Scenario {
         source: path.to_path_buf(),
@@ -752,6 +880,7 @@ fn validate(raw: RawConfig, path: &Path, resolved: toml::Table) -> Result<Scenar
         bounds,
         initial_stiffness,
         solver,
+        board,
         resolved,
     })
 }

@@ -20,6 +20,7 @@ pub mod evaluation;
 pub mod experiment;
 pub mod identify;
 pub mod model;
+pub mod operator;
 pub mod plan;
 pub mod plot;
 pub mod realtime;

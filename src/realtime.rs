@@ -215,8 +215,14 @@ pub struct BoardStats {
     pub late_ticks: u64,
     pub missed_periods: u64,
     pub rejected_messages: u64,
+    /// Rejected messages by reason (only reasons that occurred).
+    pub rejected_by_reason: std::collections::BTreeMap<String, u64>,
     pub safe_hold_ticks: u64,
+    pub watchdog_trips: u64,
+    pub faults: u64,
     pub lost_periods: u64,
+    /// Dead nodes (killed processes) whose iceoryx2 resources the board removed at start.
+    pub cleaned_dead_nodes: usize,
     pub jitter_us: PercentilesJson,
     pub work_us: PercentilesJson,
     pub command_age_us: PercentilesJson,
@@ -265,12 +271,17 @@ pub fn board_tick(
     ep.drain_controls(|c| inputs.push_control(c));
     ep.drain_disturbances(|d| inputs.push_disturbance(d));
     ep.drain_commands(|c| inputs.push_command(c));
+    inputs.received_ns = monotonic_ns();
     let out = board.step(wake.deadline_ns, inputs);
     let mut s = out.state;
     s.seq = seq;
     s.time_ns = monotonic_ns();
     // A failed publish (no subscriber memory) is not a reason to stop the plant.
     let _ = ep.publish_state(&s);
+    if board.applied() {
+        // The acknowledgement is in the state just published; wake whoever waits for it.
+        ep.notify(crate::transport::BoardEvent::Applied);
+    }
     hist.jitter.record(wake.lateness_ns);
     if let Some(age) = out.command_age_ns {
         hist.command_age.record(age);
@@ -328,8 +339,15 @@ pub fn run_board(
                 noise_factor: board.noise_factor(),
                 trial: board.trial(),
                 joints: out.state.joints,
+                rejected_by_reason: board.counters.rejected_by,
+                fault_reason: board.fault() as u32,
+                _pad: 0,
+                watchdog_trips: board.counters.watchdog_trips,
+                disturbance_seq: board.last_disturbance().0,
+                disturbance_tick: board.last_disturbance().1,
             };
             let _ = ep.publish_telemetry(&t);
+            ep.notify(crate::transport::BoardEvent::Telemetry);
         }
         if opts.max_ticks > 0 && seq >= opts.max_ticks {
             break;
@@ -340,10 +358,25 @@ pub fn run_board(
         late_ticks: periodic.late_ticks,
         missed_periods: periodic.skipped_periods,
         rejected_messages: board.counters.rejected,
+        rejected_by_reason: rejections_by_name(&board.counters.rejected_by),
         safe_hold_ticks: board.counters.safe_hold_ticks,
+        watchdog_trips: board.counters.watchdog_trips,
+        faults: board.counters.faults,
         lost_periods: board.counters.lost_periods,
+        cleaned_dead_nodes: ep.cleaned_dead_nodes,
         jitter_us: hist.jitter.percentiles().into(),
         work_us: hist.work.percentiles().into(),
         command_age_us: hist.command_age.percentiles().into(),
     }
+}
+
+/// Rejection counts by reason name, leaving out reasons that never occurred.
+pub fn rejections_by_name(
+    counts: &[u64; crate::transport::REJECTION_REASONS],
+) -> std::collections::BTreeMap<String, u64> {
+    crate::board::Rejection::ALL
+        .iter()
+        .filter(|r| counts[**r as usize] > 0)
+        .map(|r| (r.name().to_string(), counts[*r as usize]))
+        .collect()
 }

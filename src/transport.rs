@@ -15,13 +15,23 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
 /// Version of the message layout; a message with another version is rejected.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 /// Largest number of joints a message carries.
 pub const MAX_JOINTS: usize = 2;
 /// Knots per command slice. At 10 ms per knot a slice covers up to 320 ms.
 pub const MAX_KNOTS: usize = 32;
 /// The namespace used when none is given.
 pub const DEFAULT_NAMESPACE: &str = "vic";
+/// Slots for rejection counts by reason in [`Telemetry`] (see `board::Rejection`).
+pub const REJECTION_REASONS: usize = 16;
+
+/// The first sequence number of a publisher that starts now: its start time on the monotonic
+/// clock. Receivers refuse sequence numbers that go backwards or repeat; starting from the clock
+/// lets a restarted publisher (a planner after a crash, a second `vic inject`) continue upward
+/// without any state shared between processes.
+pub fn session_seq() -> u64 {
+    monotonic_ns()
+}
 
 /// The current time on `CLOCK_MONOTONIC` in nanoseconds: the time base of every message, common
 /// to all processes of the machine.
@@ -45,7 +55,8 @@ pub enum Mode {
     Running = 1,
     /// No valid command covers the present: holding the position with the safe stiffness.
     SafeHold = 2,
-    /// The plant state stopped being finite; frozen until the next reset.
+    /// The plant guard tripped (a joint or speed limit, or a state that is not finite): latched
+    /// in a safe hold (or frozen) until an explicit reset.
     Fault = 3,
 }
 
@@ -72,7 +83,7 @@ impl Mode {
 
 /// The board's plant state, published every tick.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("vic::State/1")]
+#[type_name("vic::State/2")]
 #[repr(C)]
 pub struct StateMsg {
     pub version: u32,
@@ -101,6 +112,9 @@ pub struct StateMsg {
     /// Sequence number of the last disturbance applied and the tick it was applied at.
     pub disturbance_seq: u64,
     pub disturbance_tick: u64,
+    /// Trial time at which the watchdog expires unless a valid command covers the present
+    /// [ns] (the last covered period + the watchdog timeout).
+    pub watchdog_deadline_ns: u64,
 }
 
 /// One knot of a command: the inputs of the impedance law (Eq. 4) at one time.
@@ -264,7 +278,7 @@ pub struct Percentiles {
 
 /// The board's telemetry, published at a lower rate than the state.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("vic::Telemetry/1")]
+#[type_name("vic::Telemetry/2")]
 #[repr(C)]
 pub struct Telemetry {
     pub version: u32,
@@ -291,6 +305,26 @@ pub struct Telemetry {
     pub noise_factor: f64,
     pub trial: u32,
     pub joints: u32,
+    /// Rejected messages by reason (indexed by `board::Rejection as usize`).
+    pub rejected_by_reason: [u64; REJECTION_REASONS],
+    /// Why the board is in fault (`board::FaultReason as u32`, 0: none).
+    pub fault_reason: u32,
+    pub _pad: u32,
+    /// Times the watchdog ramped the board to its safe hold.
+    pub watchdog_trips: u64,
+    /// Sequence number of the last disturbance applied and the tick it was applied at.
+    pub disturbance_seq: u64,
+    pub disturbance_tick: u64,
+}
+
+/// What a board's event wakes its listeners for (iceoryx2 event ids).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(usize)]
+pub enum BoardEvent {
+    /// New telemetry was published.
+    Telemetry = 1,
+    /// A disturbance or control request was applied (its acknowledgement is in the state).
+    Applied = 2,
 }
 
 /// A transport failure, with the namespace and service it concerns.
@@ -358,7 +392,98 @@ pub struct Endpoint {
     command_sub: Option<Sub<CommandSlice>>,
     control_sub: Option<Sub<Control>>,
     disturbance_sub: Option<Sub<Disturbance>>,
-    _node: Node<ipc::Service>,
+    notifier: Option<iceoryx2::port::notifier::Notifier<ipc::Service>>,
+    /// Dead nodes of the namespace whose resources were removed when this endpoint opened.
+    pub cleaned_dead_nodes: usize,
+    listener: Option<iceoryx2::port::listener::Listener<ipc::Service>>,
+    node: Option<Node<ipc::Service>>,
+    config: Config,
+}
+
+impl Drop for Endpoint {
+    /// Closes the ports and the node; the last process of a namespace to leave also removes the
+    /// namespace's management file, so that a clean shutdown leaves nothing in `/dev/shm`.
+    fn drop(&mut self) {
+        self.state_pub = None;
+        self.telemetry_pub = None;
+        self.command_pub = None;
+        self.control_pub = None;
+        self.disturbance_pub = None;
+        self.state_sub = None;
+        self.telemetry_sub = None;
+        self.command_sub = None;
+        self.control_sub = None;
+        self.disturbance_sub = None;
+        self.notifier = None;
+        self.listener = None;
+        self.node = None;
+        let mut others = false;
+        let _ = Node::<ipc::Service>::list(&self.config, |state| {
+            others |= matches!(state, NodeState::Alive(_));
+            CallbackProgression::Continue
+        });
+        if !others {
+            remove_namespace(&self.namespace);
+        }
+    }
+}
+
+/// The iceoryx2 node name of each role; the board's is how a second board finds the first.
+fn node_name(role: Role) -> &'static str {
+    match role {
+        Role::Board => "vic-board",
+        Role::Planner => "vic-planner",
+        Role::Tool => "vic-tool",
+    }
+}
+
+fn dead_nodes_in(cfg: &Config) -> usize {
+    let mut n = 0;
+    let _ = Node::<ipc::Service>::list(cfg, |state| {
+        n += matches!(state, NodeState::Dead(_)) as usize;
+        CallbackProgression::Continue
+    });
+    n
+}
+
+/// Nodes of killed processes whose resources nobody has removed yet, in namespace `ns`.
+pub fn dead_nodes(ns: &str) -> usize {
+    config(ns).map(|c| dead_nodes_in(&c)).unwrap_or(0)
+}
+
+/// Removes the resources of the namespace's dead nodes (processes killed without cleaning up) and
+/// returns the process ids of the live nodes named `name` other than `own`.
+fn live_nodes_named(
+    cfg: &Config,
+    name: &str,
+    own: &iceoryx2::identifiers::UniqueNodeId,
+) -> Result<(Vec<u32>, usize), String> {
+    use iceoryx2::node::NodeView;
+    let mut alive = Vec::new();
+    let mut dead = Vec::new();
+    Node::<ipc::Service>::list(cfg, |state| {
+        match state {
+            NodeState::Alive(view) => {
+                if let Some(d) = view.details()
+                    && view.id() != own
+                    && d.name().as_str() == name
+                {
+                    alive.push(d.process_id().value() as u32);
+                }
+            }
+            NodeState::Dead(view) => dead.push(view),
+            _ => {}
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| format!("cannot list the nodes: {e:?}"))?;
+    let mut cleaned = 0;
+    for view in dead {
+        if view.try_remove_stale_resources().is_ok() {
+            cleaned += 1;
+        }
+    }
+    Ok((alive, cleaned))
 }
 
 /// Subscriber buffer of the state service: a 50 Hz reader sees every 1 kHz state.
@@ -373,7 +498,12 @@ impl Endpoint {
             what,
         };
         let cfg = config(ns).map_err(err)?;
+        // Dead nodes (killed processes) are counted before our node's creation, which already
+        // removes some of their resources.
+        let dead_before = dead_nodes_in(&cfg);
+        let name = NodeName::new(node_name(role)).map_err(|e| err(format!("{e:?}")))?;
         let node = NodeBuilder::new()
+            .name(&name)
             .config(&cfg)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
@@ -390,9 +520,26 @@ impl Endpoint {
             command_sub: None,
             control_sub: None,
             disturbance_sub: None,
-            _node: node,
+            cleaned_dead_nodes: 0,
+            notifier: None,
+            listener: None,
+            node: Some(node),
+            config: cfg.clone(),
         };
-        let node = &ep._node;
+        // A board refuses to start beside a live one (two plants answering one planner); the
+        // resources of a killed one are removed here so that the services open cleanly.
+        let (alive, _) =
+            live_nodes_named(&cfg, node_name(Role::Board), ep.node().id()).map_err(err)?;
+        ep.cleaned_dead_nodes = dead_before.saturating_sub(dead_nodes_in(&cfg));
+        restrict_namespace_files(ns);
+        if role == Role::Board && !alive.is_empty() {
+            return Err(err(format!(
+                "a board is already running in this namespace (pid {}); stop it or use another \
+                 --namespace",
+                alive[0]
+            )));
+        }
+        let node = ep.node.as_ref().expect("open");
         macro_rules! service {
             ($name:expr, $ty:ty, $buffer:expr, $history:expr) => {{
                 let name = ServiceName::new($name).map_err(|e| err(format!("{e:?}")))?;
@@ -413,6 +560,29 @@ impl Endpoint {
         let (command, _) = service!("vic/command", CommandSlice, 8, 0)?;
         let (control, _) = service!("vic/control", Control, 8, 0)?;
         let (disturbance, _) = service!("vic/disturbance", Disturbance, 8, 0)?;
+        let event_name = ServiceName::new("vic/board-event").map_err(|e| err(format!("{e:?}")))?;
+        let event = node
+            .service_builder(&event_name)
+            .event()
+            .max_notifiers(4)
+            .max_listeners(16)
+            .open_or_create()
+            .map_err(|e| err(format!("service vic/board-event: {e:?}")))?;
+        if role == Role::Board {
+            ep.notifier = Some(
+                event
+                    .notifier_builder()
+                    .create()
+                    .map_err(|e| err(format!("event notifier: {e:?}")))?,
+            );
+        } else {
+            ep.listener = Some(
+                event
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| err(format!("event listener: {e:?}")))?,
+            );
+        }
         let p = |what: &str, e: &dyn std::fmt::Debug| err(format!("{what} publisher: {e:?}"));
         let s = |what: &str, e: &dyn std::fmt::Debug| err(format!("{what} subscriber: {e:?}"));
         match role {
@@ -490,6 +660,12 @@ impl Endpoint {
             }
         }
         Ok(ep)
+    }
+
+    fn node(&self) -> &Node<ipc::Service> {
+        self.node
+            .as_ref()
+            .expect("the node lives as long as the endpoint")
     }
 
     /// The namespace of this endpoint.
@@ -584,22 +760,50 @@ impl Endpoint {
     pub fn drain_disturbances(&self, f: impl FnMut(&Disturbance)) -> usize {
         Self::drain(&self.disturbance_sub, f)
     }
+
+    /// Wakes the board's listeners (board). Without listeners this touches shared memory only.
+    pub fn notify(&self, e: BoardEvent) {
+        if let Some(n) = &self.notifier {
+            let _ = n.notify_with_custom_event_id(EventId::new(e as usize));
+        }
+    }
+
+    /// Blocks until the board signals an event or `timeout` passes (planner, tools): the
+    /// iceoryx2 listener sleeps in the kernel, no polling. Returns whether an event came.
+    pub fn wait_event(&self, timeout: std::time::Duration) -> bool {
+        let Some(l) = &self.listener else {
+            std::thread::sleep(timeout);
+            return false;
+        };
+        let mut got = false;
+        let _ = l.timed_wait(|_| got = true, timeout);
+        // Drain what else is pending, so the next wait blocks again.
+        let _ = l.try_wait(|_| got = true);
+        got
+    }
 }
 
-/// Whether a board is alive in the namespace: a node other than this process's own that
-/// publishes state. Cheap enough to call from tools, not from a loop.
-pub fn board_present(ns: &str, timeout: std::time::Duration) -> Result<bool, TransportError> {
-    let ep = Endpoint::open(ns, Role::Tool)?;
+/// Waits up to `timeout` for telemetry from a board in the namespace of `ep` (woken by the
+/// board's events, no polling). `None`: no board answered.
+pub fn wait_for_telemetry(ep: &Endpoint, timeout: std::time::Duration) -> Option<Telemetry> {
     let deadline = std::time::Instant::now() + timeout;
     loop {
-        if ep.latest_state().is_some() {
-            return Ok(true);
+        if let Some(t) = ep.latest_telemetry() {
+            return Some(t);
         }
-        if std::time::Instant::now() >= deadline {
-            return Ok(false);
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return None;
         }
-        std::thread::sleep(std::time::Duration::from_millis(2));
+        ep.wait_event(left.min(std::time::Duration::from_millis(200)));
     }
+}
+
+/// Whether a board is alive in the namespace (it publishes telemetry within `timeout`). Cheap
+/// enough to call from tools, not from a loop.
+pub fn board_present(ns: &str, timeout: std::time::Duration) -> Result<bool, TransportError> {
+    let ep = Endpoint::open(ns, Role::Tool)?;
+    Ok(wait_for_telemetry(&ep, timeout).is_some())
 }
 
 /// Removes the shared-memory and node files a namespace left behind. Call it only when no
@@ -630,6 +834,24 @@ pub fn remove_namespace(ns: &str) -> usize {
         }
     }
     removed
+}
+
+/// Makes the namespace's files in `/dev/shm` owner-only. iceoryx2 creates its data segments 0600
+/// but its 16-byte `global_mgmt` file 0666; no other user may write any of them.
+fn restrict_namespace_files(ns: &str) {
+    use std::os::unix::fs::PermissionsExt;
+    let prefix = prefix(ns);
+    let Ok(dir) = std::fs::read_dir("/dev/shm") else {
+        return;
+    };
+    for e in dir.flatten() {
+        if e.file_name().to_string_lossy().starts_with(&prefix)
+            && let Ok(m) = e.metadata()
+            && m.permissions().mode() & 0o077 != 0
+        {
+            let _ = std::fs::set_permissions(e.path(), std::fs::Permissions::from_mode(0o600));
+        }
+    }
 }
 
 /// Files a namespace has in `/dev/shm` (for tests and `vic demo`'s final check).

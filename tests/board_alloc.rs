@@ -43,12 +43,18 @@ fn a_board_step_does_not_allocate() {
     let scenario = Scenario::load(path, &[]).unwrap();
     let setup = vic::plan::setup(&scenario).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
-    let mut board = Board::new(scenario.model.clone(), BoardConfig::default(), &q0).unwrap();
+    let mut board = Board::new(
+        scenario.model.clone(),
+        BoardConfig::from_scenario(&scenario, 1_000_000),
+        &q0,
+    )
+    .unwrap();
     let mut inputs = Inputs::default();
     let ms = 1_000_000u64;
     let reset = Control {
         version: vic::transport::PROTOCOL_VERSION,
         kind: ControlKind::Reset as u32,
+        seq: 1,
         trial: 0,
         seed: 3,
         start_ns: 0,
@@ -79,7 +85,8 @@ fn a_board_step_does_not_allocate() {
         if tick == 0 {
             inputs.push_control(&reset);
         }
-        if tick % 20 == 0 {
+        // A gap in the commands: the watchdog ramps the board into its safe hold and back.
+        if tick % 20 == 0 && !(500..700).contains(&tick) {
             slice.seq = tick + 1;
             slice.start_ns = tick * ms;
             inputs.push_command(&slice);
@@ -95,5 +102,9 @@ fn a_board_step_does_not_allocate() {
     let after = allocations();
     assert_eq!(after - before, 0, "Board::step allocated");
     assert_eq!(board.counters.rejected, 0);
+    assert_eq!(
+        board.counters.watchdog_trips, 1,
+        "the hold path was not exercised"
+    );
     assert!(board.state().iter().all(|v| v.is_finite()));
 }

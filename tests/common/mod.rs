@@ -2,6 +2,8 @@
 //! place (config/).
 #![allow(dead_code)] // each test binary uses a part
 
+pub mod daemons;
+
 use std::path::Path;
 use vic::config::Scenario;
 use vic::model::{Plant, SingleJoint, TwoLink};
