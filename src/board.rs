@@ -229,10 +229,12 @@ pub enum Rejection {
     Overflow = 12,
     /// A command while the plant guard's fault is latched (only a reset clears it).
     Faulted = 13,
+    /// An equilibrium `q_d` outside the joint range or `q_d'` beyond the speed limit.
+    EquilibriumOutOfBounds = 14,
 }
 
 impl Rejection {
-    pub const ALL: [Rejection; 14] = [
+    pub const ALL: [Rejection; 15] = [
         Rejection::Version,
         Rejection::Joints,
         Rejection::Shape,
@@ -247,6 +249,7 @@ impl Rejection {
         Rejection::UnknownKind,
         Rejection::Overflow,
         Rejection::Faulted,
+        Rejection::EquilibriumOutOfBounds,
     ];
     /// Name for reports and JSON.
     pub fn name(self) -> &'static str {
@@ -265,6 +268,7 @@ impl Rejection {
             Rejection::UnknownKind => "unknown-kind",
             Rejection::Overflow => "overflow",
             Rejection::Faulted => "faulted",
+            Rejection::EquilibriumOutOfBounds => "equilibrium-out-of-bounds",
         }
     }
 }
@@ -518,6 +522,14 @@ impl Board {
                 }
                 if k.tau_ff[i].abs() > self.cfg.torque_max {
                     return Err(Rejection::TorqueOutOfBounds);
+                }
+                // A spring pulled towards a point outside the joint range (or a huge one) is a
+                // torque command in disguise.
+                if k.q_d[i] < self.cfg.joint_min[i]
+                    || k.q_d[i] > self.cfg.joint_max[i]
+                    || k.qd_d[i].abs() > self.cfg.velocity_max
+                {
+                    return Err(Rejection::EquilibriumOutOfBounds);
                 }
             }
         }
