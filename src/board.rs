@@ -103,6 +103,12 @@ pub struct Outputs {
     pub periods: u64,
     /// Distance of the joint angles to the equilibrium in use [rad].
     pub tracking_error: f64,
+    /// The knot the law used over the last period integrated (the safe hold's while holding;
+    /// zero when no period was integrated).
+    pub knot: Knot,
+    /// Joint acceleration over the last period integrated: the change of `q'` over the period
+    /// divided by the period [rad/s²] (noise included; zero when no period was integrated).
+    pub qdd: [f64; MAX_JOINTS],
 }
 
 /// Running counts of a board.
@@ -254,6 +260,16 @@ impl Board {
     }
     pub fn noise_factor(&self) -> f64 {
         self.noise_factor
+    }
+    /// Damping gain `K_D` of the impedance law (Eq. 4) for the stiffness `k` [N m s/rad].
+    pub fn damping(&self, k: &[f64; MAX_JOINTS]) -> [f64; MAX_JOINTS] {
+        let mut d = [0.0; MAX_JOINTS];
+        if let crate::model::Actuator::Impedance { damping } = &self.model.actuator {
+            for i in 0..self.dof {
+                d[i] = damping.gain(k[i]);
+            }
+        }
+        d
     }
 
     /// Checks a command slice; `Ok` when it may be used.
@@ -518,7 +534,13 @@ impl Board {
                             self.hold
                         }
                     };
+                    out.knot = knot;
+                    let before = self.x;
                     self.integrate(&knot, now_p);
+                    let dt = self.cfg.period_ns as f64 * 1e-9;
+                    for i in self.dof..2 * self.dof {
+                        out.qdd[i - self.dof] = (self.x[i] - before[i]) / dt;
+                    }
                     out.tracking_error = (0..self.dof)
                         .map(|i| (self.x[i] - knot.q_d[i]).powi(2))
                         .sum::<f64>()

@@ -23,6 +23,7 @@ pub mod model;
 pub mod plan;
 pub mod plot;
 pub mod realtime;
+pub mod record;
 pub mod reference;
 pub mod scalar;
 pub mod simulation;
