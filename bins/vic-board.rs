@@ -51,6 +51,14 @@ struct Args {
     /// Print the final statistics as one JSON object.
     #[arg(long)]
     json: bool,
+    /// Record every tick (state, command in use, disturbances) to this CSV file, in the log
+    /// format `vic identify --log` reads, from a thread outside the loop. Gaps (queue full) are
+    /// marked in the file and counted in the statistics.
+    #[arg(long, value_name = "FILE.csv")]
+    record: Option<PathBuf>,
+    /// Capacity of the recording queue [ticks].
+    #[arg(long, value_name = "TICKS", default_value_t = vic::record::DEFAULT_CAPACITY)]
+    record_queue: usize,
 }
 
 fn main() -> ExitCode {
@@ -101,7 +109,43 @@ fn run(args: Args) -> Result<(), (u8, String)> {
         max_ticks: (args.duration_s * args.rate_hz as f64) as u64,
         ..BoardLoopOptions::default()
     };
-    let stats = run_board(&ep, &mut board, period_ns, &opts, &stop);
+    let mut recorder = match &args.record {
+        Some(path) => Some(
+            vic::record::Recorder::start(
+                path,
+                &vic::record::RecordOptions {
+                    capacity: args.record_queue,
+                    joints: scenario.model.dof(),
+                    banner: format!(
+                        "{} {}, {} Hz, namespace {}",
+                        args.config.display(),
+                        args.overrides.join(" "),
+                        args.rate_hz,
+                        args.namespace
+                    ),
+                    start_paused: false,
+                },
+            )
+            .map_err(|e| input(format!("--record: {e}")))?,
+        ),
+        None => None,
+    };
+    let mut stats = run_board(
+        &ep,
+        &mut board,
+        period_ns,
+        &opts,
+        &stop,
+        recorder.as_mut().map(|r| r.producer()),
+    );
+    if let Some(r) = recorder.take() {
+        let path = r.path().display().to_string();
+        let summary = r
+            .finish()
+            .map_err(|e| (1, format!("--record {path}: {e}")))?;
+        stats.recorded = Some(summary.written);
+        stats.dropped = Some(summary.dropped);
+    }
     if args.json {
         println!(
             "{}",
@@ -124,6 +168,9 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             stats.rejected_by_reason,
             stats.safe_hold_ticks
         );
+        if let (Some(r), Some(d)) = (stats.recorded, stats.dropped) {
+            println!("recorded     {r} ticks, {d} dropped");
+        }
         p("jitter", &stats.jitter_us);
         p("work", &stats.work_us);
         p("command age", &stats.command_age_us);

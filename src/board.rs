@@ -118,7 +118,8 @@ impl BoardConfig {
             max_field_beta: b.max_field_beta,
             max_noise_factor: b.max_noise_factor,
             stiffness_max: finite_or(s.bounds.upper.get(dof).copied().unwrap_or(1e4), 1e4),
-            torque_max: finite_or(s.bounds.upper[0].abs().max(s.bounds.lower[0].abs()), 1e4),
+            // A board without a torque limit is a hazard: 100 N m when the scenario has none.
+            torque_max: finite_or(s.bounds.upper[0].abs().max(s.bounds.lower[0].abs()), 100.0),
             max_catch_up: 50,
         }
     }
@@ -178,6 +179,12 @@ pub struct Outputs {
     pub periods: u64,
     /// Distance of the joint angles to the equilibrium in use [rad].
     pub tracking_error: f64,
+    /// The knot the law used over the last period integrated (the safe hold's while holding;
+    /// zero when no period was integrated).
+    pub knot: Knot,
+    /// Joint acceleration over the last period integrated: the change of `q'` over the period
+    /// divided by the period [rad/s²] (noise included; zero when no period was integrated).
+    pub qdd: [f64; MAX_JOINTS],
 }
 
 /// Running counts of a board.
@@ -371,6 +378,16 @@ impl Board {
         if cfg.period_ns == 0 || cfg.substeps == 0 {
             return Err("the board period and sub-steps must be positive".into());
         }
+        if ![cfg.stiffness_max, cfg.torque_max, cfg.velocity_max]
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0)
+        {
+            return Err(format!(
+                "the board's limits must be finite: stiffness_max {}, torque_max {}, \
+                 velocity_max {}",
+                cfg.stiffness_max, cfg.torque_max, cfg.velocity_max
+            ));
+        }
         if !(cfg.hold_stiffness.is_finite() && damping.gain(cfg.hold_stiffness) >= 0.0) {
             return Err(format!(
                 "hold stiffness {}: its damping under the actuator's law must be ≥ 0",
@@ -471,6 +488,16 @@ impl Board {
     }
     pub fn noise_factor(&self) -> f64 {
         self.noise_factor
+    }
+    /// Damping gain `K_D` of the impedance law (Eq. 4) for the stiffness `k` [N m s/rad].
+    pub fn damping(&self, k: &[f64; MAX_JOINTS]) -> [f64; MAX_JOINTS] {
+        let mut d = [0.0; MAX_JOINTS];
+        if let crate::model::Actuator::Impedance { damping } = &self.model.actuator {
+            for i in 0..self.dof {
+                d[i] = damping.gain(k[i]);
+            }
+        }
+        d
     }
 
     fn reject(&mut self, r: Rejection) {
@@ -911,8 +938,13 @@ impl Board {
                     let t = self.trial_time_ns;
                     let now_p = now_ns - (periods - 1 - p) * self.cfg.period_ns;
                     let knot = self.knot_for(t, now_p, &mut out);
+                    out.knot = knot;
                     let before = self.x;
                     self.integrate(&knot, now_p);
+                    let dt = self.cfg.period_ns as f64 * 1e-9;
+                    for i in self.dof..2 * self.dof {
+                        out.qdd[i - self.dof] = (self.x[i] - before[i]) / dt;
+                    }
                     out.tracking_error = (0..self.dof)
                         .map(|i| (self.x[i] - knot.q_d[i]).powi(2))
                         .sum::<f64>()

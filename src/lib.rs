@@ -24,6 +24,7 @@ pub mod operator;
 pub mod plan;
 pub mod plot;
 pub mod realtime;
+pub mod record;
 pub mod reference;
 pub mod scalar;
 pub mod simulation;

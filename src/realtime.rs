@@ -226,6 +226,9 @@ pub struct BoardStats {
     pub jitter_us: PercentilesJson,
     pub work_us: PercentilesJson,
     pub command_age_us: PercentilesJson,
+    /// Ticks recorded and dropped by `--record` (None without a recording).
+    pub recorded: Option<u64>,
+    pub dropped: Option<u64>,
 }
 
 /// [`Percentiles`] for JSON reports [µs].
@@ -291,13 +294,16 @@ pub fn board_tick(
     out
 }
 
-/// Runs the board at its period until `stop` is set (checked at the end of every tick).
+/// Runs the board at its period until `stop` is set (checked at the end of every tick). With
+/// `record`, every tick is pushed to the recording queue (allocation-free; a full queue drops
+/// the tick and the file marks the gap).
 pub fn run_board(
     ep: &crate::transport::Endpoint,
     board: &mut crate::board::Board,
     period_ns: u64,
     opts: &BoardLoopOptions,
     stop: &std::sync::atomic::AtomicBool,
+    mut record: Option<&mut crate::record::RecordProducer>,
 ) -> BoardStats {
     use crate::transport::{PROTOCOL_VERSION, Telemetry};
     use std::sync::atomic::Ordering;
@@ -312,6 +318,14 @@ pub fn run_board(
         let wake = periodic.wait();
         seq += 1;
         let out = board_tick(ep, board, &mut inputs, &wake, seq, &mut hist);
+        if let Some(r) = record.as_deref_mut() {
+            r.push(&crate::record::Sample::from_step(
+                seq,
+                wake.deadline_ns,
+                board,
+                &out,
+            ));
+        }
         if seq.is_multiple_of(opts.telemetry_every.max(1)) {
             let now = monotonic_ns();
             let rate =
@@ -367,6 +381,8 @@ pub fn run_board(
         jitter_us: hist.jitter.percentiles().into(),
         work_us: hist.work.percentiles().into(),
         command_age_us: hist.command_age.percentiles().into(),
+        recorded: record.as_ref().map(|r| r.pushed()),
+        dropped: record.as_ref().map(|r| r.dropped()),
     }
 }
 

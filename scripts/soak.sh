@@ -1,0 +1,123 @@
+#!/usr/bin/env bash
+# Soak test of the real-time pair (not run in CI): scripts/soak.sh [MINUTES=10]
+#
+# Builds release, starts vic-board with --record in a namespace of its own and vic-planner running
+# trials in a loop, and every second injects a disturbance (a 10 ms pulse) and a malformed command
+# slice (NaN, wrong version, out-of-order sequence, stiffness out of bounds, wrong joint count;
+# examples/malformed.rs). Samples the board's RSS at start and end, then stops everything and
+# prints deadlines missed, messages rejected, memory, and ticks recorded vs ticks run.
+# Processes and shared-memory files are cleaned up on exit, Ctrl-C included.
+#
+# Environment: CARGO_TARGET_DIR (default ./target), SOAK_DIR (where the recording and logs go;
+# default a new /tmp/vic-soak.* folder, kept).
+set -euo pipefail
+
+MINUTES=${1:-10}
+if ! [[ $MINUTES =~ ^[0-9]+([.][0-9]+)?$ ]]; then
+    echo "usage: $0 [MINUTES=10]" >&2
+    exit 2
+fi
+SECONDS_TOTAL=$(awk -v m="$MINUTES" 'BEGIN { printf "%d", m * 60 }')
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
+BIN=$CARGO_TARGET_DIR/release
+NS=soak$$
+OUT=${SOAK_DIR:-$(mktemp -d /tmp/vic-soak.XXXXXX)}
+mkdir -p "$OUT"
+CONFIG=$ROOT/config/two_link_divergent.toml
+PLAN=$ROOT/tests/data/realtime/two_link_divergent_sigma002_sooc.json
+SIGMA=noise.sigma=0.02
+
+BOARD_PID=""
+LOOP_PID=""
+TOOL_PID=""
+
+cleanup() {
+    local code=$?
+    trap - EXIT INT TERM
+    # Only the processes this script started, by their ids.
+    if [[ -n $LOOP_PID ]]; then
+        kill "$LOOP_PID" 2>/dev/null || true
+        pkill -TERM -P "$LOOP_PID" 2>/dev/null || true
+    fi
+    [[ -n $TOOL_PID ]] && kill "$TOOL_PID" 2>/dev/null || true
+    [[ -n $BOARD_PID ]] && kill "$BOARD_PID" 2>/dev/null || true
+    wait 2>/dev/null || true
+    # What transport::remove_namespace removes: the namespace's files in /dev/shm and under
+    # iceoryx2's root folder.
+    find /dev/shm -maxdepth 1 -name "vic_${NS}_*" -delete 2>/dev/null || true
+    find /tmp/iceoryx2 -name "vic_${NS}_*" -delete 2>/dev/null || true
+    local left
+    left=$(find /dev/shm -maxdepth 1 -name "vic_${NS}_*" | wc -l)
+    echo "cleanup: namespace $NS, $left files left in /dev/shm" >&2
+    exit "$code"
+}
+trap cleanup EXIT
+trap 'echo "interrupted" >&2; exit 130' INT TERM
+
+echo "building (release)…" >&2
+cargo build --release --bins --example malformed 2>&1 | tail -n 2 >&2
+
+rss_kb() { awk '/^VmRSS/ { print $2 }' "/proc/$1/status"; }
+
+"$BIN/vic-board" --config "$CONFIG" --set "$SIGMA" --namespace "$NS" --json \
+    --record "$OUT/soak.csv" >"$OUT/board.json" 2>"$OUT/board.err" &
+BOARD_PID=$!
+sleep 1
+kill -0 "$BOARD_PID" || { cat "$OUT/board.err" >&2; exit 1; }
+
+(
+    trap 'exit 0' TERM
+    i=0
+    while true; do
+        i=$((i + 1))
+        "$BIN/vic-planner" --config "$CONFIG" --set "$SIGMA" --namespace "$NS" --json \
+            --plan "$PLAN" --strategy stiffness --latency-ms 200 --seed "$i" --trials 5 \
+            >>"$OUT/planner.jsonl" 2>>"$OUT/planner.err" || echo "planner run $i failed" >>"$OUT/planner.err"
+    done
+) &
+LOOP_PID=$!
+
+"$BIN/examples/malformed" "$NS" "$SECONDS_TOTAL" 1000 >"$OUT/malformed.log" 2>&1 &
+TOOL_PID=$!
+
+sleep 2
+RSS_START=$(rss_kb "$BOARD_PID")
+echo "soak: $MINUTES min in namespace $NS, board pid $BOARD_PID, files in $OUT" >&2
+END=$(($(date +%s) + SECONDS_TOTAL - 2))
+while (($(date +%s) < END)); do
+    kill -0 "$BOARD_PID" 2>/dev/null || { echo "the board died" >&2; cat "$OUT/board.err" >&2; exit 1; }
+    sleep 5
+done
+RSS_END=$(rss_kb "$BOARD_PID")
+
+wait "$TOOL_PID" || true
+TOOL_PID=""
+kill "$LOOP_PID" 2>/dev/null || true
+pkill -TERM -P "$LOOP_PID" 2>/dev/null || true
+wait "$LOOP_PID" 2>/dev/null || true
+LOOP_PID=""
+kill -TERM "$BOARD_PID"
+wait "$BOARD_PID"
+BOARD_PID=""
+
+S=$OUT/board.json
+ROWS=$(grep -vc '^#' "$OUT/soak.csv" || true)
+ROWS=$((ROWS - 1))
+GAPS=$(grep -c '^# gap' "$OUT/soak.csv" || true)
+TRIALS=$(jq -s 'map(.trials) | add // 0' "$OUT/planner.jsonl" 2>/dev/null || echo "?")
+HOLDS=$(jq -s 'map(.safe_hold_trials) | add // 0' "$OUT/planner.jsonl" 2>/dev/null || echo "?")
+echo
+echo "== soak: $MINUTES min =="
+jq -r '"ticks run          \(.ticks)",
+       "deadlines missed   \(.late_ticks) late ticks, \(.missed_periods) periods missed, \(.lost_periods) periods lost",
+       "jitter [µs]        p50 \(.jitter_us.p50)  p99 \(.jitter_us.p99)  p99.9 \(.jitter_us.p999)  max \(.jitter_us.max)",
+       "work [µs]          p50 \(.work_us.p50)  p99 \(.work_us.p99)  max \(.work_us.max)",
+       "messages rejected  \(.rejected_messages) (total; by reason: \(.rejected_by_reason // "not reported by this board"))",
+       "safe-hold ticks    \(.safe_hold_ticks)",
+       "ticks recorded     \(.recorded) of \(.ticks) run, \(.dropped) dropped"' "$S"
+echo "file rows          $ROWS rows, $GAPS gap markers ($OUT/soak.csv)"
+echo "injected           $(cat "$OUT/malformed.log")"
+echo "planner            $TRIALS trials, $HOLDS with safe hold"
+echo "board RSS [kB]     start $RSS_START, end $RSS_END"
