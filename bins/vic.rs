@@ -74,6 +74,11 @@ enum Command {
     ///
     /// Example: vic identify --log elbow.csv --config config/icub_experiment.toml
     Identify(IdentifyArgs),
+    /// Benchmark against the machine's own limits: the board's 1 kHz loop against cyclictest,
+    /// the transport against a bare iceoryx2 ping-pong (same run, both distributions, ratios).
+    ///
+    /// Example: vic bench loop --seconds 30 --json
+    Bench(BenchArgs),
 }
 
 #[derive(clap::Args)]
@@ -266,6 +271,7 @@ fn main() -> ExitCode {
         Command::Monitor(args) => run_monitor(args),
         Command::Results(args) => run_results(args),
         Command::Identify(args) => run_identify(args),
+        Command::Bench(args) => run_bench(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -1174,6 +1180,193 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
     );
     if !leftover.is_empty() {
         eprintln!("vic: warning: files left in /dev/shm: {leftover:?}");
+    }
+    Ok(())
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    #[command(subcommand)]
+    which: BenchCommand,
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// The board's periodic loop at 1 kHz with its real work (the scenario's plant, a 50 Hz
+    /// planner thread streaming hold commands over the transport), under each option real-time
+    /// loops use: default vs 1 ns timer slack, a 100 µs spin before the deadline, mlockall, CPU
+    /// pinning, SCHED_FIFO 80 (when permitted). Then cyclictest -i1000 for the same duration
+    /// (default scheduler, and -p80 when a FIFO variant ran). Runs are sequential; the whole
+    /// bench takes about (variants + 2) × --seconds.
+    ///
+    /// Reports wake-up lateness (p50/p99/p99.9/max), tick work and CPU use per variant, and the
+    /// ratio to cyclictest's p99. Without cyclictest (`apt-get install rt-tests`) it runs vic
+    /// only and the JSON's "baseline" is null.
+    ///
+    /// Example: vic bench loop --seconds 30 --json
+    Loop(BenchLoopArgs),
+    /// One-way and round-trip latency of the state and command channels (vic's Endpoint, real
+    /// message types) against a bare iceoryx2 publish/subscribe ping-pong with the same payload
+    /// sizes, both as two busy-polling threads; then the running vic-board + vic-planner pair:
+    /// state age at a reader, command age at the board, pulse-injection-to-effect.
+    ///
+    /// Example: vic bench ipc --iterations 100000 --json
+    Ipc(BenchIpcArgs),
+}
+
+#[derive(clap::Args)]
+struct BenchLoopArgs {
+    /// Seconds per variant and per cyclictest run.
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..=3600))]
+    seconds: u64,
+    /// Run only these variants (repeatable or comma-separated): sleep-slack50, sleep, spin,
+    /// spin-mlock, spin-mlock-pin, fifo, fifo-spin.
+    #[arg(long = "variant", value_name = "NAME", value_delimiter = ',')]
+    variants: Vec<String>,
+    /// Skip cyclictest (the JSON's "baseline" is null).
+    #[arg(long)]
+    no_baseline: bool,
+    /// Fail (exit 1) when cyclictest is not installed, instead of running vic only.
+    #[arg(long, conflicts_with = "no_baseline")]
+    require_baseline: bool,
+    /// Scenario whose plant the board integrates (impedance actuator).
+    #[arg(
+        long,
+        short,
+        value_name = "FILE",
+        default_value = "config/two_link_divergent.toml"
+    )]
+    config: PathBuf,
+    /// Override a configuration key (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    overrides: Vec<String>,
+    /// Print one JSON object: {"vic": {p50_us, p99_us, p999_us, max_us, cpu_percent, …},
+    /// "baseline": {…} or null, "ratio_p99": …, "variants": […], …}.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args)]
+struct BenchIpcArgs {
+    /// Ping-pongs per transport (after 1000 not recorded).
+    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    iterations: u64,
+    /// Trials of the running pair (about 1.5 s each; 0 skips the pair).
+    #[arg(long, default_value_t = 5)]
+    pair_trials: u64,
+    /// Scenario of the pair.
+    #[arg(
+        long,
+        short,
+        value_name = "FILE",
+        default_value = "config/two_link_divergent.toml"
+    )]
+    config: PathBuf,
+    /// Overrides for the pair's board and planner.
+    #[arg(
+        long = "set",
+        value_name = "SECTION.KEY=VALUE",
+        default_value = "noise.sigma=0.02"
+    )]
+    overrides: Vec<String>,
+    /// SOOC plan the pair's planner plays (stiffness strategy).
+    #[arg(
+        long,
+        value_name = "FILE",
+        default_value = "tests/data/realtime/two_link_divergent_sigma002_sooc.json"
+    )]
+    plan: PathBuf,
+    /// Print one JSON object: {"vic": {p50_us, p99_us, …}, "baseline": {…}, "ratio_p50": …,
+    /// "pair": {…}, …} (one-way latency of the state channel in the summary).
+    #[arg(long)]
+    json: bool,
+}
+
+/// `vic bench loop` and `vic bench ipc`: parse, call the library, print.
+fn run_bench(args: BenchArgs) -> Result<(), Failure> {
+    let progress = |json: bool| {
+        move |m: &str| {
+            if !json {
+                eprintln!("running: {m}");
+            }
+        }
+    };
+    match args.which {
+        BenchCommand::Loop(a) => {
+            if !a.config.is_file() {
+                return Err(Failure::input(format!(
+                    "{}: no such scenario file",
+                    a.config.display()
+                )));
+            }
+            if a.require_baseline && vic::bench::cyclictest::find().is_none() {
+                return Err(Failure::runtime(format!(
+                    "cyclictest not found: {}",
+                    vic::bench::cyclictest::INSTALL_HINT
+                )));
+            }
+            let names: Vec<&str> = vic::bench::loop_bench::variants()
+                .iter()
+                .map(|v| v.name)
+                .collect();
+            if let Some(bad) = a.variants.iter().find(|v| !names.contains(&v.as_str())) {
+                return Err(Failure::input(format!(
+                    "--variant {bad}: choose from {}",
+                    names.join(", ")
+                )));
+            }
+            let opts = vic::bench::loop_bench::Options {
+                seconds: a.seconds,
+                config: a.config,
+                overrides: a.overrides,
+                variants: a.variants,
+                baseline: !a.no_baseline,
+            };
+            let report =
+                vic::bench::loop_bench::run(&opts, progress(a.json)).map_err(Failure::runtime)?;
+            if a.json {
+                println!(
+                    "{}",
+                    serde_json::to_string(&report).map_err(Failure::runtime)?
+                );
+            } else {
+                vic::bench::loop_bench::print(&report);
+            }
+        }
+        BenchCommand::Ipc(a) => {
+            let pair = if a.pair_trials == 0 {
+                None
+            } else {
+                if !a.plan.is_file() {
+                    return Err(Failure::input(format!(
+                        "--plan {}: no such file (make one with `vic plan --method sooc --out FILE`, \
+                         or skip the running pair with --pair-trials 0)",
+                        a.plan.display()
+                    )));
+                }
+                Some(vic::bench::ipc::PairOptions {
+                    board_bin: sibling_binary("vic-board")?,
+                    planner_bin: sibling_binary("vic-planner")?,
+                    config: a.config,
+                    overrides: a.overrides,
+                    plan: a.plan,
+                    trials: a.pair_trials,
+                })
+            };
+            let opts = vic::bench::ipc::Options {
+                iterations: a.iterations,
+                pair,
+            };
+            let report = vic::bench::ipc::run(&opts, progress(a.json)).map_err(Failure::runtime)?;
+            if a.json {
+                println!(
+                    "{}",
+                    serde_json::to_string(&report).map_err(Failure::runtime)?
+                );
+            } else {
+                vic::bench::ipc::print(&report);
+            }
+        }
     }
     Ok(())
 }

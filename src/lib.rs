@@ -10,6 +10,7 @@
 // Index loops read like the equations they implement; iterator chains over several arrays do not.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bench;
 pub mod board;
 pub mod central;
 pub mod config;
@@ -27,6 +28,7 @@ pub mod realtime;
 pub mod record;
 pub mod reference;
 pub mod scalar;
+pub mod sched;
 pub mod simulation;
 pub mod solver;
 pub mod transport;
