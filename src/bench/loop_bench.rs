@@ -206,20 +206,7 @@ pub struct Baselines {
 
 /// The board configuration `vic-board` derives from a scenario at 1 kHz.
 pub fn board_config(s: &Scenario, period_ns: u64) -> BoardConfig {
-    let dof = s.model.dof();
-    let stiffness_max = s.bounds.upper.get(dof).copied().unwrap_or(f64::INFINITY);
-    let torque_max = s.bounds.upper[0].abs().max(s.bounds.lower[0].abs());
-    let finite_or = |v: f64| if v.is_finite() { v } else { 1e4 };
-    BoardConfig {
-        period_ns,
-        substeps: ((period_ns as f64 * 1e-9) / (s.task.dt / s.task.substeps as f64))
-            .ceil()
-            .max(1.0) as usize,
-        integrator: s.task.integrator,
-        stiffness_max: finite_or(stiffness_max),
-        torque_max: finite_or(torque_max),
-        ..BoardConfig::default()
-    }
+    BoardConfig::from_scenario(s, period_ns)
 }
 
 /// A full command slice (32 knots) holding `q0` with `stiffness`, for `trial` from trial time
