@@ -45,6 +45,13 @@ struct Args {
     /// of the scenario's [board] section: --set board.watchdog=0.1
     #[arg(long, value_name = "N_M_PER_RAD")]
     hold_stiffness: Option<f64>,
+    /// Run the loop under SCHED_FIFO at this priority (1–99; needs CAP_SYS_NICE, else a
+    /// warning). With --spin-us 100 this is what meets cyclictest's p99 here (docs/BENCHMARKS.md).
+    #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(i32).range(1..=99))]
+    fifo: Option<i32>,
+    /// Pin the loop to this CPU.
+    #[arg(long, value_name = "N")]
+    cpu: Option<usize>,
     /// Stop after this many seconds (0: run until SIGINT/SIGTERM).
     #[arg(long, default_value_t = 0.0)]
     duration_s: f64,
@@ -130,6 +137,17 @@ fn run(args: Args) -> Result<(), (u8, String)> {
         ),
         None => None,
     };
+    // After the recorder's writer thread exists: it must not inherit the real-time policy.
+    if let Some(cpu) = args.cpu
+        && let Err(e) = vic::sched::pin_to_cpu(cpu)
+    {
+        eprintln!("vic-board: warning: cannot pin to CPU {cpu}: {e}");
+    }
+    if let Some(prio) = args.fifo
+        && let Err(e) = vic::sched::set_policy(vic::sched::Policy::Fifo(prio))
+    {
+        eprintln!("vic-board: warning: SCHED_FIFO {prio} refused ({e}); running unprivileged");
+    }
     let mut stats = run_board(
         &ep,
         &mut board,

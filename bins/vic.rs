@@ -41,7 +41,8 @@ enum Command {
     /// Example: vic results --out-dir docs
     Results(ResultsArgs),
     /// Run the real-time pair: start a board and a planner in a fresh namespace, run the
-    /// `stiffness` and `delayed-feedback` strategies with the same noise seeds, print the
+    /// `stiffness` and `delayed-feedback` strategies at --latency-ms with the same noise seeds,
+    /// and delayed feedback at 0 ms latency as the reference (the planner at 250 Hz); print the
     /// comparison and the board's timing, and shut everything down.
     ///
     /// Example: vic demo --latency-ms 200 --trials 3
@@ -1009,11 +1010,16 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
         .map_err(|e| Failure::runtime(format!("cannot create {}: {e}", dir.display())))?;
     let mut df_overrides = args.overrides.clone();
     df_overrides.push("actuator.stiffness_max=0".into());
+    // The reference row: central feedback without latency (planned for none, the planner at
+    // 250 Hz so that its own loop adds only a few ms) — the paper's "with 0 ms latency,
+    // delayed feedback works".
+    let mut zero_overrides = df_overrides.clone();
+    zero_overrides.push("task.delay_ms=0".into());
     df_overrides.push(format!("task.delay_ms={}", args.latency_ms));
     if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
         eprintln!("planning (SOOC for stiffness, ILQG for delayed feedback) ...");
     }
-    let (sooc, ilqg) = std::thread::scope(|s| {
+    let (sooc, (ilqg, ilqg0)) = std::thread::scope(|s| {
         let a = s.spawn(|| {
             if let Some(p) = &args.stiffness_plan {
                 return Ok(p.clone());
@@ -1027,21 +1033,39 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
             )
         });
         let b = s.spawn(|| {
-            if let Some(p) = &args.feedback_plan {
-                return Ok(p.clone());
-            }
-            demo_plan(
-                &args.config,
-                &df_overrides,
-                vic::plan::Method::Ilqg,
-                &dir,
-                reuse,
-            )
+            let delayed = match &args.feedback_plan {
+                Some(p) => Ok(p.clone()),
+                None => demo_plan(
+                    &args.config,
+                    &df_overrides,
+                    vic::plan::Method::Ilqg,
+                    &dir,
+                    reuse,
+                ),
+            };
+            let zero = if args.latency_ms == 0.0 {
+                Ok(None)
+            } else {
+                demo_plan(
+                    &args.config,
+                    &zero_overrides,
+                    vic::plan::Method::Ilqg,
+                    &dir,
+                    reuse,
+                )
+                .map(Some)
+            };
+            (delayed, zero)
         });
-        (a.join(), b.join())
+        let b = match b.join() {
+            Ok((x, y)) => (Ok(x), Ok(y)),
+            Err(_) => (Err(()), Err(())),
+        };
+        (a.join(), b)
     });
     let sooc = sooc.map_err(|_| Failure::runtime("planning panicked"))??;
     let ilqg = ilqg.map_err(|_| Failure::runtime("planning panicked"))??;
+    let ilqg0 = ilqg0.map_err(|_| Failure::runtime("planning panicked"))??;
 
     let mut guard = DemoGuard {
         namespace: namespace.clone(),
@@ -1064,7 +1088,14 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
             .map_err(|e| Failure::runtime(format!("cannot start {}: {e}", board_bin.display())))?,
     );
     let mut results = Vec::new();
-    for (name, plan_path) in [("stiffness", &sooc), ("delayed-feedback", &ilqg)] {
+    let mut runs = vec![
+        ("stiffness", &sooc, args.latency_ms, 50),
+        ("delayed-feedback", &ilqg, args.latency_ms, 50),
+    ];
+    if let Some(p) = &ilqg0 {
+        runs.push(("delayed-feedback", p, 0.0, 250));
+    }
+    for (name, plan_path, latency_ms, rate_hz) in runs {
         let mut p = Proc::new(&planner_bin);
         p.arg("--config")
             .arg(&args.config)
@@ -1073,7 +1104,8 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
             .args(["--strategy", name, "--namespace", &namespace, "--json"])
             .args(["--trials", &args.trials.to_string()])
             .args(["--seed", &args.seed.to_string()])
-            .args(["--latency-ms", &args.latency_ms.to_string()])
+            .args(["--latency-ms", &latency_ms.to_string()])
+            .args(["--rate-hz", &rate_hz.to_string()])
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit());
         for o in &args.overrides {

@@ -7,7 +7,9 @@
 
 mod common;
 
-use common::daemons::{Daemons, ilqg_plan, run_planner, sooc_plan, unique_namespace};
+use common::daemons::{
+    Daemons, ilqg_plan, ilqg0_plan, planner_command_at, run_planner, sooc_plan, unique_namespace,
+};
 
 #[test]
 fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
@@ -18,6 +20,15 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
     let trials = 3;
     let stiff = run_planner(&ns, &sooc, "stiffness", trials, false);
     let fb = run_planner(&ns, &ilqg, "delayed-feedback", trials, false);
+    // Without latency central feedback works: a plan for no delay, the planner at 250 Hz so
+    // that its own loop adds only a few milliseconds.
+    let out = planner_command_at(&ns, &ilqg0_plan(), "delayed-feedback", trials, "0")
+        .args(["--rate-hz", "250"])
+        .stderr(std::process::Stdio::inherit())
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let fb0: vic::central::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
 
     // SIGTERM: the board stops at the end of the tick, prints its statistics, exits 0.
     let out = d.signal_and_wait(board, libc::SIGTERM);
@@ -31,7 +42,9 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
         vic::transport::namespace_files(&ns)
     );
 
-    eprintln!("stiffness: {stiff:?}\ndelayed feedback: {fb:?}\nboard: {stats}");
+    eprintln!(
+        "stiffness: {stiff:?}\ndelayed feedback: {fb:?}\nwithout latency: {fb0:?}\nboard: {stats}"
+    );
     assert_eq!(stiff.trials, trials);
     assert_eq!(stiff.safe_hold_trials, 0, "commands arrived late");
     assert!(
@@ -43,6 +56,11 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
         fb.final_error_max > 10.0,
         "delayed feedback without stiffness should miss by centimetres or diverge, got {:?} mm",
         fb.final_errors
+    );
+    assert!(
+        fb0.final_errors.iter().all(|e| *e < 10.0),
+        "delayed feedback at 0 ms latency should work, got {:?} mm",
+        fb0.final_errors
     );
 
     // Lockstep (simulated clock, same code, same seeds) agrees with the live run: the stiffness

@@ -56,6 +56,15 @@ pub fn ilqg_plan() -> PathBuf {
     )
 }
 
+/// The ILQG plan for no delay without stiffness (delayed feedback at 0 ms) at σ = 0.02.
+pub fn ilqg0_plan() -> PathBuf {
+    plan_or_fixture(
+        "two_link_divergent_sigma002_ilqg0_k0.json",
+        "ilqg",
+        &["--set", "actuator.stiffness_max=0"],
+    )
+}
+
 /// A namespace no other test (or test run) uses.
 pub fn unique_namespace(tag: &str) -> String {
     format!(
@@ -142,6 +151,17 @@ impl Drop for Daemons {
 
 /// The `vic-planner` command line for a live run (200 ms latency, seed 11).
 pub fn planner_command(ns: &str, plan: &Path, strategy: &str, trials: usize) -> Command {
+    planner_command_at(ns, plan, strategy, trials, "200")
+}
+
+/// The same at another feedback latency [ms].
+pub fn planner_command_at(
+    ns: &str,
+    plan: &Path,
+    strategy: &str,
+    trials: usize,
+    latency_ms: &str,
+) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_vic-planner"));
     c.args([
         "--config",
@@ -158,7 +178,7 @@ pub fn planner_command(ns: &str, plan: &Path, strategy: &str, trials: usize) -> 
         "--strategy",
         strategy,
         "--latency-ms",
-        "200",
+        latency_ms,
         "--seed",
         "11",
     ])
