@@ -143,7 +143,11 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     if !(sensor >= 0.0 && command >= 0.0 && sensor.is_finite() && command.is_finite()) {
         return Err(input("latencies must be finite and ≥ 0".into()));
     }
-    if strategy != Strategy::Stiffness && sensor + command + lookahead_ms > latency_ms + 1e-9 {
+    // (At 0 ms every knot uses the freshest state: stale by design, no warning.)
+    if strategy != Strategy::Stiffness
+        && latency_ms > 0.0
+        && sensor + command + lookahead_ms > latency_ms + 1e-9
+    {
         eprintln!(
             "vic-planner: warning: sensor {sensor} ms + command {command} ms + lookahead \
              {lookahead_ms} ms exceed the feedback latency {latency_ms} ms: feedback will use \
