@@ -482,7 +482,7 @@ impl Ilqg {
         let bw = &mut self.bw;
         let traj = &self.nominal;
         let term = &traj.derivs[horizon];
-        bw.s_mat.copy_from(&term.lxx);
+        copy(&term.lxx, &mut bw.s_mat);
         bw.s_vec.copy_from(&term.lx);
         let mut s0 = problem.cost.terminal(traj.x[horizon].as_slice());
         let (mut dv1, mut dv2) = (0.0, 0.0);
@@ -490,7 +490,7 @@ impl Ilqg {
         for k in (0..horizon).rev() {
             if stochastic {
                 // Only the stochastic merit reads them.
-                self.value_hessians[k].copy_from(&bw.s_mat);
+                copy(&bw.s_mat, &mut self.value_hessians[k]);
             }
             let (lin, d) = (&traj.lin[k], &traj.derivs[k]);
             let mut q0 = problem
@@ -505,12 +505,12 @@ impl Ilqg {
             sp.b.tr_mul_vec_add(1.0, bw.s_vec.as_slice(), bw.qu.as_mut_slice());
             sp.a.right_mul(&bw.s_mat, &mut bw.sa);
             sp.b.right_mul(&bw.s_mat, &mut bw.sb);
-            bw.qxx.copy_from(&d.lxx);
-            bw.sa.transpose_to(&mut bw.sat);
+            copy(&d.lxx, &mut bw.qxx);
+            transpose(&bw.sa, &mut bw.sat);
             sp.a.right_mul_add(&bw.sat, &mut bw.qxx);
-            bw.quu.copy_from(&d.luu);
+            copy(&d.luu, &mut bw.quu);
             sp.b.tr_mul_add(1.0, &bw.sb, &mut bw.quu);
-            bw.qux.copy_from(&d.lux);
+            copy(&d.lux, &mut bw.qux);
             sp.b.tr_mul_add(1.0, &bw.sa, &mut bw.qux);
             if stochastic && lin.noise != NoiseKind::None {
                 for i in 0..lin.c.ncols() {
@@ -522,7 +522,7 @@ impl Ilqg {
                         cu.tr_mul_vec_add(1.0, bw.sc.as_slice(), bw.qu.as_mut_slice());
                         cx.right_mul(&bw.s_mat, &mut bw.scx);
                         cu.right_mul(&bw.s_mat, &mut bw.scu);
-                        bw.scx.transpose_to(&mut bw.sat);
+                        transpose(&bw.scx, &mut bw.sat);
                         cx.right_mul_add(&bw.sat, &mut bw.qxx);
                         cu.tr_mul_add(1.0, &bw.scu, &mut bw.quu);
                         cu.tr_mul_add(1.0, &bw.scx, &mut bw.qux);
@@ -534,8 +534,8 @@ impl Ilqg {
             // control terms. As μ grows the gains tend to −(BᵀB)⁻¹BᵀA, which cancels state
             // deviations, rather than to zero (open loop), so the line search stays meaningful in
             // an unstable field. The value update below uses the unregularised Q.
-            bw.quu_reg.copy_from(&bw.quu);
-            bw.qux_reg.copy_from(&bw.qux);
+            copy(&bw.quu, &mut bw.quu_reg);
+            copy(&bw.qux, &mut bw.qux_reg);
             if mu > 0.0 {
                 sp.b.tr_mul_add(mu, &lin.b, &mut bw.quu_reg);
                 sp.b.tr_mul_add(mu, &lin.a, &mut bw.qux_reg);
@@ -570,7 +570,7 @@ impl Ilqg {
                 l[j] = qp.x[j];
             }
             let gain = &mut self.gains[k];
-            gain.fill(0.0);
+            gain.as_mut_slice().fill(0.0);
             if let Some(regularized) = &qp.factor {
                 let mut free = [0usize; MAX_QP];
                 let mut nfree = 0;
@@ -603,13 +603,13 @@ impl Ilqg {
             bw.s_vec.copy_from(&bw.qx);
             bw.s_vec.gemv_tr(1.0, gain, &bw.t_m, 1.0);
             bw.s_vec.gemv_tr(1.0, &bw.qux, l, 1.0);
-            bw.t_mn.copy_from(&bw.qux);
+            copy(&bw.qux, &mut bw.t_mn);
             bw.t_mn.gemm(1.0, &bw.quu, gain, 1.0); // Q_uu L + Q_ux
             // S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L as 2m rank-one updates, each an axpy on
             // contiguous columns of the transposed thin factors (nalgebra's transposed products
             // are plain dot loops).
-            gain.transpose_to(&mut bw.lt);
-            bw.qux.transpose_to(&mut bw.xt);
+            transpose(gain, &mut bw.lt);
+            transpose(&bw.qux, &mut bw.xt);
             let n = bw.s_mat.nrows();
             let (gd, td) = (gain.as_slice(), bw.t_mn.as_slice());
             let (ltd, xtd) = (bw.lt.as_slice(), bw.xt.as_slice());
@@ -640,6 +640,25 @@ impl Ilqg {
     /// The current gains (valid after [`Ilqg::solve`]).
     pub fn gains(&self) -> &[DMatrix<f64>] {
         &self.gains
+    }
+}
+
+/// `dst = src` for matrices of one size, as one `memcpy` (nalgebra's `copy_from` goes element by
+/// element through a generic iterator, which showed in profiles of the 42-dimensional delay
+/// problem).
+fn copy(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
+    dst.as_mut_slice().copy_from_slice(src.as_slice());
+}
+
+/// `dst = srcᵀ` on the column-major storage (see [`copy`]).
+fn transpose(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
+    let (r, c) = (src.nrows(), src.ncols());
+    debug_assert_eq!((dst.nrows(), dst.ncols()), (c, r));
+    let (sd, dd) = (src.as_slice(), dst.as_mut_slice());
+    for j in 0..c {
+        for (i, &v) in sd[j * r..(j + 1) * r].iter().enumerate() {
+            dd[i * c + j] = v;
+        }
     }
 }
 
