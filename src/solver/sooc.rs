@@ -136,6 +136,62 @@ fn add_sandwich(
     }
 }
 
+/// The parts of the plant's linearisation that the covariance step needs: `A`, `c_i`, `Cx_i`
+/// (not `B`: m fewer dual flow evaluations per step of every line-search rollout). Computed as
+/// [`EulerModel`]'s `linearize` computes them, so the values are the same.
+fn state_linearization(base: &EulerModel, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+    let (n, m, nw) = (base.nx(), base.nu(), base.nw());
+    let mut xd = [Dual64::from(0.0); MAX_NX];
+    let mut ud = [Dual64::from(0.0); MAX_NU];
+    for (d, v) in xd.iter_mut().zip(x) {
+        *d = Dual64::from(*v);
+    }
+    for (d, v) in ud.iter_mut().zip(u) {
+        *d = Dual64::from(*v);
+    }
+    let mut out = [Dual64::from(0.0); MAX_NX];
+    for j in 0..n {
+        xd[j].eps = 1.0;
+        base.flow(k, &xd[..n], &ud[..m], &mut out[..n]);
+        xd[j].eps = 0.0;
+        for r in 0..n {
+            lin.a[(r, j)] = out[r].eps;
+        }
+    }
+    if nw == 0 {
+        lin.noise = NoiseKind::None;
+        return;
+    }
+    let mut g = [0.0; MAX_NX * MAX_NW];
+    let mut dgx = [0.0; MAX_NX * MAX_NX * MAX_NW];
+    let mut dgu = [0.0; MAX_NU * MAX_NX * MAX_NW];
+    base.noise_jacobian(x, u, &mut g, &mut dgx, &mut dgu);
+    let block = n * nw;
+    let mut dependent = false;
+    for ch in 0..nw {
+        for r in 0..n {
+            lin.c[(r, ch)] = g[ch * n + r];
+        }
+        for j in 0..n {
+            for r in 0..n {
+                let v = dgx[j * block + ch * n + r];
+                dependent |= v != 0.0;
+                lin.cx[ch][(r, j)] = v;
+            }
+        }
+        for j in 0..m {
+            for r in 0..n {
+                dependent |= dgu[j * block + ch * n + r] != 0.0;
+            }
+        }
+    }
+    lin.noise = if dependent {
+        NoiseKind::Dependent
+    } else {
+        NoiseKind::Additive
+    };
+}
+
 impl Dynamics for MomentDynamics<'_> {
     fn nx(&self) -> usize {
         let n = self.base.nx();
@@ -153,7 +209,7 @@ impl Dynamics for MomentDynamics<'_> {
         let mut guard = self.scratch.lock().expect("scratch lock");
         let s = &mut *guard;
         self.base.step(k, &z[..n], u, &mut next[..n]);
-        self.base.linearize(k, &z[..n], u, &mut s.lin);
+        state_linearization(self.base, k, &z[..n], u, &mut s.lin);
         unpack(n, &z[n..], &mut s.p);
         s.next.fill(0.0);
         add_sandwich(&mut s.next, 1.0, &s.lin.a, &s.p, &s.lin.a, &mut s.t1);
