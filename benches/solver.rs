@@ -88,6 +88,33 @@ fn solvers(c: &mut Criterion) {
     group.bench_function("single_joint_delay_200ms", |b| {
         b.iter(|| black_box(solver.solve(&problem, &u_init)))
     });
+
+    // SOOC at full noise from the configured warm start, capped at a few iterations: the cost of
+    // one iteration on the moment dynamics (z = (m, vech P): 14 dims for the type-2 arm, 44 for
+    // the VSA).
+    for (name, file, cap) in [
+        (
+            "two_link_divergent_sooc_10it",
+            "two_link_divergent.toml",
+            10,
+        ),
+        ("two_link_vsa_sooc_3it", "two_link_vsa_divergent.toml", 3),
+    ] {
+        let (s, setup) = load(file, &[]);
+        let mut section = s.solver.clone();
+        section.options.max_iterations = cap;
+        section.noise_continuation = vec![1.0];
+        let sol = plan::solve_sooc(&setup, &section, &setup.u_init, &None);
+        eprintln!(
+            "{name}: {} iterations, expected cost {:.6}, {:.3} ms per iteration",
+            sol.iterations,
+            sol.expected_cost,
+            sol.solve_time.as_secs_f64() * 1e3 / sol.iterations.max(1) as f64
+        );
+        group.bench_function(name, |b| {
+            b.iter(|| black_box(plan::solve_sooc(&setup, &section, &setup.u_init, &None)))
+        });
+    }
     group.finish();
 }
 

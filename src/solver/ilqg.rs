@@ -8,6 +8,7 @@
 //! terms of the backward pass ask for.
 
 use super::boxqp::{MAX_QP, QpStatus, solve_box_qp};
+use super::sparse::SparseLinearization;
 use super::{Bounds, Problem};
 use crate::cost::CostDerivatives;
 use crate::dynamics::{Linearization, NoiseKind};
@@ -126,6 +127,8 @@ struct Trajectory {
     u: Vec<DVector<f64>>,
     cost: f64,
     lin: Vec<Linearization>,
+    /// The nonzeros of `lin`, for the backward pass's products.
+    sparse: Vec<SparseLinearization>,
     derivs: Vec<CostDerivatives>,
 }
 
@@ -137,6 +140,9 @@ impl Trajectory {
             cost: f64::INFINITY,
             lin: (0..horizon)
                 .map(|_| Linearization::new(nx, nu, nw))
+                .collect(),
+            sparse: (0..horizon)
+                .map(|_| SparseLinearization::new(nx, nu, nw))
                 .collect(),
             derivs: (0..=horizon)
                 .map(|_| CostDerivatives::new(nx, nu))
@@ -150,6 +156,11 @@ struct Backward {
     s_mat: DMatrix<f64>,
     s_vec: DVector<f64>,
     sa: DMatrix<f64>,
+    /// `(S A)ᵀ = Aᵀ S` (S is symmetric), so that `Aᵀ S A` is a product by A's columns.
+    sat: DMatrix<f64>,
+    /// `Lᵀ` and `Q_uxᵀ` (n×m): the value update by contiguous columns.
+    lt: DMatrix<f64>,
+    xt: DMatrix<f64>,
     sb: DMatrix<f64>,
     scx: DMatrix<f64>,
     scu: DMatrix<f64>,
@@ -202,6 +213,9 @@ impl Ilqg {
                 s_mat: DMatrix::zeros(nx, nx),
                 s_vec: DVector::zeros(nx),
                 sa: DMatrix::zeros(nx, nx),
+                sat: DMatrix::zeros(nx, nx),
+                lt: DMatrix::zeros(nx, nu),
+                xt: DMatrix::zeros(nx, nu),
                 sb: DMatrix::zeros(nx, nu),
                 scx: DMatrix::zeros(nx, nx),
                 scu: DMatrix::zeros(nx, nu),
@@ -468,42 +482,50 @@ impl Ilqg {
         let bw = &mut self.bw;
         let traj = &self.nominal;
         let term = &traj.derivs[horizon];
-        bw.s_mat.copy_from(&term.lxx);
+        copy(&term.lxx, &mut bw.s_mat);
         bw.s_vec.copy_from(&term.lx);
         let mut s0 = problem.cost.terminal(traj.x[horizon].as_slice());
         let (mut dv1, mut dv2) = (0.0, 0.0);
 
         for k in (0..horizon).rev() {
-            self.value_hessians[k].copy_from(&bw.s_mat);
+            if stochastic {
+                // Only the stochastic merit reads them.
+                copy(&bw.s_mat, &mut self.value_hessians[k]);
+            }
             let (lin, d) = (&traj.lin[k], &traj.derivs[k]);
             let mut q0 = problem
                 .cost
                 .running(k, traj.x[k].as_slice(), traj.u[k].as_slice())
                 + s0;
+            // The products take A, B, Cx, Cu by their nonzeros (see `sparse`): n·nnz, not n³.
+            let sp = &traj.sparse[k];
             bw.qx.copy_from(&d.lx);
-            bw.qx.gemv_tr(1.0, &lin.a, &bw.s_vec, 1.0);
+            sp.a.tr_mul_vec_add(1.0, bw.s_vec.as_slice(), bw.qx.as_mut_slice());
             bw.qu.copy_from(&d.lu);
-            bw.qu.gemv_tr(1.0, &lin.b, &bw.s_vec, 1.0);
-            bw.sa.gemm(1.0, &bw.s_mat, &lin.a, 0.0);
-            bw.sb.gemm(1.0, &bw.s_mat, &lin.b, 0.0);
-            bw.qxx.copy_from(&d.lxx);
-            bw.qxx.gemm_tr(1.0, &lin.a, &bw.sa, 1.0);
-            bw.quu.copy_from(&d.luu);
-            bw.quu.gemm_tr(1.0, &lin.b, &bw.sb, 1.0);
-            bw.qux.copy_from(&d.lux);
-            bw.qux.gemm_tr(1.0, &lin.b, &bw.sa, 1.0);
+            sp.b.tr_mul_vec_add(1.0, bw.s_vec.as_slice(), bw.qu.as_mut_slice());
+            sp.a.right_mul(&bw.s_mat, &mut bw.sa);
+            sp.b.right_mul(&bw.s_mat, &mut bw.sb);
+            copy(&d.lxx, &mut bw.qxx);
+            transpose(&bw.sa, &mut bw.sat);
+            sp.a.right_mul_add(&bw.sat, &mut bw.qxx);
+            copy(&d.luu, &mut bw.quu);
+            sp.b.tr_mul_add(1.0, &bw.sb, &mut bw.quu);
+            copy(&d.lux, &mut bw.qux);
+            sp.b.tr_mul_add(1.0, &bw.sa, &mut bw.qux);
             if stochastic && lin.noise != NoiseKind::None {
                 for i in 0..lin.c.ncols() {
                     bw.sc.gemv(1.0, &bw.s_mat, &lin.c.column(i), 0.0);
                     q0 += 0.5 * lin.c.column(i).dot(&bw.sc);
                     if lin.noise == NoiseKind::Dependent {
-                        bw.qx.gemv_tr(1.0, &lin.cx[i], &bw.sc, 1.0);
-                        bw.qu.gemv_tr(1.0, &lin.cu[i], &bw.sc, 1.0);
-                        bw.scx.gemm(1.0, &bw.s_mat, &lin.cx[i], 0.0);
-                        bw.scu.gemm(1.0, &bw.s_mat, &lin.cu[i], 0.0);
-                        bw.qxx.gemm_tr(1.0, &lin.cx[i], &bw.scx, 1.0);
-                        bw.quu.gemm_tr(1.0, &lin.cu[i], &bw.scu, 1.0);
-                        bw.qux.gemm_tr(1.0, &lin.cu[i], &bw.scx, 1.0);
+                        let (cx, cu) = (&sp.cx[i], &sp.cu[i]);
+                        cx.tr_mul_vec_add(1.0, bw.sc.as_slice(), bw.qx.as_mut_slice());
+                        cu.tr_mul_vec_add(1.0, bw.sc.as_slice(), bw.qu.as_mut_slice());
+                        cx.right_mul(&bw.s_mat, &mut bw.scx);
+                        cu.right_mul(&bw.s_mat, &mut bw.scu);
+                        transpose(&bw.scx, &mut bw.sat);
+                        cx.right_mul_add(&bw.sat, &mut bw.qxx);
+                        cu.tr_mul_add(1.0, &bw.scu, &mut bw.quu);
+                        cu.tr_mul_add(1.0, &bw.scx, &mut bw.qux);
                     }
                 }
             }
@@ -512,11 +534,11 @@ impl Ilqg {
             // control terms. As μ grows the gains tend to −(BᵀB)⁻¹BᵀA, which cancels state
             // deviations, rather than to zero (open loop), so the line search stays meaningful in
             // an unstable field. The value update below uses the unregularised Q.
-            bw.quu_reg.copy_from(&bw.quu);
-            bw.qux_reg.copy_from(&bw.qux);
+            copy(&bw.quu, &mut bw.quu_reg);
+            copy(&bw.qux, &mut bw.qux_reg);
             if mu > 0.0 {
-                bw.quu_reg.gemm_tr(mu, &lin.b, &lin.b, 1.0);
-                bw.qux_reg.gemm_tr(mu, &lin.b, &lin.a, 1.0);
+                sp.b.tr_mul_add(mu, &lin.b, &mut bw.quu_reg);
+                sp.b.tr_mul_add(mu, &lin.a, &mut bw.qux_reg);
                 for j in 0..nu {
                     // A trace of control-space damping for controls that do not move the state.
                     bw.quu_reg[(j, j)] += mu * 1e-6;
@@ -548,7 +570,7 @@ impl Ilqg {
                 l[j] = qp.x[j];
             }
             let gain = &mut self.gains[k];
-            gain.fill(0.0);
+            gain.as_mut_slice().fill(0.0);
             if let Some(regularized) = &qp.factor {
                 let mut free = [0usize; MAX_QP];
                 let mut nfree = 0;
@@ -581,17 +603,34 @@ impl Ilqg {
             bw.s_vec.copy_from(&bw.qx);
             bw.s_vec.gemv_tr(1.0, gain, &bw.t_m, 1.0);
             bw.s_vec.gemv_tr(1.0, &bw.qux, l, 1.0);
-            bw.t_mn.copy_from(&bw.qux);
+            copy(&bw.qux, &mut bw.t_mn);
             bw.t_mn.gemm(1.0, &bw.quu, gain, 1.0); // Q_uu L + Q_ux
-            bw.s_mat.copy_from(&bw.qxx);
-            bw.s_mat.gemm_tr(1.0, gain, &bw.t_mn, 1.0);
-            bw.s_mat.gemm_tr(1.0, &bw.qux, gain, 1.0);
+            // S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L as 2m rank-one updates, each an axpy on
+            // contiguous columns of the transposed thin factors (nalgebra's transposed products
+            // are plain dot loops).
+            transpose(gain, &mut bw.lt);
+            transpose(&bw.qux, &mut bw.xt);
             let n = bw.s_mat.nrows();
-            for i in 0..n {
-                for j in 0..i {
-                    let m = 0.5 * (bw.s_mat[(i, j)] + bw.s_mat[(j, i)]);
-                    bw.s_mat[(i, j)] = m;
-                    bw.s_mat[(j, i)] = m;
+            let (gd, td) = (gain.as_slice(), bw.t_mn.as_slice());
+            let (ltd, xtd) = (bw.lt.as_slice(), bw.xt.as_slice());
+            let sd = bw.s_mat.as_mut_slice();
+            sd.copy_from_slice(bw.qxx.as_slice());
+            for j in 0..n {
+                let col = &mut sd[j * n..(j + 1) * n];
+                for r in 0..nu {
+                    let (t, g) = (td[j * nu + r], gd[j * nu + r]);
+                    let (lr, xr) = (&ltd[r * n..(r + 1) * n], &xtd[r * n..(r + 1) * n]);
+                    for ((s, l), x) in col.iter_mut().zip(lr).zip(xr) {
+                        *s += l * t + x * g;
+                    }
+                }
+            }
+            // Symmetric against round-off: the average of the two triangles.
+            for j in 0..n {
+                for i in j + 1..n {
+                    let m = 0.5 * (sd[j * n + i] + sd[i * n + j]);
+                    sd[j * n + i] = m;
+                    sd[i * n + j] = m;
                 }
             }
         }
@@ -601,6 +640,25 @@ impl Ilqg {
     /// The current gains (valid after [`Ilqg::solve`]).
     pub fn gains(&self) -> &[DMatrix<f64>] {
         &self.gains
+    }
+}
+
+/// `dst = src` for matrices of one size, as one `memcpy` (nalgebra's `copy_from` goes element by
+/// element through a generic iterator, which showed in profiles of the 42-dimensional delay
+/// problem).
+fn copy(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
+    dst.as_mut_slice().copy_from_slice(src.as_slice());
+}
+
+/// `dst = srcᵀ` on the column-major storage (see [`copy`]).
+fn transpose(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
+    let (r, c) = (src.nrows(), src.ncols());
+    debug_assert_eq!((dst.nrows(), dst.ncols()), (c, r));
+    let (sd, dd) = (src.as_slice(), dst.as_mut_slice());
+    for j in 0..c {
+        for (i, &v) in sd[j * r..(j + 1) * r].iter().enumerate() {
+            dd[i * c + j] = v;
+        }
     }
 }
 
@@ -663,12 +721,14 @@ fn linearize(problem: &Problem, traj: &mut Trajectory) {
     // way whatever the thread count, so the solution does not depend on it.
     traj.lin[..h]
         .par_iter_mut()
+        .zip(traj.sparse[..h].par_iter_mut())
         .zip(traj.derivs[..h].par_iter_mut())
         .enumerate()
         .with_min_len(8)
-        .for_each(|(k, (lin, d))| {
+        .for_each(|(k, ((lin, sparse), d))| {
             let (x, u) = (xs[k].as_slice(), us[k].as_slice());
             problem.dynamics.linearize(k, x, u, lin);
+            sparse.assign(lin);
             problem.cost.running_derivatives(k, x, u, d);
         });
     problem

@@ -5,6 +5,7 @@ pub mod boxqp;
 pub mod ilqg;
 pub mod moments;
 pub mod sooc;
+pub mod sparse;
 
 pub use ilqg::{Ilqg, IlqgOptions, Solution, StopReason};
 

@@ -17,7 +17,7 @@ use crate::cost::{Cost, CostDerivatives, TrackingCost};
 use crate::dynamics::{Dynamics, EulerModel, Linearization, NoiseKind};
 use crate::scalar::{MAX_NU, MAX_NW, MAX_NX};
 use nalgebra::DMatrix;
-use num_dual::Dual64;
+use num_dual::{Dual, Dual64};
 use std::sync::Mutex;
 
 /// Number of entries of `vech P` for an n×n symmetric matrix.
@@ -62,7 +62,9 @@ struct Scratch {
     da: DMatrix<f64>,
     dcx: DMatrix<f64>,
     dc: Vec<f64>,
-    e: DMatrix<f64>,
+    /// `P Aᵀ` and `P Cx_iᵀ` at the knot being linearised.
+    pat: DMatrix<f64>,
+    pcx: Vec<DMatrix<f64>>,
 }
 
 impl Scratch {
@@ -76,7 +78,8 @@ impl Scratch {
             da: z(n, n),
             dcx: z(n, n),
             dc: vec![0.0; n],
-            e: z(n, n),
+            pat: z(n, n),
+            pcx: (0..p).map(|_| z(n, n)).collect(),
         }
     }
 }
@@ -133,6 +136,62 @@ fn add_sandwich(
     }
 }
 
+/// The parts of the plant's linearisation that the covariance step needs: `A`, `c_i`, `Cx_i`
+/// (not `B`: m fewer dual flow evaluations per step of every line-search rollout). Computed as
+/// [`EulerModel`]'s `linearize` computes them, so the values are the same.
+fn state_linearization(base: &EulerModel, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+    let (n, m, nw) = (base.nx(), base.nu(), base.nw());
+    let mut xd = [Dual64::from(0.0); MAX_NX];
+    let mut ud = [Dual64::from(0.0); MAX_NU];
+    for (d, v) in xd.iter_mut().zip(x) {
+        *d = Dual64::from(*v);
+    }
+    for (d, v) in ud.iter_mut().zip(u) {
+        *d = Dual64::from(*v);
+    }
+    let mut out = [Dual64::from(0.0); MAX_NX];
+    for j in 0..n {
+        xd[j].eps = 1.0;
+        base.flow(k, &xd[..n], &ud[..m], &mut out[..n]);
+        xd[j].eps = 0.0;
+        for r in 0..n {
+            lin.a[(r, j)] = out[r].eps;
+        }
+    }
+    if nw == 0 {
+        lin.noise = NoiseKind::None;
+        return;
+    }
+    let mut g = [0.0; MAX_NX * MAX_NW];
+    let mut dgx = [0.0; MAX_NX * MAX_NX * MAX_NW];
+    let mut dgu = [0.0; MAX_NU * MAX_NX * MAX_NW];
+    base.noise_jacobian(x, u, &mut g, &mut dgx, &mut dgu);
+    let block = n * nw;
+    let mut dependent = false;
+    for ch in 0..nw {
+        for r in 0..n {
+            lin.c[(r, ch)] = g[ch * n + r];
+        }
+        for j in 0..n {
+            for r in 0..n {
+                let v = dgx[j * block + ch * n + r];
+                dependent |= v != 0.0;
+                lin.cx[ch][(r, j)] = v;
+            }
+        }
+        for j in 0..m {
+            for r in 0..n {
+                dependent |= dgu[j * block + ch * n + r] != 0.0;
+            }
+        }
+    }
+    lin.noise = if dependent {
+        NoiseKind::Dependent
+    } else {
+        NoiseKind::Additive
+    };
+}
+
 impl Dynamics for MomentDynamics<'_> {
     fn nx(&self) -> usize {
         let n = self.base.nx();
@@ -150,7 +209,7 @@ impl Dynamics for MomentDynamics<'_> {
         let mut guard = self.scratch.lock().expect("scratch lock");
         let s = &mut *guard;
         self.base.step(k, &z[..n], u, &mut next[..n]);
-        self.base.linearize(k, &z[..n], u, &mut s.lin);
+        state_linearization(self.base, k, &z[..n], u, &mut s.lin);
         unpack(n, &z[n..], &mut s.p);
         s.next.fill(0.0);
         add_sandwich(&mut s.next, 1.0, &s.lin.a, &s.p, &s.lin.a, &mut s.t1);
@@ -191,31 +250,29 @@ impl Dynamics for MomentDynamics<'_> {
         let noisy = s.lin.noise != NoiseKind::None;
         let dependent = s.lin.noise == NoiseKind::Dependent;
 
-        // ∂P⁺/∂P along each symmetric basis matrix E_f: A E Aᵀ + Σ Cx E Cxᵀ.
+        // ∂P⁺/∂P along each symmetric basis matrix E_ab = e_a e_bᵀ + e_b e_aᵀ (E_aa = e_a e_aᵀ
+        // counted once as in `vech`): A E Aᵀ = A_a A_bᵀ + A_b A_aᵀ with A_a the a-th column, and
+        // the same for every Cx_i. O(n²) per entry instead of the sandwich's O(n³).
         let mut f = 0;
         for a in 0..n {
             for b in a..n {
-                s.e.fill(0.0);
-                s.e[(a, b)] = 1.0;
-                s.e[(b, a)] = 1.0;
-                s.next.fill(0.0);
-                add_sandwich(&mut s.next, 1.0, &s.lin.a, &s.e, &s.lin.a, &mut s.t1);
-                if dependent {
-                    for i in 0..nw {
-                        add_sandwich(
-                            &mut s.next,
-                            1.0,
-                            &s.lin.cx[i],
-                            &s.e,
-                            &s.lin.cx[i],
-                            &mut s.t1,
-                        );
-                    }
-                }
                 let mut e = 0;
                 for r in 0..n {
                     for c in r..n {
-                        lin.a[(n + e, n + f)] = s.next[(r, c)];
+                        let pair = |m: &DMatrix<f64>| {
+                            if a == b {
+                                m[(r, a)] * m[(c, a)]
+                            } else {
+                                m[(r, a)] * m[(c, b)] + m[(r, b)] * m[(c, a)]
+                            }
+                        };
+                        let mut v = pair(&s.lin.a);
+                        if dependent {
+                            for i in 0..nw {
+                                v += pair(&s.lin.cx[i]);
+                            }
+                        }
+                        lin.a[(n + e, n + f)] = v;
                         e += 1;
                     }
                 }
@@ -224,7 +281,60 @@ impl Dynamics for MomentDynamics<'_> {
         }
         debug_assert_eq!(f, pairs_len);
 
-        // ∂P⁺/∂m_j and ∂P⁺/∂u_j need ∂A/∂(m,u)_j and ∂G/∂(m,u)_j: one nested-dual pass each.
+        // ∂A/∂(m,u)_j from the second derivatives of the flow: column i of ∂A/∂z_j is
+        // ∂²Φ/∂z_j ∂x_i, one nested-dual flow evaluation per pair. The pairs with both indices
+        // in the state are symmetric, so only i ≤ j is evaluated, and B's second derivatives
+        // (not needed) are never formed.
+        let mut d2 = [[[0.0; MAX_NX]; MAX_NX]; MAX_NX + MAX_NU];
+        {
+            let zero = Dual::from_re(Dual64::from(0.0));
+            let mut xdd = [zero; MAX_NX];
+            let mut udd = [zero; MAX_NU];
+            for (d, v) in xdd.iter_mut().zip(&z[..n]) {
+                *d = Dual::from_re(Dual64::from(*v));
+            }
+            for (d, v) in udd.iter_mut().zip(u) {
+                *d = Dual::from_re(Dual64::from(*v));
+            }
+            let mut out = [zero; MAX_NX];
+            for j in 0..n + m {
+                for i in 0..n {
+                    if j < n && i < j {
+                        d2[j][i] = d2[i][j];
+                        continue;
+                    }
+                    // Inner seed on z_j, outer seed on x_i: out.eps.eps = ∂²Φ/∂x_i ∂z_j.
+                    if j < n {
+                        xdd[j].re.eps = 1.0;
+                    } else {
+                        udd[j - n].re.eps = 1.0;
+                    }
+                    xdd[i].eps.re = 1.0;
+                    base.flow(k, &xdd[..n], &udd[..m], &mut out[..n]);
+                    xdd[i].eps.re = 0.0;
+                    if j < n {
+                        xdd[j].re.eps = 0.0;
+                    } else {
+                        udd[j - n].re.eps = 0.0;
+                    }
+                    for r in 0..n {
+                        d2[j][i][r] = out[r].eps.eps;
+                    }
+                }
+            }
+        }
+
+        // ∂P⁺/∂m_j and ∂P⁺/∂u_j: d(A P Aᵀ) = X + Xᵀ with X = dA (P Aᵀ), and the same for each
+        // Cx_i; P Aᵀ and P Cx_iᵀ do not depend on j.
+        // P Aᵀ = (A P)ᵀ, P being symmetric.
+        s.t1.gemm(1.0, &s.lin.a, &s.p, 0.0);
+        s.t1.transpose_to(&mut s.pat);
+        if dependent {
+            for i in 0..nw {
+                s.t1.gemm(1.0, &s.lin.cx[i], &s.p, 0.0);
+                s.t1.transpose_to(&mut s.pcx[i]);
+            }
+        }
         let mut xd = [Dual64::from(0.0); MAX_NX];
         let mut ud = [Dual64::from(0.0); MAX_NU];
         for (d, v) in xd.iter_mut().zip(&z[..n]) {
@@ -233,30 +343,32 @@ impl Dynamics for MomentDynamics<'_> {
         for (d, v) in ud.iter_mut().zip(u) {
             *d = Dual64::from(*v);
         }
-        let mut ja = [Dual64::from(0.0); MAX_NX * MAX_NX];
-        let mut jb = [Dual64::from(0.0); MAX_NX * MAX_NU];
         let mut g = [Dual64::from(0.0); MAX_NX * MAX_NW];
         let mut dgx = [Dual64::from(0.0); MAX_NX * MAX_NX * MAX_NW];
         let mut dgu = [Dual64::from(0.0); MAX_NU * MAX_NX * MAX_NW];
         let block = n * nw;
         for j in 0..n + m {
-            if j < n {
-                xd[j].eps = 1.0;
-            } else {
-                ud[j - n].eps = 1.0;
-            }
-            base.flow_jacobian(k, &xd[..n], &ud[..m], &mut ja, &mut jb);
             for c in 0..n {
                 for r in 0..n {
-                    s.da[(r, c)] = ja[c * n + r].eps;
+                    s.da[(r, c)] = d2[j][c][r];
                 }
             }
-            // d(A P Aᵀ) = dA P Aᵀ + A P dAᵀ
-            s.next.fill(0.0);
-            add_sandwich(&mut s.next, 1.0, &s.da, &s.p, &s.lin.a, &mut s.t1);
-            add_sandwich(&mut s.next, 1.0, &s.lin.a, &s.p, &s.da, &mut s.t1);
+            s.t1.gemm(1.0, &s.da, &s.pat, 0.0);
             if noisy {
+                if j < n {
+                    xd[j].eps = 1.0;
+                } else {
+                    ud[j - n].eps = 1.0;
+                }
                 base.noise_jacobian(&xd[..n], &ud[..m], &mut g, &mut dgx, &mut dgu);
+                if j < n {
+                    xd[j].eps = 0.0;
+                } else {
+                    ud[j - n].eps = 0.0;
+                }
+            }
+            s.next.fill(0.0);
+            if noisy {
                 for i in 0..nw {
                     // dc_i = ∂c_i/∂(m,u)_j; d(c cᵀ) = dc cᵀ + c dcᵀ
                     for r in 0..n {
@@ -268,21 +380,20 @@ impl Dynamics for MomentDynamics<'_> {
                         }
                     }
                     if dependent {
-                        // d(Cx P Cxᵀ) = dCx P Cxᵀ + Cx P dCxᵀ, dCx from the second derivatives.
+                        // dCx from the second derivatives of the noise gain.
                         for c in 0..n {
                             for r in 0..n {
                                 s.dcx[(r, c)] = dgx[c * block + i * n + r].eps;
                             }
                         }
-                        add_sandwich(&mut s.next, 1.0, &s.dcx, &s.p, &s.lin.cx[i], &mut s.t1);
-                        add_sandwich(&mut s.next, 1.0, &s.lin.cx[i], &s.p, &s.dcx, &mut s.t1);
+                        s.t1.gemm(1.0, &s.dcx, &s.pcx[i], 1.0);
                     }
                 }
             }
             let mut e = 0;
             for r in 0..n {
                 for c in r..n {
-                    let v = s.next[(r, c)];
+                    let v = s.next[(r, c)] + s.t1[(r, c)] + s.t1[(c, r)];
                     if j < n {
                         lin.a[(n + e, j)] = v;
                     } else {
@@ -290,11 +401,6 @@ impl Dynamics for MomentDynamics<'_> {
                     }
                     e += 1;
                 }
-            }
-            if j < n {
-                xd[j].eps = 0.0;
-            } else {
-                ud[j - n].eps = 0.0;
             }
         }
     }
