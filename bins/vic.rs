@@ -910,39 +910,6 @@ struct DemoArgs {
     json: bool,
 }
 
-/// Child processes and a namespace that must not outlive the demo, whatever happens.
-struct DemoGuard {
-    namespace: String,
-    children: Vec<std::process::Child>,
-}
-
-impl DemoGuard {
-    fn terminate(child: &mut std::process::Child) {
-        if let Ok(None) = child.try_wait() {
-            // SAFETY: kill(2) on the pid of a child we spawned and have not reaped.
-            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
-            let t0 = std::time::Instant::now();
-            while let Ok(None) = child.try_wait() {
-                if t0.elapsed() > std::time::Duration::from_secs(3) {
-                    let _ = child.kill();
-                    let _ = child.wait();
-                    break;
-                }
-                std::thread::sleep(std::time::Duration::from_millis(10));
-            }
-        }
-    }
-}
-
-impl Drop for DemoGuard {
-    fn drop(&mut self) {
-        for c in &mut self.children {
-            Self::terminate(c);
-        }
-        vic::transport::remove_namespace(&self.namespace);
-    }
-}
-
 fn sibling_binary(name: &str) -> Result<PathBuf, Failure> {
     let exe = std::env::current_exe().map_err(Failure::runtime)?;
     let path = exe.with_file_name(name);
@@ -1067,10 +1034,7 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
     let ilqg = ilqg.map_err(|_| Failure::runtime("planning panicked"))??;
     let ilqg0 = ilqg0.map_err(|_| Failure::runtime("planning panicked"))??;
 
-    let mut guard = DemoGuard {
-        namespace: namespace.clone(),
-        children: Vec::new(),
-    };
+    let mut guard = vic::daemon::Children::new(&namespace);
     let mut board = Proc::new(&board_bin);
     board
         .arg("--config")
@@ -1126,7 +1090,7 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
     }
     // Stop the board: it prints its statistics at the end of the current tick.
     let mut child = guard.children.pop().expect("the board");
-    DemoGuard::terminate(&mut child);
+    vic::daemon::Children::terminate(&mut child);
     let mut stdout = String::new();
     if let Some(mut s) = child.stdout.take() {
         use std::io::Read;

@@ -15,6 +15,7 @@ pub mod board;
 pub mod central;
 pub mod config;
 pub mod cost;
+pub mod daemon;
 pub mod delay;
 pub mod dynamics;
 pub mod evaluation;

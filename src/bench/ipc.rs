@@ -323,49 +323,13 @@ pub struct Pair {
     pub trials: u64,
 }
 
-/// Children and a namespace that must not outlive the run.
-struct Guard {
-    ns: String,
-    children: Vec<std::process::Child>,
-}
-
-impl Guard {
-    fn terminate(child: &mut std::process::Child) {
-        if let Ok(None) = child.try_wait() {
-            // SAFETY: kill(2) on the pid of a child we spawned and have not reaped.
-            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
-            let t0 = std::time::Instant::now();
-            while let Ok(None) = child.try_wait() {
-                if t0.elapsed() > Duration::from_secs(3) {
-                    let _ = child.kill();
-                    let _ = child.wait();
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        }
-    }
-}
-
-impl Drop for Guard {
-    fn drop(&mut self) {
-        for c in &mut self.children {
-            Self::terminate(c);
-        }
-        remove_namespace(&self.ns);
-    }
-}
-
 /// Runs `vic-board` and `vic-planner --strategy stiffness` in a fresh namespace, injects a small
 /// torque pulse every 100 ms and records the state age, the pulse-to-effect delay and the board's
 /// statistics.
 pub fn run_pair(o: &PairOptions) -> Result<Pair> {
     use std::process::{Command, Stdio};
     let ns = super::unique_namespace("bp");
-    let mut guard = Guard {
-        ns: ns.clone(),
-        children: Vec::new(),
-    };
+    let mut guard = crate::daemon::Children::new(&ns);
     let mut board = Command::new(&o.board_bin);
     board
         .arg("--config")
@@ -471,7 +435,7 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
     }
     guard.children.pop();
     let mut board = guard.children.pop().expect("the board");
-    Guard::terminate(&mut board);
+    crate::daemon::Children::terminate(&mut board);
     let mut stdout = String::new();
     if let Some(mut s) = board.stdout.take() {
         use std::io::Read;

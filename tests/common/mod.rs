@@ -2,6 +2,7 @@
 //! place (config/).
 #![allow(dead_code)] // each test binary uses a part
 
+pub mod alloc;
 pub mod daemons;
 
 use std::path::Path;
