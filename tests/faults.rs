@@ -10,6 +10,14 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 use vic::transport::{Endpoint, Mode, Role, StateMsg, namespace_files};
 
+/// The tests run one at a time: each runs a 1 kHz board and a planner, and four pairs at once on
+/// a 2-core machine would test the machine, not the board.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Collects the board's states for `dur` (drained often enough that none is lost).
 fn watch(ep: &Endpoint, dur: Duration, states: &mut Vec<StateMsg>) {
     let t0 = Instant::now();
@@ -47,6 +55,7 @@ fn vic(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn a_killed_planner_leaves_the_board_in_safe_hold_and_a_new_one_resumes() {
+    let _serial = serial();
     let plan = sooc_plan();
     let ns = unique_namespace("fp");
     let mut d = Daemons::default();
@@ -98,6 +107,7 @@ fn a_killed_planner_leaves_the_board_in_safe_hold_and_a_new_one_resumes() {
 
 #[test]
 fn a_killed_board_is_replaced_and_the_planner_carries_on() {
+    let _serial = serial();
     let plan = sooc_plan();
     let ns = unique_namespace("fb");
     let mut d = Daemons::default();
@@ -157,6 +167,7 @@ fn a_killed_board_is_replaced_and_the_planner_carries_on() {
 
 #[test]
 fn injected_pulses_show_within_two_ticks_and_namespaces_do_not_cross() {
+    let _serial = serial();
     use std::os::unix::fs::PermissionsExt;
     let plan = sooc_plan();
     let (a, b) = (unique_namespace("ia"), unique_namespace("ib"));
@@ -250,6 +261,7 @@ fn injected_pulses_show_within_two_ticks_and_namespaces_do_not_cross() {
 
 #[test]
 fn the_plant_guard_latches_a_fault_that_status_reports() {
+    let _serial = serial();
     let plan = sooc_plan();
     let ns = unique_namespace("fg");
     let mut d = Daemons::default();
