@@ -197,7 +197,7 @@ impl Dynamics for EulerModel {
     }
 
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
+        let (nx, nu) = (self.nx(), self.nu());
         let mut a = [0.0; MAX_NX * MAX_NX];
         let mut b = [0.0; MAX_NX * MAX_NU];
         self.flow_jacobian(k, x, u, &mut a, &mut b);
@@ -211,6 +211,22 @@ impl Dynamics for EulerModel {
                 lin.b[(i, j)] = b[j * nx + i];
             }
         }
+        self.noise_linearization(x, u, lin, true);
+    }
+}
+
+impl EulerModel {
+    /// The noise part of the linearisation: `c_i`, `Cx_i` and (if `with_cu`) `Cu_i`, and whether
+    /// the noise depends on the state or controls at all. SOOC's covariance step, which needs no
+    /// `Cu`, calls it with `with_cu = false`.
+    pub(crate) fn noise_linearization(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        lin: &mut Linearization,
+        with_cu: bool,
+    ) {
+        let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
         if nw == 0 {
             lin.noise = NoiseKind::None;
             return;
@@ -236,7 +252,9 @@ impl Dynamics for EulerModel {
                 for r in 0..nx {
                     let v = dgu[j * block + ch * nx + r];
                     dependent |= v != 0.0;
-                    lin.cu[ch][(r, j)] = v;
+                    if with_cu {
+                        lin.cu[ch][(r, j)] = v;
+                    }
                 }
             }
         }

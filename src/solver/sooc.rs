@@ -140,7 +140,7 @@ fn add_sandwich(
 /// (not `B`: m fewer dual flow evaluations per step of every line-search rollout). Computed as
 /// [`EulerModel`]'s `linearize` computes them, so the values are the same.
 fn state_linearization(base: &EulerModel, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-    let (n, m, nw) = (base.nx(), base.nu(), base.nw());
+    let (n, m) = (base.nx(), base.nu());
     let mut xd = [Dual64::from(0.0); MAX_NX];
     let mut ud = [Dual64::from(0.0); MAX_NU];
     for (d, v) in xd.iter_mut().zip(x) {
@@ -158,38 +158,7 @@ fn state_linearization(base: &EulerModel, k: usize, x: &[f64], u: &[f64], lin: &
             lin.a[(r, j)] = out[r].eps;
         }
     }
-    if nw == 0 {
-        lin.noise = NoiseKind::None;
-        return;
-    }
-    let mut g = [0.0; MAX_NX * MAX_NW];
-    let mut dgx = [0.0; MAX_NX * MAX_NX * MAX_NW];
-    let mut dgu = [0.0; MAX_NU * MAX_NX * MAX_NW];
-    base.noise_jacobian(x, u, &mut g, &mut dgx, &mut dgu);
-    let block = n * nw;
-    let mut dependent = false;
-    for ch in 0..nw {
-        for r in 0..n {
-            lin.c[(r, ch)] = g[ch * n + r];
-        }
-        for j in 0..n {
-            for r in 0..n {
-                let v = dgx[j * block + ch * n + r];
-                dependent |= v != 0.0;
-                lin.cx[ch][(r, j)] = v;
-            }
-        }
-        for j in 0..m {
-            for r in 0..n {
-                dependent |= dgu[j * block + ch * n + r] != 0.0;
-            }
-        }
-    }
-    lin.noise = if dependent {
-        NoiseKind::Dependent
-    } else {
-        NoiseKind::Additive
-    };
+    base.noise_linearization(x, u, lin, false);
 }
 
 impl Dynamics for MomentDynamics<'_> {
