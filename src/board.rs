@@ -337,6 +337,8 @@ pub struct Board {
     next_slot: usize,
     last_command_seq: u64,
     last_control_seq: u64,
+    /// Sequence number of the reset that started the present trial.
+    reset_seq: u64,
     used_command_seq: u64,
     /// The knot last taken from a valid command, and the trial time it covered last.
     last_knot: Knot,
@@ -420,6 +422,7 @@ impl Board {
             next_slot: 0,
             last_command_seq: 0,
             last_control_seq: 0,
+            reset_seq: 0,
             used_command_seq: 0,
             last_knot: Knot::default(),
             last_cover_ns: 0,
@@ -614,6 +617,7 @@ impl Board {
             self.x[..self.dof].copy_from_slice(&c.q0[..self.dof]);
             self.x[self.dof..2 * self.dof].copy_from_slice(&c.qd0[..self.dof]);
             self.trial = c.trial;
+            self.reset_seq = c.seq;
             self.start_ns = Some(c.start_ns);
             self.mode = Mode::Idle;
             self.fault = FaultReason::None;
@@ -985,6 +989,7 @@ impl Board {
             disturbance_seq: self.disturbance_seq,
             disturbance_tick: self.disturbance_tick,
             watchdog_deadline_ns: self.last_cover_ns + self.cfg.watchdog_ns,
+            reset_seq: self.reset_seq,
             ..Default::default()
         };
         s.q[..dof].copy_from_slice(&self.x[..dof]);

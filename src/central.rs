@@ -162,6 +162,9 @@ pub struct Central {
     /// ([`crate::transport::session_seq`]); the board refuses numbers that go backwards.
     seq: u64,
     control_seq: u64,
+    /// The reset that started the present trial: states of any other (a trial of the same
+    /// number before a restart of this controller) are ignored.
+    reset_seq: u64,
     recorded: Vec<Option<[f64; MAX_NX]>>,
     seen: Vec<Option<[f64; MAX_NX]>>,
     latest_seen: Option<usize>,
@@ -184,6 +187,7 @@ impl Central {
             start_ns: 0,
             seq: crate::transport::session_seq(),
             control_seq: crate::transport::session_seq(),
+            reset_seq: 0,
             recorded: vec![None; n + 1],
             seen: vec![None; n + 1],
             latest_seen: None,
@@ -214,6 +218,7 @@ impl Central {
         self.fault = false;
         let dof = self.track.dof;
         self.control_seq += 1;
+        self.reset_seq = self.control_seq;
         let mut c = Control {
             version: PROTOCOL_VERSION,
             kind: ControlKind::Reset as u32,
@@ -251,7 +256,7 @@ impl Central {
     /// A state arrived at `recv_ns`: record it (truth, for the results) and put it in the sensor
     /// delay line (what the controller will see).
     pub fn on_state(&mut self, s: &StateMsg, recv_ns: u64) {
-        if s.trial != self.trial {
+        if s.trial != self.trial || s.reset_seq != self.reset_seq {
             return;
         }
         let mode = Mode::from_u32(s.mode);
@@ -669,5 +674,68 @@ pub fn summarize(
         } else {
             f64::MAX
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Scenario;
+    use std::path::Path;
+
+    fn central() -> Central {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let s = Scenario::load(
+            &root.join("config/two_link_divergent.toml"),
+            &["noise.sigma=0.02".into()],
+        )
+        .unwrap();
+        let setup = crate::plan::setup(&s).unwrap();
+        let text = std::fs::read_to_string(
+            root.join("tests/data/realtime/two_link_divergent_sigma002_sooc.json"),
+        )
+        .unwrap();
+        let plan: PlanFile = serde_json::from_str(&text).unwrap();
+        let timing = Timing {
+            latency_steps: 0,
+            sensor_latency_ns: 0,
+            command_latency_ns: 0,
+            lookahead_ns: 40_000_000,
+        };
+        Central::new(
+            Track::new(&plan, &setup).unwrap(),
+            Strategy::Stiffness,
+            timing,
+        )
+    }
+
+    #[test]
+    fn states_of_a_trial_before_a_restart_are_not_mixed_in() {
+        let mut c = central();
+        let reset = c.begin_trial(0, 1, 1_000_000_000, 0);
+        // A state of "trial 0" from before this controller started (another reset), in safe
+        // hold 100 ms into the movement: not ours.
+        let stale = StateMsg {
+            trial: 0,
+            mode: Mode::SafeHold as u32,
+            trial_time_ns: 100_000_000,
+            reset_seq: reset.seq - 7,
+            ..Default::default()
+        };
+        c.on_state(&stale, 0);
+        let r = c.record();
+        assert!(!r.safe_hold, "an old trial's safe hold counted");
+        assert_eq!(r.missing_states, c.track.steps + 1);
+        // The same state from our reset is recorded.
+        c.on_state(
+            &StateMsg {
+                reset_seq: reset.seq,
+                ..stale
+            },
+            0,
+        );
+        let r = c.record();
+        assert!(r.safe_hold);
+        assert_eq!(r.missing_states, c.track.steps);
     }
 }

@@ -115,6 +115,9 @@ pub struct StateMsg {
     /// Trial time at which the watchdog expires unless a valid command covers the present
     /// [ns] (the last covered period + the watchdog timeout).
     pub watchdog_deadline_ns: u64,
+    /// Sequence number of the reset that started this trial: a restarted planner numbers its
+    /// trials from 0 again, and this tells its trial from the one before the restart.
+    pub reset_seq: u64,
 }
 
 /// One knot of a command: the inputs of the impedance law (Eq. 4) at one time.
