@@ -12,8 +12,8 @@ mod common;
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::dynamics::{Dynamics, EulerModel, Integrator, Linearization, NoiseKind};
-use vic::model::{
+use vic::core::dynamics::{Dynamics, EulerModel, Integrator, Linearization, NoiseKind};
+use vic::core::model::{
     Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
 };
 
