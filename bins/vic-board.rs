@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::Board;
 use vic::rt::realtime::{BoardLoopOptions, run_board};
-use vic::rt::transport::{DEFAULT_NAMESPACE, Endpoint, Role};
+use vic::rt::transport::{BoardPorts, DEFAULT_NAMESPACE};
 
 /// The simulated board: plant, impedance law and disturbances at 1 kHz.
 ///
@@ -84,7 +84,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     if args.rate_hz == 0 || args.rate_hz > 10_000 {
         return Err(input(format!("--rate-hz {}: use 1 to 10000", args.rate_hz)));
     }
-    vic::rt::transport::validate_namespace(&args.namespace).map_err(input)?;
+    vic::rt::transport::validate_namespace(&args.namespace).map_err(|e| input(e.to_string()))?;
     let scenario =
         Scenario::load(&args.config, &args.overrides).map_err(|e| input(e.to_string()))?;
     let setup = vic::planning::plan::setup(&scenario).map_err(|e| input(e.to_string()))?;
@@ -101,11 +101,12 @@ fn run(args: Args) -> Result<(), (u8, String)> {
         ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
             .map_err(|e| (1, format!("cannot install the signal handler: {e}")))?;
     }
-    let ep = Endpoint::open(&args.namespace, Role::Board).map_err(|e| (1, e.to_string()))?;
-    if ep.cleaned_dead_nodes > 0 {
+    let ep = BoardPorts::open(&args.namespace).map_err(|e| (1, e.to_string()))?;
+    let cleaned_dead_nodes = ep.session().cleaned_dead_nodes();
+    if cleaned_dead_nodes > 0 {
         eprintln!(
             "vic-board: removed the resources of {} dead process(es) in namespace \"{}\"",
-            ep.cleaned_dead_nodes, args.namespace
+            cleaned_dead_nodes, args.namespace
         );
     }
     if !vic::rt::realtime::lock_memory() {

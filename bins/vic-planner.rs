@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use vic::planning::plan::{Method, PlanFile};
 use vic::planning::scenario::Scenario;
 use vic::rt::central::{Central, Strategy, Timing, lockstep, run_live, split_latency_ms};
-use vic::rt::transport::{DEFAULT_NAMESPACE, Endpoint, Role};
+use vic::rt::transport::{CentralPorts, DEFAULT_NAMESPACE};
 
 #[derive(Clone, Copy, ValueEnum)]
 enum StrategyArg {
@@ -96,7 +96,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     if args.rate_hz == 0 || args.rate_hz > 1000 || args.trials == 0 {
         return Err(input("--rate-hz must be 1..1000 and --trials ≥ 1".into()));
     }
-    vic::rt::transport::validate_namespace(&args.namespace).map_err(input)?;
+    vic::rt::transport::validate_namespace(&args.namespace).map_err(|e| input(e.to_string()))?;
     let strategy = match args.strategy {
         StrategyArg::Stiffness => Strategy::Stiffness,
         StrategyArg::DelayedFeedback => Strategy::DelayedFeedback,
@@ -167,8 +167,8 @@ fn run(args: Args) -> Result<(), (u8, String)> {
         let s = Scenario::load(&args.config, &args.overrides).map_err(|e| input(e.to_string()))?;
         // The board the live daemon would run (same limits), at 1 kHz.
         let cfg = vic::tools::launch::board_config(&s, 1_000_000);
-        let mut board =
-            vic::rt::board::Board::new(s.model.clone(), cfg, &setup.x0).map_err(input)?;
+        let mut board = vic::rt::board::Board::new(s.model.clone(), cfg, &setup.x0)
+            .map_err(|e| input(e.to_string()))?;
         lockstep(
             &mut board,
             &mut central,
@@ -184,7 +184,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
                 .map_err(|e| (1, format!("cannot install the signal handler: {e}")))?;
         }
-        let ep = Endpoint::open(&args.namespace, Role::Planner).map_err(|e| (1, e.to_string()))?;
+        let ep = CentralPorts::open(&args.namespace).map_err(|e| (1, e.to_string()))?;
         run_live(
             &ep,
             &mut central,
@@ -194,7 +194,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             std::time::Duration::from_secs_f64(args.board_timeout_s),
             &stop,
         )
-        .map_err(|e| (1, e))?
+        .map_err(|e| (1, e.to_string()))?
     };
     let divergence = args
         .divergence
