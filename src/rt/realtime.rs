@@ -234,27 +234,8 @@ pub struct BoardStats {
     pub dropped: Option<u64>,
 }
 
-/// [`Percentiles`] for JSON reports [µs].
-#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize, Default)]
-pub struct PercentilesJson {
-    pub p50: f64,
-    pub p99: f64,
-    pub p999: f64,
-    pub max: f64,
-    pub count: u64,
-}
-
-impl From<Percentiles> for PercentilesJson {
-    fn from(p: Percentiles) -> Self {
-        PercentilesJson {
-            p50: p.p50,
-            p99: p.p99,
-            p999: p.p999,
-            max: p.max,
-            count: p.count,
-        }
-    }
-}
+/// [`Percentiles`] in JSON reports [µs]: the wire type serialises as it is.
+pub type PercentilesJson = Percentiles;
 
 /// The histograms a board loop fills.
 #[derive(Default)]
@@ -385,9 +366,9 @@ pub fn run_board(
         faults: board.counters.faults,
         lost_periods: board.counters.lost_periods,
         cleaned_dead_nodes: ep.session().cleaned_dead_nodes(),
-        jitter_us: hist.jitter.percentiles().into(),
-        work_us: hist.work.percentiles().into(),
-        command_age_us: hist.command_age.percentiles().into(),
+        jitter_us: hist.jitter.percentiles(),
+        work_us: hist.work.percentiles(),
+        command_age_us: hist.command_age.percentiles(),
         recorded: record.as_ref().map(|r| r.pushed()),
         dropped: record.as_ref().map(|r| r.dropped()),
     }

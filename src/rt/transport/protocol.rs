@@ -269,8 +269,10 @@ pub struct Control {
     pub qd0: [f64; MAX_JOINTS],
 }
 
-/// Percentiles of a histogram [µs].
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+/// Percentiles of a histogram [µs] (also the form JSON reports print).
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("vic::Percentiles/1")]
 #[repr(C)]
 pub struct Percentiles {
