@@ -7,6 +7,9 @@ use std::path::{Path, PathBuf};
 
 const LAYERS: [&str; 4] = ["core", "planning", "rt", "tools"];
 
+/// Module → (its layer, the modules it names, its file).
+type Graph = BTreeMap<String, (usize, BTreeSet<(usize, String)>, PathBuf)>;
+
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     for entry in std::fs::read_dir(dir).expect("readable source directory") {
         let path = entry.expect("directory entry").path();
@@ -50,11 +53,11 @@ fn references(text: &str) -> BTreeSet<(usize, String)> {
     out
 }
 
-fn graph() -> BTreeMap<String, (usize, BTreeSet<(usize, String)>, PathBuf)> {
+fn graph() -> Graph {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = Vec::new();
     rust_files(&src, &mut files);
-    let mut g: BTreeMap<String, (usize, BTreeSet<(usize, String)>, PathBuf)> = BTreeMap::new();
+    let mut g: Graph = BTreeMap::new();
     for file in files {
         let Some((layer, module)) = module_of(&src, &file) else {
             continue;
@@ -107,7 +110,7 @@ fn no_two_modules_depend_on_each_other_in_a_cycle() {
     // Depth-first search with colours: grey = on the stack; a grey successor closes a cycle.
     fn visit(
         m: &str,
-        g: &BTreeMap<String, (usize, BTreeSet<(usize, String)>, PathBuf)>,
+        g: &Graph,
         colour: &mut BTreeMap<String, u8>,
         stack: &mut Vec<String>,
         cycles: &mut Vec<String>,
