@@ -190,7 +190,7 @@ pub fn sweep_latency(
 /// A latency in whole plan steps.
 fn latency_steps(latency_ms: f64, dt: f64) -> Result<usize, String> {
     let steps = latency_ms / 1000.0 / dt;
-    if !(steps >= 0.0) || (steps - steps.round()).abs() > 1e-6 {
+    if steps.is_nan() || steps < 0.0 || (steps - steps.round()).abs() > 1e-6 {
         return Err(format!(
             "latency {latency_ms} ms: not a whole number of {} ms steps",
             dt * 1000.0
