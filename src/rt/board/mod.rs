@@ -88,6 +88,8 @@ pub enum BoardError {
     HoldStiffness(f64),
     #[error("initial state: {got} joint angles for a {dof}-joint arm")]
     InitialState { got: usize, dof: usize },
+    #[error("a {0}-joint arm: the messages carry at most {MAX_JOINTS} joints")]
+    TooManyJoints(usize),
 }
 
 /// Most messages of each kind a step takes; more are counted as rejected ([`Rejection::Overflow`]).
@@ -230,6 +232,9 @@ impl Board {
         }
         if !(cfg.hold_stiffness.is_finite() && damping.gain(cfg.hold_stiffness) >= 0.0) {
             return Err(BoardError::HoldStiffness(cfg.hold_stiffness));
+        }
+        if model.dof() > MAX_JOINTS {
+            return Err(BoardError::TooManyJoints(model.dof()));
         }
         if q0.len() < model.dof() {
             return Err(BoardError::InitialState {
