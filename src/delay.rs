@@ -98,12 +98,22 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
         out.view_mut((0, 0), (n, g.ncols())).copy_from(g);
     }
 
+    fn parallel_linearization(&self) -> bool {
+        // The augmented part is a fixed shift: the cost is the base model's.
+        self.base.parallel_linearization()
+    }
+
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         let (n, m) = (self.base.nx(), self.base.nu());
         let total = self.nx();
-        // Own scratch per call: knots are linearised in parallel.
-        let mut own = Linearization::new(n, m, self.base.nw());
-        let base = &mut own;
+        // The shared scratch when free (the solvers linearise a cheap model's knots in order, and
+        // then nothing is allocated); an own one when another thread holds it.
+        let mut guard = self.scratch.try_lock();
+        let mut own = None;
+        let base = match guard.as_mut() {
+            Ok(g) => &mut g.0,
+            Err(_) => own.insert(Linearization::new(n, m, self.base.nw())),
+        };
         self.base.linearize(k, &x[..n], self.acting(x, u), base);
         lin.a.fill(0.0);
         lin.b.fill(0.0);
