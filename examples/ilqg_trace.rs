@@ -1,0 +1,69 @@
+//! Prints ILQG's progress on a scenario, iteration by iteration (step length, μ, merit):
+//! `cargo run --release --example ilqg_trace -- config/single_joint_delay.toml task.delay_ms=0`.
+
+use nalgebra::DVector;
+use std::path::Path;
+use vic::config::Scenario;
+use vic::delay::Delayed;
+use vic::plan::{self, DelayedCost};
+use vic::solver::{Ilqg, Problem};
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let file = args
+        .first()
+        .cloned()
+        .unwrap_or("config/single_joint_delay.toml".into());
+    let s = Scenario::load(Path::new(&file), &args[1.min(args.len())..]).expect("scenario loads");
+    let setup = plan::setup(&s).expect("scenario sets up");
+    let (steps, d) = (s.task.steps, s.task.delay_steps());
+    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+    let problem = Problem {
+        dynamics: &delayed,
+        cost: &cost,
+        x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
+        horizon: steps,
+        bounds: setup.bounds.clone(),
+    };
+    let plain = Problem {
+        dynamics: &setup.dynamics,
+        cost: &setup.cost,
+        x0: setup.x0.clone(),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    let u_init: Vec<DVector<f64>> = if std::env::var("UNDELAYED").is_ok() {
+        let t = std::time::Instant::now();
+        let u = vic::delay::undelayed_guess(
+            &plain,
+            setup.u_init[0].as_slice(),
+            d,
+            &s.solver.options,
+            &setup.u_init,
+        )
+        .expect("undelayed solve");
+        println!("undelayed guess: {:.2} ms", t.elapsed().as_secs_f64() * 1e3);
+        u
+    } else {
+        (0..steps)
+            .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
+            .collect()
+    };
+    let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+    solver.on_iteration = Some(Box::new(|p| {
+        println!(
+            "{:4} alpha {:8.5} mu {:10.3e} merit {:.10e}",
+            p.iteration, p.alpha, p.mu, p.merit
+        )
+    }));
+    let sol = solver.try_solve(&problem, &u_init).expect("solves");
+    println!(
+        "{} iterations, {:?}, cost {:.10e}, expected {:.10e}, {:.2} ms",
+        sol.iterations,
+        sol.stop,
+        sol.cost,
+        sol.expected_cost,
+        sol.solve_time.as_secs_f64() * 1e3
+    );
+}
