@@ -8,10 +8,10 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
-use vic::config::Scenario;
-use vic::delay::{Delayed, Offset};
-use vic::plan::{self, Setup};
-use vic::solver::{Ilqg, Problem};
+use vic::core::delay::{Delayed, Offset};
+use vic::core::solver::{Ilqg, Problem};
+use vic::planning::plan::{self, Setup};
+use vic::planning::scenario::Scenario;
 
 fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -79,10 +79,10 @@ fn solvers(c: &mut Criterion) {
         horizon: s.task.steps,
         bounds: setup.bounds.clone(),
     };
-    // The whole plan: the undelayed first guess (vic::delay::undelayed_guess), then ILQG on the
+    // The whole plan: the undelayed first guess (vic::core::delay::undelayed_guess), then ILQG on the
     // 42-dimensional delayed plant for its gains.
     let plan_delayed = |solver: &mut Ilqg| {
-        let u_init = vic::delay::undelayed_guess(
+        let u_init = vic::core::delay::undelayed_guess(
             &plain,
             setup.u_init[0].as_slice(),
             d,

@@ -3,10 +3,10 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::config::Scenario;
-use vic::delay::Delayed;
-use vic::plan::{self, DelayedCost};
-use vic::solver::{Ilqg, Problem};
+use vic::core::delay::Delayed;
+use vic::core::solver::{Ilqg, Problem};
+use vic::planning::plan::{self, DelayedCost};
+use vic::planning::scenario::Scenario;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -35,7 +35,7 @@ fn main() {
     };
     let u_init: Vec<DVector<f64>> = if std::env::var("UNDELAYED").is_ok() {
         let t = std::time::Instant::now();
-        let u = vic::delay::undelayed_guess(
+        let u = vic::core::delay::undelayed_guess(
             &plain,
             setup.u_init[0].as_slice(),
             d,

@@ -8,10 +8,10 @@
 
 use std::path::Path;
 use std::time::Instant;
-use vic::config::Scenario;
-use vic::model::Plant;
-use vic::plan;
-use vic::solver::{Ilqg, Problem};
+use vic::core::model::Plant;
+use vic::core::solver::{Ilqg, Problem};
+use vic::planning::plan;
+use vic::planning::scenario::Scenario;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

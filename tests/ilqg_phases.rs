@@ -5,10 +5,10 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::config::Scenario;
-use vic::delay::Delayed;
-use vic::plan::{self, DelayedCost};
-use vic::solver::{Ilqg, Problem};
+use vic::core::delay::Delayed;
+use vic::core::solver::{Ilqg, Problem};
+use vic::planning::plan::{self, DelayedCost};
+use vic::planning::scenario::Scenario;
 
 /// (cost, expected cost, accepted iterations) of a solve.
 fn solve(file: &str, overrides: &[&str], delay: Option<usize>) -> (f64, f64, usize) {

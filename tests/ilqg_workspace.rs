@@ -7,10 +7,10 @@ mod common;
 use common::alloc::{Counting, allocations};
 use nalgebra::DVector;
 use std::path::Path;
-use vic::config::Scenario;
-use vic::delay::{Delayed, Offset};
-use vic::plan::{self, DelayedCost, Setup};
-use vic::solver::{Ilqg, IlqgError, IlqgOptions, Problem};
+use vic::core::delay::{Delayed, Offset};
+use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem};
+use vic::planning::plan::{self, DelayedCost, Setup};
+use vic::planning::scenario::Scenario;
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -201,7 +201,7 @@ fn undelayed_guess_is_the_deterministic_delayed_optimum() {
         horizon: s.task.steps,
         bounds: setup.bounds.clone(),
     };
-    let guess = vic::delay::undelayed_guess(
+    let guess = vic::core::delay::undelayed_guess(
         &plain,
         setup.u_init[0].as_slice(),
         d,
