@@ -57,7 +57,25 @@ fn main() {
             p.iteration, p.alpha, p.mu, p.merit
         )
     }));
-    let sol = solver.try_solve(&problem, &u_init).expect("solves");
+    let mut sol = solver.try_solve(&problem, &u_init).expect("solves");
+    let (later_dynamics, later_cost) = (
+        vic::core::delay::Offset::new(&delayed, 2),
+        vic::core::delay::Offset::new(&cost, 2),
+    );
+    if std::env::var("WARM").is_ok() {
+        println!(
+            "cold: {} iterations; warm re-solve two knots later:",
+            sol.iterations
+        );
+        let later = Problem {
+            dynamics: &later_dynamics,
+            cost: &later_cost,
+            x0: sol.x[2].as_slice().to_vec(),
+            horizon: steps,
+            bounds: setup.bounds.clone(),
+        };
+        sol = solver.resolve_shifted(&later, 2).expect("warm start");
+    }
     println!(
         "{} iterations, {:?}, cost {:.10e}, expected {:.10e}, {:.2} ms",
         sol.iterations,
