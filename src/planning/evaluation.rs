@@ -1,21 +1,22 @@
-//! What a Monte Carlo evaluation reports (DESIGN §7): final spread, 95 % confidence ellipse,
-//! tracking and final errors, divergence, and the Monte Carlo expected cost next to the predicted.
+//! What a Monte Carlo evaluation reports: final spread, 95 % confidence ellipse, tracking and
+//! final errors, divergence, and the Monte Carlo expected cost (the Eq. 14 cost averaged over
+//! trials) next to the predicted one.
 
-use crate::core::model::ArmModel;
 use crate::planning::montecarlo::{Trial, position};
 use crate::planning::plan::Setup;
+use crate::planning::unit::Unit;
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
 /// χ²(2) quantile at 95 %: the 95 % ellipse of a 2-D Gaussian is `dᵀ Σ⁻¹ d ≤ 5.991`.
 const CHI2_2_95: f64 = 5.991_464_547_107_979;
 
-/// The summary of a set of trials. Positions are the hand [mm] for the arm and the joint angle
-/// [deg] for a single joint (`unit` says which).
+/// The summary of a set of trials. Positions are in `unit`: the hand [mm] for the arm, the joint
+/// angle [deg] for a single joint.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Report {
     pub trials: usize,
-    pub unit: String,
+    pub unit: Unit,
     /// Mean final position.
     pub final_mean: Vec<f64>,
     /// Standard deviation of the final position: the largest principal axis for the hand.
@@ -33,26 +34,19 @@ pub struct Report {
     /// Trials that ended further than the divergence threshold from the target (or blew up).
     pub diverged: usize,
     pub diverged_fraction: f64,
-    /// Fraction of trials ending more than 5 cm (arm) or 5° (joint) from the target.
+    /// Fraction of trials ending further than [`Unit::far_threshold`] from the target.
     pub far_fraction: f64,
     /// Monte Carlo expected cost and its standard error.
     pub expected_cost_mc: f64,
     pub expected_cost_se: f64,
 }
 
-fn scale(model: &ArmModel) -> (f64, &'static str) {
-    if model.dof() == 1 {
-        (1.0_f64.to_degrees(), "deg")
-    } else {
-        (1000.0, "mm")
-    }
-}
-
 /// Summarises `trials` run on `setup`; a trial diverged when its final position is further than
 /// `divergence` (in the report's unit) from the target.
 pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
     let model = &setup.dynamics.model;
-    let (k, unit) = scale(model);
+    let unit = Unit::for_model(model);
+    let k = unit.scale();
     let steps = setup.reference.len() - 1;
     let target = |i: usize| -> Vec<f64> {
         let r = &setup.reference[i];
@@ -128,7 +122,7 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         costs.iter().map(|c| (c - cost_mean).powi(2)).sum::<f64>() / (count - 1.0).max(1.0);
     Report {
         trials: trials.len(),
-        unit: unit.into(),
+        unit,
         final_mean: mean.iter().map(|m| m * k).collect(),
         final_std,
         ellipse_95,
@@ -140,9 +134,7 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         diverged_fraction: diverged as f64 / count,
         far_fraction: final_errors
             .iter()
-            .filter(|e| {
-                !e.is_finite() || **e > 50.0_f64.min(if model.dof() == 1 { 5.0 } else { 50.0 })
-            })
+            .filter(|e| !e.is_finite() || **e > unit.far_threshold())
             .count() as f64
             / count,
         expected_cost_mc: cost_mean,

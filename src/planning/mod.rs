@@ -4,7 +4,11 @@
 //! units a reader expects).
 
 pub mod evaluation;
+pub mod method;
 pub mod montecarlo;
 pub mod plan;
+pub mod plan_file;
 pub mod reference;
 pub mod scenario;
+pub mod setup;
+pub mod unit;
