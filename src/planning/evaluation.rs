@@ -70,37 +70,13 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         .iter()
         .map(|t| position(model, &t.x[steps]))
         .collect();
-    let dim = goal.len();
     let count = trials.len() as f64;
-    let mut mean = vec![0.0; dim];
-    for f in &finals {
-        for (m, v) in mean.iter_mut().zip(f) {
-            *m += v / count;
-        }
-    }
-    let mut cov = [[0.0; 2]; 2];
-    for f in &finals {
-        for a in 0..dim {
-            for b in 0..dim {
-                cov[a][b] += (f[a] - mean[a]) * (f[b] - mean[b]) / (count - 1.0).max(1.0);
-            }
-        }
-    }
-    let (ellipse_95, angle, final_std) = if dim == 1 {
-        let sd = cov[0][0].sqrt() * k;
-        (vec![1.959_963_984_540_054 * sd], 0.0, sd)
-    } else {
-        let (a, b, c) = (cov[0][0], cov[0][1], cov[1][1]);
-        let tr = a + c;
-        let disc = ((a - c) * (a - c) / 4.0 + b * b).sqrt();
-        let (l1, l2) = (tr / 2.0 + disc, (tr / 2.0 - disc).max(0.0));
-        let angle = 0.5 * (2.0 * b).atan2(a - c);
-        (
-            vec![(CHI2_2_95 * l1).sqrt() * k, (CHI2_2_95 * l2).sqrt() * k],
-            angle.to_degrees(),
-            l1.sqrt() * k,
-        )
-    };
+    let Spread {
+        mean,
+        ellipse_95,
+        angle,
+        final_std,
+    } = spread(&finals, goal.len(), k);
     let mut sq = 0.0;
     let mut n = 0.0;
     let targets: Vec<Vec<f64>> = (0..=steps).map(target).collect();
@@ -139,5 +115,56 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
             / count,
         expected_cost_mc: cost_mean,
         expected_cost_se: (cost_var / count).sqrt(),
+    }
+}
+
+/// The spread of final positions (`dim` coordinates in SI units, `k` the report unit's scale).
+struct Spread {
+    /// Mean final position (SI units).
+    mean: Vec<f64>,
+    ellipse_95: Vec<f64>,
+    /// Orientation of the major axis [deg].
+    angle: f64,
+    final_std: f64,
+}
+
+/// Sample mean and covariance of the final positions, and from them the 95 % confidence ellipse
+/// (χ²(2) for the hand, the normal 95 % half-width for a joint).
+fn spread(finals: &[Vec<f64>], dim: usize, k: f64) -> Spread {
+    let count = finals.len() as f64;
+    let mut mean = vec![0.0; dim];
+    for f in finals {
+        for (m, v) in mean.iter_mut().zip(f) {
+            *m += v / count;
+        }
+    }
+    let mut cov = [[0.0_f64; 2]; 2];
+    for f in finals {
+        for a in 0..dim {
+            for b in 0..dim {
+                cov[a][b] += (f[a] - mean[a]) * (f[b] - mean[b]) / (count - 1.0).max(1.0);
+            }
+        }
+    }
+    let (ellipse_95, angle, final_std) = if dim == 1 {
+        let sd = cov[0][0].sqrt() * k;
+        (vec![1.959_963_984_540_054 * sd], 0.0, sd)
+    } else {
+        let (a, b, c) = (cov[0][0], cov[0][1], cov[1][1]);
+        let tr = a + c;
+        let disc = ((a - c) * (a - c) / 4.0 + b * b).sqrt();
+        let (l1, l2) = (tr / 2.0 + disc, (tr / 2.0 - disc).max(0.0));
+        let angle = 0.5 * (2.0 * b).atan2(a - c);
+        (
+            vec![(CHI2_2_95 * l1).sqrt() * k, (CHI2_2_95 * l2).sqrt() * k],
+            angle.to_degrees(),
+            l1.sqrt() * k,
+        )
+    };
+    Spread {
+        mean,
+        ellipse_95,
+        angle,
+        final_std,
     }
 }

@@ -3,7 +3,7 @@
 //! the headline figures, with the policy that executes it.
 
 use crate::core::dynamics::Dynamics;
-use crate::core::model::{Actuator, Exogenous};
+use crate::core::model::{Actuator, ArmModel, Exogenous};
 use crate::core::policy::Policy;
 use crate::core::solver::{Solution, StopReason};
 use crate::planning::method::Method;
@@ -170,20 +170,7 @@ pub(crate) fn plan_file(
     let dof = model.dof();
     let dt = s.task.dt;
     let steps = s.task.steps;
-    let stiffness: Vec<f64> = match model.actuator.stiffness_offset(dof) {
-        Some(off) => sol
-            .u
-            .iter()
-            .flat_map(|u| u.rows(off, dof).iter().copied().collect::<Vec<_>>())
-            .collect(),
-        None => vec![],
-    };
-    let max_stiffness = stiffness.iter().copied().fold(0.0, f64::max);
-    let mean_stiffness = if stiffness.is_empty() {
-        0.0
-    } else {
-        stiffness.iter().sum::<f64>() / stiffness.len() as f64
-    };
+    let (max_stiffness, mean_stiffness) = stiffness_figures(model, sol);
     let last = &sol.x[steps];
     let target = &setup.reference[steps];
     let unit = Unit::for_model(model);
@@ -197,34 +184,14 @@ pub(crate) fn plan_file(
         };
     let (position_cov, open_loop_final_std) =
         final_position_covariance(model, &open_loop.mean[steps], &open_loop.final_covariance);
-    let joints: Vec<String> = (1..=dof)
-        .map(|i| {
-            if dof == 1 {
-                "q".to_string()
-            } else {
-                format!("q{i}")
-            }
-        })
-        .collect();
-    let mut state_names: Vec<String> = joints.clone();
-    state_names.extend(joints.iter().map(|j| format!("{j}_dot")));
-    if matches!(model.actuator, Actuator::Vsa { .. }) {
-        let motors: Vec<String> = (1..=dof).map(|i| format!("theta{i}")).collect();
-        state_names.extend(motors.clone());
-        state_names.extend(motors.iter().map(|m| format!("{m}_dot")));
-    }
-    let mut control_names: Vec<String> = (1..=dof).map(|i| format!("tau{i}")).collect();
-    if nu > dof {
-        control_names.extend((1..=dof).map(|i| format!("k{i}")));
-    }
     PlanFile {
         version: PLAN_VERSION,
         scenario: s.source.display().to_string(),
         config: serde_json::to_value(&s.resolved).unwrap_or(serde_json::Value::Null),
         dt,
         time: (0..=steps).map(|k| k as f64 * dt).collect(),
-        state_names,
-        control_names,
+        state_names: state_names(model),
+        control_names: control_names(dof, nu),
         x: sol.x.iter().map(|v| v.iter().copied().collect()).collect(),
         u: sol.u.iter().map(|v| v.iter().copied().collect()).collect(),
         gains: sol
@@ -255,6 +222,59 @@ pub(crate) fn plan_file(
     }
 }
 
+/// Largest and time-averaged planned stiffness over all joints [N m/rad] (0 without a stiffness
+/// control).
+fn stiffness_figures(model: &ArmModel, sol: &Solution) -> (f64, f64) {
+    let dof = model.dof();
+    let stiffness: Vec<f64> = match model.actuator.stiffness_offset(dof) {
+        Some(off) => sol
+            .u
+            .iter()
+            .flat_map(|u| u.rows(off, dof).iter().copied().collect::<Vec<_>>())
+            .collect(),
+        None => vec![],
+    };
+    let max_stiffness = stiffness.iter().copied().fold(0.0, f64::max);
+    let mean_stiffness = if stiffness.is_empty() {
+        0.0
+    } else {
+        stiffness.iter().sum::<f64>() / stiffness.len() as f64
+    };
+    (max_stiffness, mean_stiffness)
+}
+
+/// Names of the plant state's components: `q`, `q_dot` (single joint) or `q1`, `q2`, `q1_dot`,
+/// … (arm), then the VSA's motor angles and speeds.
+fn state_names(model: &ArmModel) -> Vec<String> {
+    let dof = model.dof();
+    let joints: Vec<String> = (1..=dof)
+        .map(|i| {
+            if dof == 1 {
+                "q".to_string()
+            } else {
+                format!("q{i}")
+            }
+        })
+        .collect();
+    let mut state_names: Vec<String> = joints.clone();
+    state_names.extend(joints.iter().map(|j| format!("{j}_dot")));
+    if matches!(model.actuator, Actuator::Vsa { .. }) {
+        let motors: Vec<String> = (1..=dof).map(|i| format!("theta{i}")).collect();
+        state_names.extend(motors.clone());
+        state_names.extend(motors.iter().map(|m| format!("{m}_dot")));
+    }
+    state_names
+}
+
+/// Names of the controls: torques `tau1…`, then stiffnesses `k1…` when the actuator has them.
+fn control_names(dof: usize, nu: usize) -> Vec<String> {
+    let mut control_names: Vec<String> = (1..=dof).map(|i| format!("tau{i}")).collect();
+    if nu > dof {
+        control_names.extend((1..=dof).map(|i| format!("k{i}")));
+    }
+    control_names
+}
+
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
     m.row_iter().map(|r| r.iter().copied().collect()).collect()
 }
@@ -262,7 +282,7 @@ fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
 /// The covariance of the final position (hand for the arm, `J P_qq Jᵀ`; joint angle for a single
 /// joint) and its largest standard deviation in the model's [`Unit`].
 pub fn final_position_covariance(
-    model: &crate::core::model::ArmModel,
+    model: &ArmModel,
     mean: &DVector<f64>,
     cov: &DMatrix<f64>,
 ) -> (DMatrix<f64>, f64) {
