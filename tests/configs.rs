@@ -149,7 +149,7 @@ fn a_misspelt_key_and_a_wrong_type_name_the_file_and_the_key() {
         (
             "type = \"impedance\"",
             "typ = \"impedance\"",
-            "[actuator] type: missing",
+            "[actuator] type: missing, required",
         ),
         ("type = \"impedance\"", "type = 3", "[actuator] type"),
         ("w_p = 1e6", "w_p = [1e6]", "[cost] w_p"),

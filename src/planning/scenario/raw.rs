@@ -53,7 +53,13 @@ pub(super) fn retag(table: &mut toml::Table) -> Result<(), (&'static str, &'stat
             Some(other) => {
                 return Err((section, tag, format!("must be a string, got {other}")));
             }
-            None => return Err((section, tag, "missing".to_string())),
+            None => {
+                return Err((
+                    section,
+                    tag,
+                    "missing, required: it selects the model".to_string(),
+                ));
+            }
         };
         let body = std::mem::take(body);
         table.insert(
