@@ -9,3 +9,4 @@ pub mod launch;
 pub mod operator;
 pub mod plot;
 pub mod report;
+pub mod sweep;
