@@ -11,23 +11,12 @@ use crate::core::solver::{Ilqg, IlqgOptions, Problem, Solution};
 pub use crate::planning::method::Method;
 use crate::planning::plan_file::plan_file;
 pub use crate::planning::plan_file::{
-    PLAN_VERSION, PlanFile, PlanSummary, Stop, final_position_covariance,
+    OpenLoopPrediction, PLAN_VERSION, PlanFile, PlanSummary, Stop, final_position_covariance,
 };
 use crate::planning::scenario::Scenario;
 pub use crate::planning::setup::{PlanError, Setup, setup};
 use nalgebra::{DMatrix, DVector};
 use std::sync::Arc;
-
-/// What executing a command sequence open loop is predicted to give (covariance propagation).
-#[derive(Debug, Clone)]
-pub struct OpenLoopPrediction {
-    /// Expected cost `E[C]` of the open-loop plant.
-    pub expected_cost: f64,
-    /// Mean states `m_0 ..= m_N`.
-    pub mean: Vec<DVector<f64>>,
-    /// Final state covariance `P_N`.
-    pub final_covariance: DMatrix<f64>,
-}
 
 /// Predicts the open-loop execution of the controls `acting` (those that act at each step) by
 /// mean and covariance propagation: feedback gains ignored, so that plans from any method compare

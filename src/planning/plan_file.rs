@@ -7,7 +7,6 @@ use crate::core::model::{Actuator, ArmModel, Exogenous};
 use crate::core::policy::Policy;
 use crate::core::solver::{Solution, StopReason};
 use crate::planning::method::Method;
-use crate::planning::plan::OpenLoopPrediction;
 use crate::planning::scenario::Scenario;
 use crate::planning::setup::{PlanError, Setup};
 use crate::planning::unit::Unit;
@@ -75,6 +74,17 @@ pub struct PlanFile {
     /// angle [rad²] (single joint, 1×1), executed open loop.
     pub open_loop_final_position_covariance: Vec<Vec<f64>>,
     pub summary: PlanSummary,
+}
+
+/// What executing a command sequence open loop is predicted to give (covariance propagation).
+#[derive(Debug, Clone)]
+pub struct OpenLoopPrediction {
+    /// Expected cost `E[C]` of the open-loop plant.
+    pub expected_cost: f64,
+    /// Mean states `m_0 ..= m_N`.
+    pub mean: Vec<DVector<f64>>,
+    /// Final state covariance `P_N`.
+    pub final_covariance: DMatrix<f64>,
 }
 
 /// Why the solver stopped, as written in plan files (the names of the solver's
