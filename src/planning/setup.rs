@@ -24,6 +24,16 @@ pub enum PlanError {
     StepsMismatch { plan: usize, scenario: usize },
     #[error("the plan's controls/states are not {nu}/{nx}-dimensional like the scenario's")]
     DimensionMismatch { nu: usize, nx: usize },
+    /// The solver could not start or failed (its message, with the phase that failed).
+    #[error("{0}")]
+    Solver(String),
+}
+
+/// The solver's failures arrive as messages naming the phase that failed.
+impl From<String> for PlanError {
+    fn from(message: String) -> Self {
+        PlanError::Solver(message)
+    }
 }
 
 /// Everything needed to solve a scenario with any method.

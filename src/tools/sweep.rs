@@ -230,7 +230,7 @@ pub fn write_figure(
             .points
             .push((p.latency_ms, p.final_error_mean, p.final_error_max));
     }
-    let unit = sweep.points.first().map_or("", |p| p.unit.as_str());
+    let unit = sweep.points.first().map_or("", |p| p.unit.name());
     crate::tools::plot::curve_figure(
         &curves,
         &format!("Delay versus stiffness ({} trials)", sweep.trials),
