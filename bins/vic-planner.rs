@@ -125,7 +125,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             };
             let s = Scenario::load(&args.config, &o).map_err(|e| input(e.to_string()))?;
             eprintln!("vic-planner: planning ({}) ...", method.name());
-            vic::planning::plan::plan(&s, method, None).map_err(|e| (1, e))?
+            vic::planning::plan::plan(&s, method, None).map_err(|e| (1, e.to_string()))?
         }
     };
     let latency_ms = args.latency_ms.unwrap_or(plan.summary.delay_ms);
@@ -154,7 +154,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
              older states (counted as stale)"
         );
     }
-    let setup = vic::planning::plan::setup(&base).map_err(input)?;
+    let setup = vic::planning::plan::setup(&base).map_err(|e| input(e.to_string()))?;
     let track = vic::tools::launch::track(&plan, &setup).map_err(input)?;
     let timing = Timing {
         latency_steps: steps.round() as usize,
@@ -196,13 +196,9 @@ fn run(args: Args) -> Result<(), (u8, String)> {
         )
         .map_err(|e| (1, e.to_string()))?
     };
-    let divergence = args
-        .divergence
-        .unwrap_or(if setup.dynamics.model.dof() == 1 {
-            10.0
-        } else {
-            50.0
-        });
+    let divergence = args.divergence.unwrap_or_else(|| {
+        vic::planning::unit::Unit::for_model(&setup.dynamics.model).default_divergence()
+    });
     let result = vic::tools::report::summarize(&setup, &central, &records, divergence);
     if args.json {
         println!(

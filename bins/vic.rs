@@ -399,13 +399,9 @@ fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
             }
         }
     };
-    let divergence = args
-        .divergence
-        .unwrap_or(if setup.dynamics.model.dof() == 1 {
-            10.0
-        } else {
-            50.0
-        });
+    let divergence = args.divergence.unwrap_or_else(|| {
+        vic::planning::unit::Unit::for_model(&setup.dynamics.model).default_divergence()
+    });
     let trials = run_trials(&setup, &exe, policy, args.trials as usize, args.seed);
     let report = vic::planning::evaluation::summarize(&setup, &trials, divergence);
     if let Some(path) = &args.csv {
@@ -1136,7 +1132,9 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
         println!("{doc}");
         return Ok(());
     }
-    let unit = results.first().map_or("mm".to_string(), |r| r.unit.clone());
+    let unit = results
+        .first()
+        .map_or(vic::planning::unit::Unit::Millimetre, |r| r.unit);
     println!(
         "{:<17} {:>8} {:>10} {:>12} {:>10} {:>9} {:>26} {:>6}",
         "strategy",
