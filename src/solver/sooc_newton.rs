@@ -31,6 +31,13 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
 
+/// Relative regularisation above which an iteration gives up on the Newton model and takes a
+/// Gauss–Newton step instead.
+const NEWTON_MU_LIMIT: f64 = 1e6;
+
+/// Relative predicted decrease at the level of floating-point round-off of `J`.
+const ROUND_OFF: f64 = 1e-13;
+
 /// Settings of the stagewise Newton solver. Defaults suit the paper's problems.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -38,7 +45,7 @@ pub struct SoocOptions {
     /// Iteration limit (default 100; a converging solve needs 5–30).
     pub max_iterations: usize,
     /// Converged when the scaled projected gradient, relative to `J`, is at most this
-    /// (default 1e-7; see [`Optimality::projected_gradient`]).
+    /// (default 1e-6; see [`Optimality::projected_gradient`]).
     pub gradient_tolerance: f64,
     /// ... and the Newton step's predicted decrease, relative to `J`, at most this (default 1e-9).
     pub decrease_tolerance: f64,
@@ -52,7 +59,7 @@ impl Default for SoocOptions {
     fn default() -> Self {
         SoocOptions {
             max_iterations: 100,
-            gradient_tolerance: 1e-7,
+            gradient_tolerance: 1e-6,
             decrease_tolerance: 1e-9,
             mu_min: 1e-6,
             mu_max: 1e10,
@@ -118,7 +125,9 @@ pub struct SoocSolution {
 /// Errors of a solve: the problem does not fit the workspace, or cannot be started.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SoocError {
-    #[error("problem size {got:?} (states, controls, horizon) differs from the workspace's {want:?}")]
+    #[error(
+        "problem size {got:?} (states, controls, horizon) differs from the workspace's {want:?}"
+    )]
     SizeMismatch {
         got: (usize, usize, usize),
         want: (usize, usize, usize),
@@ -337,6 +346,7 @@ impl SoocSolver {
         let mut stop = SoocStop::MaxIterations;
         let mut optimality;
         let mut needs_expansion = true;
+        let mut newton;
         loop {
             if needs_expansion {
                 self.expand(problem);
@@ -344,19 +354,30 @@ impl SoocSolver {
                 needs_expansion = false;
             }
             let pg = self.projected_gradient(problem.bounds, &scale) / cost.abs().max(1e-300);
-            // Backward pass, raising μ until every stage QP is convex.
+            // Backward pass, raising μ until every stage QP is convex. Far from the optimum the
+            // Newton model can be too indefinite for any sensible μ; then this iteration uses the
+            // Gauss–Newton model (no curvature term, the ILQG model), which is convex in the
+            // controls, and the next iteration tries Newton again.
+            newton = true;
+            let mut mu_here = mu;
             let predicted = loop {
-                match self.backward(problem.bounds, mu) {
+                match self.backward(problem.bounds, mu_here, newton) {
                     Some(dv) => break Some(dv),
                     None => {
                         mu_step = (mu_step * 2.0).max(2.0);
-                        mu = (mu * mu_step).max(self.options.mu_min);
-                        if mu > self.options.mu_max {
+                        mu_here = (mu_here * mu_step).max(self.options.mu_min);
+                        if newton && mu_here > NEWTON_MU_LIMIT {
+                            newton = false;
+                            mu_here = mu;
+                        } else if mu_here > self.options.mu_max {
                             break None;
                         }
                     }
                 }
             };
+            if newton {
+                mu = mu_here;
+            }
             let Some((dv1, dv2)) = predicted else {
                 stop = SoocStop::RegularizationLimit;
                 optimality = Optimality {
@@ -369,7 +390,12 @@ impl SoocSolver {
             };
             optimality = Optimality {
                 projected_gradient: pg,
-                predicted_decrease: -(dv1 + dv2) / cost.abs().max(1e-300),
+                // The Gauss–Newton model's prediction says nothing about optimality.
+                predicted_decrease: if newton {
+                    -(dv1 + dv2) / cost.abs().max(1e-300)
+                } else {
+                    f64::INFINITY
+                },
                 gradient_tolerance: self.options.gradient_tolerance,
                 decrease_tolerance: self.options.decrease_tolerance,
             };
@@ -387,8 +413,7 @@ impl SoocSolver {
                 let c = self.forward(problem, alpha);
                 let actual = c - cost;
                 let expected = alpha * dv1 + alpha * alpha * dv2;
-                if c.is_finite() && actual < 0.0 && (expected >= 0.0 || actual <= 0.1 * expected)
-                {
+                if c.is_finite() && actual < 0.0 && (expected >= 0.0 || actual <= 0.1 * expected) {
                     accepted = Some(c);
                     break;
                 }
@@ -419,6 +444,12 @@ impl SoocSolver {
                     }
                 }
                 None => {
+                    if optimality.predicted_decrease < ROUND_OFF {
+                        // Nothing left to gain above round-off, yet the gradient test fails:
+                        // stop rather than inflate μ.
+                        stop = SoocStop::RegularizationLimit;
+                        break;
+                    }
                     mu_step = (mu_step * 2.0).max(2.0);
                     mu = (mu * mu_step).max(self.options.mu_min.max(1e-3));
                     if mu > self.options.mu_max {
@@ -486,8 +517,8 @@ impl SoocSolver {
         for (u, g) in self.u.iter().zip(&self.grad) {
             for j in 0..self.nu {
                 let gj = g[j];
-                let blocked = (u[j] <= bounds.lower[j] && gj > 0.0)
-                    || (u[j] >= bounds.upper[j] && gj < 0.0);
+                let blocked =
+                    (u[j] <= bounds.lower[j] && gj > 0.0) || (u[j] >= bounds.upper[j] && gj < 0.0);
                 if !blocked {
                     worst = worst.max(scale[j] * gj.abs());
                 }
@@ -499,7 +530,7 @@ impl SoocSolver {
     /// The Riccati recursion of the Newton step with box-limited stage QPs; the predicted
     /// decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)`, or `None` if some stage QP is not convex at
     /// this μ.
-    fn backward(&mut self, bounds: &Bounds, mu: f64) -> Option<(f64, f64)> {
+    fn backward(&mut self, bounds: &Bounds, mu: f64, newton: bool) -> Option<(f64, f64)> {
         let h = self.horizon;
         let m = self.nu;
         let bw = &mut self.bw;
@@ -509,7 +540,18 @@ impl SoocSolver {
         for k in (0..h).rev() {
             let e = &mut self.expansions[k];
             let d = &self.derivs[k];
-            e.curvature(self.lam[k + 1].as_slice(), &mut bw.hzz, &mut bw.huz, &mut bw.huu);
+            if newton {
+                e.curvature(
+                    self.lam[k + 1].as_slice(),
+                    &mut bw.hzz,
+                    &mut bw.huz,
+                    &mut bw.huu,
+                );
+            } else {
+                bw.hzz.fill(0.0);
+                bw.huz.fill(0.0);
+                bw.huu.fill(0.0);
+            }
             // Q terms.
             bw.va.gemm(1.0, &bw.v, &e.a, 0.0);
             bw.vb.gemm(1.0, &bw.v, &e.b, 0.0);
