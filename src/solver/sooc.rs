@@ -510,11 +510,42 @@ impl MomentDynamics<'_> {
     /// outermost, `v_a`, `v_b`), each distinct triple once (the derivative is symmetric in its
     /// state indices and in `a, b`); and, for a noise gain nonlinear in the state, its second and
     /// third derivatives.
-    fn third_derivatives(&self, k: usize, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+    ///
+    /// Also `∂²Φ/∂u_a∂u_b` (the pairs that [`MomentDynamics::expand`]'s first derivatives do not
+    /// cover). Everything [`MomentExpansion::curvature`] needs beyond `expand(.., false, ..)`:
+    /// the expensive part (`O(n (n + m)²)` triple-dual flow evaluations), done only when the
+    /// Newton model is used.
+    pub fn second_order(&self, k: usize, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
         type D3 = Dual<Dual<Dual64>>;
         let base = self.base;
         let (n, m, nw) = (base.nx(), base.nu(), base.nw());
         let nv = n + m;
+        {
+            type D2 = Dual<Dual64>;
+            let lift2 = |v: f64| D2::from_re(Dual64::from(v));
+            let mut x2 = [lift2(0.0); MAX_NX];
+            let mut u2 = [lift2(0.0); MAX_NU];
+            for (d, v) in x2.iter_mut().zip(&z[..n]) {
+                *d = lift2(*v);
+            }
+            for (d, v) in u2.iter_mut().zip(u) {
+                *d = lift2(*v);
+            }
+            let mut out = [lift2(0.0); MAX_NX];
+            for a in 0..m {
+                for b in a..m {
+                    u2[a].re.eps = 1.0;
+                    u2[b].eps.re = 1.0;
+                    base.flow(k, &x2[..n], &u2[..m], &mut out[..n]);
+                    u2[a].re.eps = 0.0;
+                    u2[b].eps.re = 0.0;
+                    for r in 0..n {
+                        s.phi_uu[a][b][r] = out[r].eps.eps;
+                        s.phi_uu[b][a][r] = out[r].eps.eps;
+                    }
+                }
+            }
+        }
         let lift = |v: f64| D3::from_re(Dual::from_re(Dual64::from(v)));
         let mut x3 = [lift(0.0); MAX_NX];
         let mut u3 = [lift(0.0); MAX_NU];
@@ -737,24 +768,9 @@ impl MomentDynamics<'_> {
                     }
                 }
             }
-            if curvature {
-                for a in 0..m {
-                    for b in a..m {
-                        udd[a].re.eps = 1.0;
-                        udd[b].eps.re = 1.0;
-                        base.flow(k, &xdd[..n], &udd[..m], &mut out[..n]);
-                        udd[a].re.eps = 0.0;
-                        udd[b].eps.re = 0.0;
-                        for r in 0..n {
-                            s.phi_uu[a][b][r] = out[r].eps.eps;
-                            s.phi_uu[b][a][r] = out[r].eps.eps;
-                        }
-                    }
-                }
-            }
         }
         if curvature {
-            self.third_derivatives(k, z, u, s);
+            self.second_order(k, z, u, s);
         }
 
         // ∂P⁺/∂m_j and ∂P⁺/∂u_j: d(A P Aᵀ) = X + Xᵀ with X = dA (P Aᵀ), and the same for each

@@ -35,6 +35,9 @@ use std::time::{Duration, Instant};
 /// Gauss–Newton step instead.
 const NEWTON_MU_LIMIT: f64 = 1e6;
 
+/// While the Newton model fails, it is tried again every this many iterations.
+const NEWTON_RETRY: usize = 4;
+
 /// Relative predicted decrease at the level of floating-point round-off of `J`.
 const ROUND_OFF: f64 = 1e-13;
 
@@ -347,18 +350,29 @@ impl SoocSolver {
         let mut optimality;
         let mut needs_expansion = true;
         let mut newton;
+        let mut has_second_order = false;
+        let mut gauss_newton_run = 0usize;
         loop {
             if needs_expansion {
                 self.expand(problem);
                 self.costates();
                 needs_expansion = false;
+                has_second_order = false;
+            }
+            // The Newton model costs the flow's third derivatives. While it keeps failing (far
+            // from the optimum), try it only every few iterations and take Gauss–Newton steps
+            // in between.
+            let try_newton = gauss_newton_run == 0 || gauss_newton_run % NEWTON_RETRY == 0;
+            if try_newton && !has_second_order {
+                self.expand_second_order(problem);
+                has_second_order = true;
             }
             let pg = self.projected_gradient(problem.bounds, &scale) / cost.abs().max(1e-300);
             // Backward pass, raising μ until every stage QP is convex. Far from the optimum the
             // Newton model can be too indefinite for any sensible μ; then this iteration uses the
             // Gauss–Newton model (no curvature term, the ILQG model), which is convex in the
             // controls, and the next iteration tries Newton again.
-            newton = true;
+            newton = try_newton;
             let mut mu_here = mu;
             let predicted = loop {
                 match self.backward(problem.bounds, mu_here, newton) {
@@ -377,6 +391,9 @@ impl SoocSolver {
             };
             if newton {
                 mu = mu_here;
+                gauss_newton_run = 0;
+            } else {
+                gauss_newton_run += 1;
             }
             let Some((dv1, dv2)) = predicted else {
                 stop = SoocStop::RegularizationLimit;
@@ -472,8 +489,22 @@ impl SoocSolver {
         })
     }
 
-    /// First derivatives of the moment step, the pieces of its second derivatives, and the cost
-    /// derivatives at every knot (in parallel: the knots are independent).
+    /// The second-order pieces of the moment step at every knot (in parallel), for the Newton
+    /// model.
+    fn expand_second_order(&mut self, problem: &SoocProblem) {
+        let (z, u) = (&self.z, &self.u);
+        self.expansions
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(k, e)| {
+                problem
+                    .dynamics
+                    .second_order(k, z[k].as_slice(), u[k].as_slice(), e);
+            });
+    }
+
+    /// First derivatives of the moment step and the cost derivatives at every knot (in
+    /// parallel: the knots are independent).
     fn expand(&mut self, problem: &SoocProblem) {
         let h = self.horizon;
         let (z, u) = (&self.z, &self.u);
@@ -484,7 +515,7 @@ impl SoocSolver {
             .for_each(|(k, (e, d))| {
                 problem
                     .dynamics
-                    .expand(k, z[k].as_slice(), u[k].as_slice(), true, e);
+                    .expand(k, z[k].as_slice(), u[k].as_slice(), false, e);
                 problem
                     .cost
                     .running_derivatives(k, z[k].as_slice(), u[k].as_slice(), d);
