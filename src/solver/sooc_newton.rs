@@ -362,7 +362,7 @@ impl SoocSolver {
             // The Newton model costs the flow's third derivatives. While it keeps failing (far
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
             // in between.
-            let try_newton = gauss_newton_run == 0 || gauss_newton_run % NEWTON_RETRY == 0;
+            let try_newton = gauss_newton_run.is_multiple_of(NEWTON_RETRY);
             if try_newton && !has_second_order {
                 self.expand_second_order(problem);
                 has_second_order = true;
@@ -435,13 +435,6 @@ impl SoocSolver {
                     break;
                 }
                 alpha *= 0.5;
-            }
-            if std::env::var_os("VIC_SOOC_DEBUG").is_some() {
-                eprintln!(
-                    "it {iterations} J {cost:.10e} pg {pg:.3e} dec {:.3e} mu {mu:.2e} alpha {alpha} actual/pred {:?}",
-                    optimality.predicted_decrease,
-                    accepted.map(|c| (c - cost) / (alpha * dv1 + alpha * alpha * dv2))
-                );
             }
             match accepted {
                 Some(c) => {
