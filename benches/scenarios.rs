@@ -12,8 +12,8 @@
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use vic::config::Scenario;
-use vic::plan::{Method, plan};
+use vic::planning::plan::{Method, plan};
+use vic::planning::scenario::Scenario;
 
 #[derive(serde::Serialize)]
 struct Case {

@@ -8,10 +8,10 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
-use vic::config::Scenario;
-use vic::delay::Delayed;
-use vic::plan::{self, Setup};
-use vic::solver::{Ilqg, Problem};
+use vic::core::delay::Delayed;
+use vic::core::solver::{Ilqg, Problem};
+use vic::planning::plan::{self, Setup};
+use vic::planning::scenario::Scenario;
 
 fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

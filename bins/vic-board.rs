@@ -8,10 +8,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use vic::board::{Board, BoardConfig};
-use vic::config::Scenario;
-use vic::realtime::{BoardLoopOptions, run_board};
-use vic::transport::{DEFAULT_NAMESPACE, Endpoint, Role};
+use vic::planning::scenario::Scenario;
+use vic::rt::board::Board;
+use vic::rt::realtime::{BoardLoopOptions, run_board};
+use vic::rt::transport::{DEFAULT_NAMESPACE, Endpoint, Role};
 
 /// The simulated board: plant, impedance law and disturbances at 1 kHz.
 ///
@@ -64,7 +64,7 @@ struct Args {
     #[arg(long, value_name = "FILE.csv")]
     record: Option<PathBuf>,
     /// Capacity of the recording queue [ticks].
-    #[arg(long, value_name = "TICKS", default_value_t = vic::record::DEFAULT_CAPACITY)]
+    #[arg(long, value_name = "TICKS", default_value_t = vic::rt::record::DEFAULT_CAPACITY)]
     record_queue: usize,
 }
 
@@ -84,12 +84,12 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     if args.rate_hz == 0 || args.rate_hz > 10_000 {
         return Err(input(format!("--rate-hz {}: use 1 to 10000", args.rate_hz)));
     }
-    vic::transport::validate_namespace(&args.namespace).map_err(input)?;
+    vic::rt::transport::validate_namespace(&args.namespace).map_err(input)?;
     let scenario =
         Scenario::load(&args.config, &args.overrides).map_err(|e| input(e.to_string()))?;
-    let setup = vic::plan::setup(&scenario).map_err(|e| input(e.to_string()))?;
+    let setup = vic::planning::plan::setup(&scenario).map_err(|e| input(e.to_string()))?;
     let period_ns = 1_000_000_000 / args.rate_hz;
-    let mut cfg = BoardConfig::from_scenario(&scenario, period_ns);
+    let mut cfg = vic::tools::launch::board_config(&scenario, period_ns);
     if let Some(k) = args.hold_stiffness {
         cfg.hold_stiffness = k;
     }
@@ -108,7 +108,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             ep.cleaned_dead_nodes, args.namespace
         );
     }
-    if !vic::realtime::lock_memory() {
+    if !vic::rt::realtime::lock_memory() {
         eprintln!("vic-board: warning: mlockall failed; page faults may add jitter");
     }
     let opts = BoardLoopOptions {
@@ -118,9 +118,9 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     };
     let mut recorder = match &args.record {
         Some(path) => Some(
-            vic::record::Recorder::start(
+            vic::rt::record::Recorder::start(
                 path,
-                &vic::record::RecordOptions {
+                &vic::rt::record::RecordOptions {
                     capacity: args.record_queue,
                     joints: scenario.model.dof(),
                     banner: format!(
@@ -139,12 +139,12 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     };
     // After the recorder's writer thread exists: it must not inherit the real-time policy.
     if let Some(cpu) = args.cpu
-        && let Err(e) = vic::sched::pin_to_cpu(cpu)
+        && let Err(e) = vic::rt::sched::pin_to_cpu(cpu)
     {
         eprintln!("vic-board: warning: cannot pin to CPU {cpu}: {e}");
     }
     if let Some(prio) = args.fifo
-        && let Err(e) = vic::sched::set_policy(vic::sched::Policy::Fifo(prio))
+        && let Err(e) = vic::rt::sched::set_policy(vic::rt::sched::SchedPolicy::Fifo(prio))
     {
         eprintln!("vic-board: warning: SCHED_FIFO {prio} refused ({e}); running unprivileged");
     }
@@ -170,7 +170,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             serde_json::to_string(&stats).map_err(|e| (1, e.to_string()))?
         );
     } else {
-        let p = |n: &str, v: &vic::realtime::PercentilesJson| {
+        let p = |n: &str, v: &vic::rt::realtime::PercentilesJson| {
             println!(
                 "{n:<12} p50 {:>8.1} µs  p99 {:>8.1} µs  p99.9 {:>8.1} µs  max {:>9.1} µs",
                 v.p50, v.p99, v.p999, v.max

@@ -7,10 +7,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use vic::central::{Central, Strategy, Timing, Track, lockstep, run_live, split_latency_ms};
-use vic::config::Scenario;
-use vic::plan::{Method, PlanFile};
-use vic::transport::{DEFAULT_NAMESPACE, Endpoint, Role};
+use vic::planning::plan::{Method, PlanFile};
+use vic::planning::scenario::Scenario;
+use vic::rt::central::{Central, Strategy, Timing, lockstep, run_live, split_latency_ms};
+use vic::rt::transport::{DEFAULT_NAMESPACE, Endpoint, Role};
 
 #[derive(Clone, Copy, ValueEnum)]
 enum StrategyArg {
@@ -96,7 +96,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     if args.rate_hz == 0 || args.rate_hz > 1000 || args.trials == 0 {
         return Err(input("--rate-hz must be 1..1000 and --trials ≥ 1".into()));
     }
-    vic::transport::validate_namespace(&args.namespace).map_err(input)?;
+    vic::rt::transport::validate_namespace(&args.namespace).map_err(input)?;
     let strategy = match args.strategy {
         StrategyArg::Stiffness => Strategy::Stiffness,
         StrategyArg::DelayedFeedback => Strategy::DelayedFeedback,
@@ -125,7 +125,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
             };
             let s = Scenario::load(&args.config, &o).map_err(|e| input(e.to_string()))?;
             eprintln!("vic-planner: planning ({}) ...", method.name());
-            vic::plan::plan(&s, method, None).map_err(|e| (1, e))?
+            vic::planning::plan::plan(&s, method, None).map_err(|e| (1, e))?
         }
     };
     let latency_ms = args.latency_ms.unwrap_or(plan.summary.delay_ms);
@@ -154,8 +154,8 @@ fn run(args: Args) -> Result<(), (u8, String)> {
              older states (counted as stale)"
         );
     }
-    let setup = vic::plan::setup(&base).map_err(input)?;
-    let track = Track::new(&plan, &setup).map_err(input)?;
+    let setup = vic::planning::plan::setup(&base).map_err(input)?;
+    let track = vic::tools::launch::track(&plan, &setup).map_err(input)?;
     let timing = Timing {
         latency_steps: steps.round() as usize,
         sensor_latency_ns: (sensor * 1e6) as u64,
@@ -166,8 +166,9 @@ fn run(args: Args) -> Result<(), (u8, String)> {
     let records = if args.lockstep {
         let s = Scenario::load(&args.config, &args.overrides).map_err(|e| input(e.to_string()))?;
         // The board the live daemon would run (same limits), at 1 kHz.
-        let cfg = vic::board::BoardConfig::from_scenario(&s, 1_000_000);
-        let mut board = vic::board::Board::new(s.model.clone(), cfg, &setup.x0).map_err(input)?;
+        let cfg = vic::tools::launch::board_config(&s, 1_000_000);
+        let mut board =
+            vic::rt::board::Board::new(s.model.clone(), cfg, &setup.x0).map_err(input)?;
         lockstep(
             &mut board,
             &mut central,
@@ -202,7 +203,7 @@ fn run(args: Args) -> Result<(), (u8, String)> {
         } else {
             50.0
         });
-    let result = vic::central::summarize(&setup, &central, &records, divergence);
+    let result = vic::tools::report::summarize(&setup, &central, &records, divergence);
     if args.json {
         println!(
             "{}",

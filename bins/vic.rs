@@ -3,8 +3,8 @@
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use vic::config::Scenario;
-use vic::plan::{PlanFile, plan};
+use vic::planning::plan::{PlanFile, plan};
+use vic::planning::scenario::Scenario;
 
 /// Plan and run variable-impedance control under noise, unstable force fields and feedback
 /// delays.
@@ -290,8 +290,8 @@ fn run_plan(args: PlanArgs) -> Result<(), Failure> {
     }
     let scenario = Scenario::load(&args.config, &overrides).map_err(Failure::input)?;
     let method = match args.method {
-        Some(Method::Ilqg) => vic::plan::Method::Ilqg,
-        Some(Method::Sooc) => vic::plan::Method::Sooc,
+        Some(Method::Ilqg) => vic::planning::plan::Method::Ilqg,
+        Some(Method::Sooc) => vic::planning::plan::Method::Sooc,
         None => scenario.solver.method,
     };
     let progress = progress_printer();
@@ -317,13 +317,13 @@ fn run_plan(args: PlanArgs) -> Result<(), Failure> {
 }
 
 /// Progress on stderr when it is a terminal: one line, rewritten in place; nothing when piped.
-fn progress_printer() -> Option<vic::plan::ProgressFn> {
+fn progress_printer() -> Option<vic::planning::plan::ProgressFn> {
     use std::io::IsTerminal;
     if !std::io::stderr().is_terminal() {
         return None;
     }
     Some(std::sync::Arc::new(
-        |phase: &str, p: &vic::solver::ilqg::Progress| {
+        |phase: &str, p: &vic::core::solver::ilqg::Progress| {
             eprint!(
                 "\r\x1b[2K{phase}: iteration {} merit {:.6e} (μ {:.1e}, step {})",
                 p.iteration, p.merit, p.mu, p.alpha
@@ -365,19 +365,21 @@ fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
 }
 
 fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
-    use vic::simulation::{Executable, Policy, run_trials};
+    use vic::core::policy::Feedback;
+    use vic::planning::montecarlo::run_trials;
     let scenario = Scenario::load(&args.config, &args.overrides).map_err(Failure::input)?;
     let text = std::fs::read_to_string(&args.plan)
         .map_err(|e| Failure::input(format!("{}: cannot read: {e}", args.plan.display())))?;
     let plan: PlanFile = serde_json::from_str(&text)
         .map_err(|e| Failure::input(format!("{}: not a plan file: {e}", args.plan.display())))?;
-    let setup = vic::plan::setup(&scenario).map_err(Failure::input)?;
-    let exe = Executable::from_plan(&plan, &setup)
+    let setup = vic::planning::plan::setup(&scenario).map_err(Failure::input)?;
+    let exe = plan
+        .policy(&setup)
         .map_err(|e| Failure::input(format!("{}: {e}", args.plan.display())))?;
     let dt = scenario.task.dt;
     let policy = match args.policy {
-        PolicyArg::OpenLoop => Policy::OpenLoop,
-        PolicyArg::Feedback => Policy::Feedback,
+        PolicyArg::OpenLoop => Feedback::OpenLoop,
+        PolicyArg::Feedback => Feedback::Full,
         PolicyArg::DelayedFeedback => {
             let steps = match args.delay_ms {
                 Some(ms) => {
@@ -392,7 +394,7 @@ fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
                 }
                 None => plan.summary.delay_steps,
             };
-            Policy::DelayedFeedback {
+            Feedback::Delayed {
                 latency_steps: steps,
             }
         }
@@ -405,23 +407,23 @@ fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
             50.0
         });
     let trials = run_trials(&setup, &exe, policy, args.trials as usize, args.seed);
-    let report = vic::evaluation::summarize(&setup, &trials, divergence);
+    let report = vic::planning::evaluation::summarize(&setup, &trials, divergence);
     if let Some(path) = &args.csv {
         write_trials_csv(path, &plan, &trials).map_err(Failure::runtime)?;
     }
     if let Some(png) = &args.plot {
         let title = format!("{:?}", policy);
-        let column = vic::experiment::column_plot(&title, &plan, &scenario, &trials);
+        let column = vic::tools::experiment::column_plot(&title, &plan, &scenario, &trials);
         let svg = png.with_extension("svg");
         let draw = if scenario.model.dof() == 2 {
-            vic::plot::arm_figure(&[column], png, &svg)
+            vic::tools::plot::arm_figure(&[column], png, &svg)
         } else {
-            vic::plot::joint_figure(&[column], png, &svg)
+            vic::tools::plot::joint_figure(&[column], png, &svg)
         };
         draw.map_err(Failure::runtime)?;
     }
     let predicted = match policy {
-        Policy::OpenLoop => plan.summary.open_loop_expected_cost,
+        Feedback::OpenLoop => plan.summary.open_loop_expected_cost,
         _ => plan.summary.expected_cost,
     };
     if args.json {
@@ -468,7 +470,7 @@ fn run_simulate(args: SimulateArgs) -> Result<(), Failure> {
 fn write_trials_csv(
     path: &PathBuf,
     plan: &PlanFile,
-    trials: &[vic::simulation::Trial],
+    trials: &[vic::planning::montecarlo::Trial],
 ) -> Result<(), String> {
     use std::io::Write;
     let file =
@@ -499,7 +501,7 @@ fn write_trials_csv(
 
 fn run_experiment(args: ExperimentArgs) -> Result<(), Failure> {
     use std::io::IsTerminal;
-    use vic::experiment::{Figure, run, to_json, write_outputs};
+    use vic::tools::experiment::{Figure, run, to_json, write_outputs};
     let figure = match args.figure {
         FigureArg::Fig1 => Figure::Fig1,
         FigureArg::Fig2 => Figure::Fig2,
@@ -526,7 +528,7 @@ fn run_experiment(args: ExperimentArgs) -> Result<(), Failure> {
         },
     )
     .map_err(|e| match e {
-        vic::experiment::ExperimentError::Config(c) => Failure::input(c),
+        vic::tools::experiment::ExperimentError::Config(c) => Failure::input(c),
         other => Failure::runtime(other),
     })?;
     if tty {
@@ -566,7 +568,7 @@ fn run_experiment(args: ExperimentArgs) -> Result<(), Failure> {
 
 fn run_results(args: ResultsArgs) -> Result<(), Failure> {
     use std::io::IsTerminal;
-    use vic::experiment::{Figure, results_markdown, run, write_outputs};
+    use vic::tools::experiment::{Figure, results_markdown, run, write_outputs};
     let tty = std::io::stderr().is_terminal();
     let mut runs = Vec::new();
     for figure in [Figure::Fig1, Figure::Fig2, Figure::Icub] {
@@ -583,7 +585,7 @@ fn run_results(args: ResultsArgs) -> Result<(), Failure> {
             },
         )
         .map_err(|e| match e {
-            vic::experiment::ExperimentError::Config(c) => Failure::input(c),
+            vic::tools::experiment::ExperimentError::Config(c) => Failure::input(c),
             other => Failure::runtime(other),
         })?;
         for f in write_outputs(&r, &args.out_dir.join("figures")).map_err(Failure::runtime)? {
@@ -609,8 +611,8 @@ fn run_results(args: ResultsArgs) -> Result<(), Failure> {
 }
 
 fn run_identify(args: IdentifyArgs) -> Result<(), Failure> {
-    use vic::identify::{IdentifyOptions, JointParams, identify, read_log_file};
-    use vic::model::Plant;
+    use vic::core::model::Plant;
+    use vic::tools::identify::{IdentifyOptions, JointParams, identify, read_log_file};
     let joint = match &args.config {
         None => JointParams::ICUB_FOREARM,
         Some(path) => {
@@ -658,7 +660,7 @@ struct InjectArgs {
     #[command(subcommand)]
     what: InjectWhat,
     /// Namespace of the board.
-    #[arg(long, global = true, default_value = vic::transport::DEFAULT_NAMESPACE)]
+    #[arg(long, global = true, default_value = vic::rt::transport::DEFAULT_NAMESPACE)]
     namespace: String,
     /// Seconds to wait for the board and its acknowledgement.
     #[arg(long, global = true, default_value_t = 2.0)]
@@ -720,8 +722,8 @@ fn joint_torques(v: &[f64]) -> Result<[f64; 2], Failure> {
 }
 
 fn run_inject(args: InjectArgs) -> Result<(), Failure> {
-    use vic::operator::{OperatorError, Request};
-    vic::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
+    use vic::tools::operator::{OperatorError, Request};
+    vic::rt::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
     if !(args.timeout_s.is_finite() && args.timeout_s > 0.0) {
         return Err(Failure::input(format!(
             "--timeout-s {}: must be a positive number of seconds",
@@ -759,7 +761,7 @@ fn run_inject(args: InjectArgs) -> Result<(), Failure> {
             Request::Noise { factor: *factor }
         }
     };
-    let ack = vic::operator::inject(
+    let ack = vic::tools::operator::inject(
         &args.namespace,
         request,
         std::time::Duration::from_secs_f64(args.timeout_s),
@@ -787,7 +789,7 @@ fn run_inject(args: InjectArgs) -> Result<(), Failure> {
 #[derive(clap::Args)]
 struct StatusArgs {
     /// Namespace of the board.
-    #[arg(long, default_value = vic::transport::DEFAULT_NAMESPACE)]
+    #[arg(long, default_value = vic::rt::transport::DEFAULT_NAMESPACE)]
     namespace: String,
     /// Seconds to wait for the board's telemetry (it publishes at 10 Hz).
     #[arg(long, default_value_t = 1.0)]
@@ -798,11 +800,11 @@ struct StatusArgs {
 }
 
 fn run_status(args: StatusArgs) -> Result<(), Failure> {
-    vic::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
+    vic::rt::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
     if !(args.timeout_s.is_finite() && args.timeout_s > 0.0) {
         return Err(Failure::input("--timeout-s must be a positive number"));
     }
-    let s = vic::operator::status(
+    let s = vic::tools::operator::status(
         &args.namespace,
         std::time::Duration::from_secs_f64(args.timeout_s),
     )
@@ -818,7 +820,7 @@ fn run_status(args: StatusArgs) -> Result<(), Failure> {
 #[derive(clap::Args)]
 struct MonitorArgs {
     /// Namespace of the board.
-    #[arg(long, default_value = vic::transport::DEFAULT_NAMESPACE)]
+    #[arg(long, default_value = vic::rt::transport::DEFAULT_NAMESPACE)]
     namespace: String,
     /// Seconds between snapshots.
     #[arg(long, default_value_t = 1.0)]
@@ -832,7 +834,7 @@ fn run_monitor(args: MonitorArgs) -> Result<(), Failure> {
     use std::io::{IsTerminal, Write};
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
-    vic::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
+    vic::rt::transport::validate_namespace(&args.namespace).map_err(Failure::input)?;
     if !(args.interval_s.is_finite() && args.interval_s >= 0.1) {
         return Err(Failure::input("--interval-s must be at least 0.1"));
     }
@@ -844,7 +846,7 @@ fn run_monitor(args: MonitorArgs) -> Result<(), Failure> {
     }
     let tty = std::io::stdout().is_terminal();
     let mut shown = 0u64;
-    vic::operator::monitor(
+    vic::tools::operator::monitor(
         &args.namespace,
         std::time::Duration::from_secs_f64(args.interval_s),
         &stop,
@@ -928,7 +930,7 @@ fn sibling_binary(name: &str) -> Result<PathBuf, Failure> {
 fn demo_plan(
     config: &std::path::Path,
     overrides: &[String],
-    method: vic::plan::Method,
+    method: vic::planning::plan::Method,
     dir: &std::path::Path,
     reuse: bool,
 ) -> Result<PathBuf, Failure> {
@@ -936,7 +938,13 @@ fn demo_plan(
     let text = std::fs::read_to_string(config)
         .map_err(|e| Failure::input(format!("{}: cannot read: {e}", config.display())))?;
     let mut h = std::collections::hash_map::DefaultHasher::new();
-    (text, overrides, method.name(), vic::plan::PLAN_VERSION).hash(&mut h);
+    (
+        text,
+        overrides,
+        method.name(),
+        vic::planning::plan::PLAN_VERSION,
+    )
+        .hash(&mut h);
     let path = dir.join(format!("{}-{:016x}.json", method.name(), h.finish()));
     if reuse && path.is_file() {
         return Ok(path);
@@ -994,7 +1002,7 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
             demo_plan(
                 &args.config,
                 &args.overrides,
-                vic::plan::Method::Sooc,
+                vic::planning::plan::Method::Sooc,
                 &dir,
                 reuse,
             )
@@ -1005,7 +1013,7 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
                 None => demo_plan(
                     &args.config,
                     &df_overrides,
-                    vic::plan::Method::Ilqg,
+                    vic::planning::plan::Method::Ilqg,
                     &dir,
                     reuse,
                 ),
@@ -1016,7 +1024,7 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
                 demo_plan(
                     &args.config,
                     &zero_overrides,
-                    vic::plan::Method::Ilqg,
+                    vic::planning::plan::Method::Ilqg,
                     &dir,
                     reuse,
                 )
@@ -1034,7 +1042,7 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
     let ilqg = ilqg.map_err(|_| Failure::runtime("planning panicked"))??;
     let ilqg0 = ilqg0.map_err(|_| Failure::runtime("planning panicked"))??;
 
-    let mut guard = vic::daemon::Children::new(&namespace);
+    let mut guard = vic::rt::daemon::Children::new(&namespace);
     let mut board = Proc::new(&board_bin);
     board
         .arg("--config")
@@ -1084,13 +1092,13 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
                 out.status
             )));
         }
-        let r: vic::central::StrategyResult = serde_json::from_slice(&out.stdout)
+        let r: vic::tools::report::StrategyResult = serde_json::from_slice(&out.stdout)
             .map_err(|e| Failure::runtime(format!("vic-planner printed no result: {e}")))?;
         results.push(r);
     }
     // Stop the board: it prints its statistics at the end of the current tick.
     let mut child = guard.children.pop().expect("the board");
-    vic::daemon::Children::terminate(&mut child);
+    vic::rt::daemon::Children::terminate(&mut child);
     let mut stdout = String::new();
     if let Some(mut s) = child.stdout.take() {
         use std::io::Read;
@@ -1102,7 +1110,7 @@ fn run_demo(args: DemoArgs) -> Result<(), Failure> {
     if args.plans_dir.is_none() {
         let _ = std::fs::remove_dir_all(&tmp_dir);
     }
-    let leftover = vic::transport::namespace_files(&namespace);
+    let leftover = vic::rt::transport::namespace_files(&namespace);
     let strategies: Vec<serde_json::Value> = results
         .iter()
         .map(|r| {
@@ -1295,13 +1303,13 @@ fn run_bench(args: BenchArgs) -> Result<(), Failure> {
                     a.config.display()
                 )));
             }
-            if a.require_baseline && vic::bench::cyclictest::find().is_none() {
+            if a.require_baseline && vic::tools::bench::cyclictest::find().is_none() {
                 return Err(Failure::runtime(format!(
                     "cyclictest not found: {}",
-                    vic::bench::cyclictest::INSTALL_HINT
+                    vic::tools::bench::cyclictest::INSTALL_HINT
                 )));
             }
-            let names: Vec<&str> = vic::bench::loop_bench::variants()
+            let names: Vec<&str> = vic::tools::bench::loop_bench::variants()
                 .iter()
                 .map(|v| v.name)
                 .collect();
@@ -1311,22 +1319,22 @@ fn run_bench(args: BenchArgs) -> Result<(), Failure> {
                     names.join(", ")
                 )));
             }
-            let opts = vic::bench::loop_bench::Options {
+            let opts = vic::tools::bench::loop_bench::Options {
                 seconds: a.seconds,
                 config: a.config,
                 overrides: a.overrides,
                 variants: a.variants,
                 baseline: !a.no_baseline,
             };
-            let report =
-                vic::bench::loop_bench::run(&opts, progress(a.json)).map_err(Failure::runtime)?;
+            let report = vic::tools::bench::loop_bench::run(&opts, progress(a.json))
+                .map_err(Failure::runtime)?;
             if a.json {
                 println!(
                     "{}",
                     serde_json::to_string(&report).map_err(Failure::runtime)?
                 );
             } else {
-                vic::bench::loop_bench::print(&report);
+                vic::tools::bench::loop_bench::print(&report);
             }
         }
         BenchCommand::Ipc(a) => {
@@ -1340,7 +1348,7 @@ fn run_bench(args: BenchArgs) -> Result<(), Failure> {
                         a.plan.display()
                     )));
                 }
-                Some(vic::bench::ipc::PairOptions {
+                Some(vic::tools::bench::ipc::PairOptions {
                     board_bin: sibling_binary("vic-board")?,
                     planner_bin: sibling_binary("vic-planner")?,
                     config: a.config,
@@ -1349,18 +1357,19 @@ fn run_bench(args: BenchArgs) -> Result<(), Failure> {
                     trials: a.pair_trials,
                 })
             };
-            let opts = vic::bench::ipc::Options {
+            let opts = vic::tools::bench::ipc::Options {
                 iterations: a.iterations,
                 pair,
             };
-            let report = vic::bench::ipc::run(&opts, progress(a.json)).map_err(Failure::runtime)?;
+            let report =
+                vic::tools::bench::ipc::run(&opts, progress(a.json)).map_err(Failure::runtime)?;
             if a.json {
                 println!(
                     "{}",
                     serde_json::to_string(&report).map_err(Failure::runtime)?
                 );
             } else {
-                vic::bench::ipc::print(&report);
+                vic::tools::bench::ipc::print(&report);
             }
         }
     }

@@ -6,7 +6,7 @@
 //! cargo run --release --example malformed -- NAMESPACE [SECONDS] [EVERY_MS]
 
 use std::time::{Duration, Instant};
-use vic::transport::{
+use vic::rt::transport::{
     CommandSlice, Disturbance, DisturbanceKind, Endpoint, PROTOCOL_VERSION, Role, monotonic_ns,
 };
 
@@ -39,7 +39,7 @@ fn main() {
         let d = Disturbance {
             version: PROTOCOL_VERSION,
             kind: DisturbanceKind::Pulse as u32,
-            seq: vic::transport::session_seq() + n,
+            seq: vic::rt::transport::session_seq() + n,
             time_ns: monotonic_ns(),
             torque: [0.2, -0.1],
             duration_ns: 10_000_000,

@@ -4,9 +4,9 @@ mod common;
 
 use common::alloc::{Counting, allocations};
 use std::path::Path;
-use vic::board::{Board, BoardConfig, Inputs};
-use vic::config::Scenario;
-use vic::transport::{CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind};
+use vic::planning::scenario::Scenario;
+use vic::rt::board::{Board, Inputs};
+use vic::rt::transport::{CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -18,18 +18,18 @@ fn a_board_step_does_not_allocate() {
         "/config/two_link_divergent.toml"
     ));
     let scenario = Scenario::load(path, &[]).unwrap();
-    let setup = vic::plan::setup(&scenario).unwrap();
+    let setup = vic::planning::plan::setup(&scenario).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
     let mut board = Board::new(
         scenario.model.clone(),
-        BoardConfig::from_scenario(&scenario, 1_000_000),
+        vic::tools::launch::board_config(&scenario, 1_000_000),
         &q0,
     )
     .unwrap();
     let mut inputs = Inputs::default();
     let ms = 1_000_000u64;
     let reset = Control {
-        version: vic::transport::PROTOCOL_VERSION,
+        version: vic::rt::transport::PROTOCOL_VERSION,
         kind: ControlKind::Reset as u32,
         seq: 1,
         trial: 0,
@@ -49,7 +49,7 @@ fn a_board_step_does_not_allocate() {
         k.stiffness = [80.0, 80.0];
     }
     let pulse = Disturbance {
-        version: vic::transport::PROTOCOL_VERSION,
+        version: vic::rt::transport::PROTOCOL_VERSION,
         kind: DisturbanceKind::Pulse as u32,
         seq: 1,
         torque: [0.5, 0.0],

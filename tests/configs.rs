@@ -5,8 +5,8 @@
 //! parallel); a further test fails when a file in `config/` has no test here.
 
 use std::path::{Path, PathBuf};
-use vic::config::Scenario;
-use vic::plan::plan;
+use vic::planning::plan::plan;
+use vic::planning::scenario::Scenario;
 
 /// The scenarios, as file stems of `config/*.toml`.
 const SCENARIOS: [&str; 10] = [

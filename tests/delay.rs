@@ -1,4 +1,4 @@
-//! The delay wrapper `vic::delay::Delayed` (paper Eq. 11–13, 19; DESIGN §6).
+//! The delay wrapper `vic::core::delay::Delayed` (paper Eq. 11–13, 19; DESIGN §6).
 //!
 //! * With 0 steps it is the plain model: step, noise gain and linearisation identical.
 //! * With `d > 0` steps a rollout of the augmented model from `initial_state(x0, pending)` is a
@@ -12,9 +12,9 @@ use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
-use vic::delay::Delayed;
-use vic::dynamics::{Dynamics, EulerModel, Linearization};
-use vic::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
+use vic::core::delay::Delayed;
+use vic::core::dynamics::{Dynamics, EulerModel, Linearization};
+use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 
 const DT: f64 = 0.01;
 const HORIZON: usize = 15;

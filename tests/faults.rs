@@ -8,7 +8,7 @@ mod common;
 use common::daemons::{CONFIG, Daemons, planner_command, run_planner, sooc_plan, unique_namespace};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use vic::transport::{Endpoint, Mode, Role, StateMsg, namespace_files};
+use vic::rt::transport::{Endpoint, Mode, Role, StateMsg, namespace_files};
 
 /// The tests run one at a time: each runs a 1 kHz board and a planner, and four pairs at once on
 /// a 2-core machine would test the machine, not the board.
@@ -132,19 +132,19 @@ fn a_killed_board_is_replaced_and_the_planner_carries_on() {
     assert!(!out.status.success());
     std::thread::sleep(Duration::from_millis(300));
     assert!(
-        vic::transport::dead_nodes(&ns) >= 1,
+        vic::rt::transport::dead_nodes(&ns) >= 1,
         "the killed board should have left a dead node"
     );
     let replacement = d.board(&ns, &[]);
     wait_for(&ep, Duration::from_secs(10), |_| true);
     assert_eq!(
-        vic::transport::dead_nodes(&ns),
+        vic::rt::transport::dead_nodes(&ns),
         0,
         "the killed board's resources are still there"
     );
     let result = d.wait(planner);
     assert!(result.status.success(), "the planner gave up");
-    let r: vic::central::StrategyResult = serde_json::from_slice(&result.stdout).unwrap();
+    let r: vic::tools::report::StrategyResult = serde_json::from_slice(&result.stdout).unwrap();
     assert_eq!(r.trials, 3);
     // The trial after the restart ran on the new board, within 1 cm.
     assert!(
@@ -235,7 +235,7 @@ fn injected_pulses_show_within_two_ticks_and_namespaces_do_not_cross() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no board in namespace"));
     assert!(t0.elapsed() < Duration::from_secs(5));
-    vic::transport::remove_namespace("nobodyhere");
+    vic::rt::transport::remove_namespace("nobodyhere");
     // Bad input: exit 2 before anything starts.
     let out = vic(&["inject", "pulse", "--torque", "nan", "--namespace", &a]);
     assert_eq!(out.status.code(), Some(2));
@@ -272,7 +272,7 @@ fn the_plant_guard_latches_a_fault_that_status_reports() {
         .output()
         .unwrap();
     assert!(out.status.success());
-    let r: vic::central::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
+    let r: vic::tools::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r.fault_trials, 1, "{r:?}");
     // Past the 100 ms ramp into the hold.
     std::thread::sleep(Duration::from_millis(300));

@@ -1,15 +1,15 @@
 //! ILQG on a linear plant with quadratic cost and additive noise is LQG (DESIGN §4, "exactness
 //! check"): its gains, nominal and predicted expected cost must equal those of a discrete-time
 //! Riccati recursion written independently here, and the moment propagation of
-//! `vic::solver::moments` must give the same expected cost.
+//! `vic::core::solver::moments` must give the same expected cost.
 
 use nalgebra::{DMatrix, DVector};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::cost::{Cost, CostDerivatives};
-use vic::dynamics::{Dynamics, Linearization, NoiseKind};
-use vic::solver::moments::{self, MomentWorkspace};
-use vic::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
+use vic::core::cost::{Cost, CostDerivatives};
+use vic::core::dynamics::{Dynamics, Linearization, NoiseKind};
+use vic::core::solver::moments::{self, MomentWorkspace};
+use vic::core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
 
 const NX: usize = 3;
 const NU: usize = 2;

@@ -6,9 +6,9 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::config::Scenario;
-use vic::plan::{Setup, setup};
-use vic::solver::{Ilqg, Problem, Solution};
+use vic::core::solver::{Ilqg, Problem, Solution};
+use vic::planning::plan::{Setup, setup};
+use vic::planning::scenario::Scenario;
 
 const CONFIG: &str = "config/two_link_reach.toml";
 

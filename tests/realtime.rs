@@ -28,7 +28,7 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
         .output()
         .unwrap();
     assert!(out.status.success());
-    let fb0: vic::central::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
+    let fb0: vic::tools::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
 
     // SIGTERM: the board stops at the end of the tick, prints its statistics, exits 0.
     let out = d.signal_and_wait(board, libc::SIGTERM);
@@ -37,9 +37,9 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
     assert!(stats["ticks"].as_u64().unwrap() > 1000);
     assert!(stats["jitter_us"]["p50"].as_f64().is_some());
     assert!(
-        vic::transport::namespace_files(&ns).is_empty(),
+        vic::rt::transport::namespace_files(&ns).is_empty(),
         "shared memory left behind: {:?}",
-        vic::transport::namespace_files(&ns)
+        vic::rt::transport::namespace_files(&ns)
     );
 
     eprintln!(

@@ -10,10 +10,10 @@ use common::daemons::{CONFIG, Daemons, SIGMA, sooc_plan};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use vic::board::{Board, BoardConfig, Inputs};
-use vic::config::Scenario;
-use vic::record::{RecordOptions, Recorder, Sample};
-use vic::transport::{
+use vic::planning::scenario::Scenario;
+use vic::rt::board::{Board, BoardConfig, Inputs};
+use vic::rt::record::{RecordOptions, Recorder, Sample};
+use vic::rt::transport::{
     CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Endpoint, PROTOCOL_VERSION,
     Role,
 };
@@ -24,7 +24,7 @@ static GLOBAL: Counting = Counting;
 #[test]
 fn building_and_pushing_a_sample_does_not_allocate_even_when_the_queue_is_full() {
     let scenario = Scenario::load(Path::new(CONFIG), &[]).unwrap();
-    let setup = vic::plan::setup(&scenario).unwrap();
+    let setup = vic::planning::plan::setup(&scenario).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
     let mut board = Board::new(scenario.model.clone(), BoardConfig::default(), &q0).unwrap();
     let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("record_alloc.csv");
@@ -168,7 +168,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     loop {
         let running = tool
             .latest_state()
-            .is_some_and(|s| s.mode == vic::transport::Mode::Running as u32);
+            .is_some_and(|s| s.mode == vic::rt::transport::Mode::Running as u32);
         if running {
             break;
         }
@@ -180,7 +180,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
         version: PROTOCOL_VERSION,
         kind: DisturbanceKind::Pulse as u32,
         seq: 77,
-        time_ns: vic::transport::monotonic_ns(),
+        time_ns: vic::rt::transport::monotonic_ns(),
         torque: [0.25, -0.125],
         duration_ns: 20_000_000,
         value: 0.0,
@@ -229,7 +229,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     // Both trials ran with the plan's stiffness and the law's damping (K_D = 0.1 K_P).
     let running: Vec<&Vec<String>> = rows
         .iter()
-        .filter(|r| num(r, "x_mode") == vic::transport::Mode::Running as u32 as f64)
+        .filter(|r| num(r, "x_mode") == vic::rt::transport::Mode::Running as u32 as f64)
         .collect();
     assert!(running.len() > 1000, "{} running ticks", running.len());
     assert!(running.iter().any(|r| num(r, "x_trial") == 1.0));
@@ -283,12 +283,12 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     }
 
     // The log reader of `vic identify` reads the whole recording.
-    let log = vic::identify::read_log_file(&file).unwrap();
+    let log = vic::tools::identify::read_log_file(&file).unwrap();
     assert_eq!(log.len() as u64, ticks);
     assert_eq!(log[5].q, num(&rows[5], "q"));
     std::fs::remove_file(&file).unwrap();
     assert!(
-        vic::transport::namespace_files(&ns).is_empty(),
+        vic::rt::transport::namespace_files(&ns).is_empty(),
         "shared memory left behind"
     );
 }

@@ -20,18 +20,19 @@ use rand::{RngExt, SeedableRng};
 use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
-use vic::config::Scenario;
-use vic::cost::{Cost, CostDerivatives, TrackingCost};
-use vic::dynamics::{Dynamics, EulerModel, Integrator, Linearization};
-use vic::model::{
+use vic::core::cost::{Cost, CostDerivatives, TrackingCost};
+use vic::core::dynamics::{Dynamics, EulerModel, Integrator, Linearization};
+use vic::core::model::{
     Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
 };
-use vic::plan::{
+use vic::core::policy::{Feedback, Policy};
+use vic::core::solver::sooc::{MomentCost, MomentDynamics, pack, unpack, vech_len, vech_pairs};
+use vic::core::solver::{Bounds, Problem};
+use vic::planning::montecarlo::{final_state_statistics, position, run_trials};
+use vic::planning::plan::{
     Method, PlanFile, Setup, final_position_covariance, plan, predict_open_loop, setup,
 };
-use vic::simulation::{Executable, Policy, final_state_statistics, position, run_trials};
-use vic::solver::sooc::{MomentCost, MomentDynamics, pack, unpack, vech_len, vech_pairs};
-use vic::solver::{Bounds, Problem};
+use vic::planning::scenario::Scenario;
 
 // ---------------------------------------------------------------------------------------------
 // Helpers
@@ -77,13 +78,14 @@ fn controls(p: &PlanFile) -> Vec<DVector<f64>> {
 }
 
 /// The plan's commands executed without feedback.
-fn open_loop_executable(setup: &Setup, acting: &[DVector<f64>]) -> Executable {
+fn open_loop_executable(setup: &Setup, acting: &[DVector<f64>]) -> Policy {
     let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
-    Executable {
+    Policy {
         acting: acting.to_vec(),
         nominal: predict_open_loop(setup, acting).mean,
         gains: vec![DMatrix::zeros(nu, nx); acting.len()],
         plan_delay: 0,
+        bounds: setup.bounds.clone(),
     }
 }
 
@@ -95,7 +97,7 @@ fn largest_std(c: &DMatrix<f64>) -> f64 {
 /// Sample covariance of the final position (hand [m] or joint angle [rad]) over trials.
 fn final_position_sample_covariance(
     model: &ArmModel,
-    trials: &[vic::simulation::Trial],
+    trials: &[vic::planning::montecarlo::Trial],
 ) -> DMatrix<f64> {
     let points: Vec<Vec<f64>> = trials
         .iter()
@@ -804,7 +806,7 @@ fn check_covariance(what: &str, setup: &Setup, acting: &[DVector<f64>], seed: u6
     let start = Instant::now();
     let pred = predict_open_loop(setup, acting);
     let exe = open_loop_executable(setup, acting);
-    let trials = run_trials(setup, &exe, Policy::OpenLoop, COVARIANCE_TRIALS, seed);
+    let trials = run_trials(setup, &exe, Feedback::OpenLoop, COVARIANCE_TRIALS, seed);
     let (mean, cov) = final_state_statistics(&trials);
     let steps = acting.len();
     let predicted = &pred.final_covariance;
@@ -988,8 +990,8 @@ fn sooc_open_loop_spread_is_far_below_torque_only() {
         ("ILQG torque-only", "two_link_torque_divergent", &torque),
     ] {
         let s = setup(&load(stem, &[])).expect("setup");
-        let exe = Executable::from_plan(p, &s).expect("executable");
-        let trials = run_trials(&s, &exe, Policy::OpenLoop, TRIALS, 31);
+        let exe = p.policy(&s).expect("executable");
+        let trials = run_trials(&s, &exe, Feedback::OpenLoop, TRIALS, 31);
         assert!(
             trials
                 .iter()

@@ -7,9 +7,9 @@ mod common;
 use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::dynamics::{EulerModel, Integrator};
-use vic::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
-use vic::solver::sooc::{MomentDynamics, MomentExpansion, pack, vech_len};
+use vic::core::dynamics::{EulerModel, Integrator};
+use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
+use vic::core::solver::sooc::{MomentDynamics, MomentExpansion, pack, vech_len};
 
 struct Case {
     name: &'static str,
@@ -226,12 +226,15 @@ fn moment_curvature_matches_finite_differences() {
 use nalgebra::DVector;
 use std::path::Path;
 use std::sync::OnceLock;
-use vic::config::Scenario;
-use vic::dynamics::Dynamics;
-use vic::plan::{Setup, predict_open_loop, setup};
-use vic::simulation::{Executable, Policy, run_trials};
-use vic::solver::sooc::MomentCost;
-use vic::solver::sooc_newton::{SoocOptions, SoocProblem, SoocSolution, SoocSolver, SoocStop};
+use vic::core::dynamics::Dynamics;
+use vic::core::policy::{Feedback, Policy};
+use vic::core::solver::sooc::MomentCost;
+use vic::core::solver::sooc_newton::{
+    SoocOptions, SoocProblem, SoocSolution, SoocSolver, SoocStop,
+};
+use vic::planning::montecarlo::run_trials;
+use vic::planning::plan::{Setup, predict_open_loop, setup};
+use vic::planning::scenario::Scenario;
 
 fn scenario(stem: &str) -> (Scenario, Setup) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -383,13 +386,14 @@ fn sooc_predicted_cost_matches_monte_carlo() {
     const TRIALS: usize = 4000;
     let (_, setup, sol) = divergent();
     let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
-    let exe = Executable {
+    let policy = Policy {
         acting: sol.u.clone(),
         nominal: predict_open_loop(setup, &sol.u).mean,
         gains: vec![DMatrix::zeros(nu, nx); sol.u.len()],
         plan_delay: 0,
+        bounds: setup.bounds.clone(),
     };
-    let trials = run_trials(setup, &exe, Policy::OpenLoop, TRIALS, 4242);
+    let trials = run_trials(setup, &policy, Feedback::OpenLoop, TRIALS, 4242);
     let n = TRIALS as f64;
     let mean = trials.iter().map(|t| t.cost).sum::<f64>() / n;
     let var = trials.iter().map(|t| (t.cost - mean).powi(2)).sum::<f64>() / (n - 1.0);
@@ -408,7 +412,7 @@ fn sooc_predicted_cost_matches_monte_carlo() {
 /// `setup` moved `shift` knots along: reference shifted (last knot repeated), a new start.
 fn shifted(setup: &Setup, shift: usize, x0: &[f64]) -> Setup {
     let mut s = setup.clone();
-    let shift_ref = |r: &mut Vec<vic::model::Exogenous>| {
+    let shift_ref = |r: &mut Vec<Exogenous>| {
         let last = *r.last().expect("reference");
         r.drain(..shift);
         r.extend(std::iter::repeat_n(last, shift));

@@ -6,8 +6,8 @@ pub mod alloc;
 pub mod daemons;
 
 use std::path::Path;
-use vic::config::Scenario;
-use vic::model::{Plant, SingleJoint, TwoLink};
+use vic::core::model::{Plant, SingleJoint, TwoLink};
+use vic::planning::scenario::Scenario;
 
 fn plant(file: &str) -> Plant {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

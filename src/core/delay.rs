@@ -1,0 +1,141 @@
+//! Feedback delay by state augmentation (paper Eq. 11–13 and 19).
+//!
+//! A central controller `d` steps away sees the state `d` steps late, and what it sends acts at
+//! once. Relabelled in the controller's time, a command computed from `x_k` acts `d` steps later:
+//! `x_{k+1} = x_k + Δ f(x_k, u_{k−d}) + …` — the first line of paper Eq. 19 with `h = d + 1`. The
+//! plant stays Markov once the state carries the commands still in flight:
+//! `x̃_k = (x_k, u_{k−d}, …, u_{k−1})`, of dimension `n + m d`.
+//!
+//! Why the commands and not the past states (the paper's `(x_k, …, x_{k−h+1})`): with a Markov
+//! plant the value function depends on `x_k` alone, so ILQG on a history of *states* puts no gain at
+//! all on the older blocks and Eq. 13 would reduce to open loop. With the commands in flight, the
+//! gain block on `x_k` is the feedback that a controller acting `d` steps late should apply to the
+//! state it sees; keeping only that block and ignoring the in-flight commands (no predictor) is
+//! the paper's Eq. 13. For `d = 0` the wrapper is the plain model.
+
+use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
+use nalgebra::DMatrix;
+use std::sync::Mutex;
+
+/// A discrete model whose commands act `steps` steps after they are issued.
+pub struct Delayed<D: Dynamics> {
+    base: D,
+    steps: usize,
+    scratch: Mutex<(Linearization, DMatrix<f64>)>,
+}
+
+impl<D: Dynamics> Delayed<D> {
+    /// Wraps `base` with a delay of `steps` control steps.
+    pub fn new(base: D, steps: usize) -> Self {
+        let (nx, nu, nw) = (base.nx(), base.nu(), base.nw());
+        Delayed {
+            base,
+            steps,
+            scratch: Mutex::new((Linearization::new(nx, nu, nw), DMatrix::zeros(nx, nw))),
+        }
+    }
+
+    /// The wrapped model.
+    pub fn base(&self) -> &D {
+        &self.base
+    }
+
+    /// Delay in steps `d`.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// The augmented initial state: `x0` with the commands `pending` already in flight (the same
+    /// command in every slot, typically the one that holds the start posture).
+    pub fn initial_state(&self, x0: &[f64], pending: &[f64]) -> Vec<f64> {
+        let mut x = x0.to_vec();
+        for _ in 0..self.steps {
+            x.extend_from_slice(pending);
+        }
+        x
+    }
+
+    /// The control that acts on the plant in augmented state `x` given the new command `u`.
+    fn acting<'a>(&self, x: &'a [f64], u: &'a [f64]) -> &'a [f64] {
+        if self.steps == 0 {
+            u
+        } else {
+            let n = self.base.nx();
+            &x[n..n + self.base.nu()]
+        }
+    }
+}
+
+impl<D: Dynamics> Dynamics for Delayed<D> {
+    fn nx(&self) -> usize {
+        self.base.nx() + self.base.nu() * self.steps
+    }
+    fn nu(&self) -> usize {
+        self.base.nu()
+    }
+    fn nw(&self) -> usize {
+        self.base.nw()
+    }
+
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
+        let (n, m) = (self.base.nx(), self.base.nu());
+        self.base
+            .step(k, &x[..n], self.acting(x, u), &mut next[..n]);
+        if self.steps > 0 {
+            // Shift the commands in flight; the new one joins at the back.
+            let total = self.nx();
+            next[n..total - m].copy_from_slice(&x[n + m..total]);
+            next[total - m..].copy_from_slice(u);
+        }
+    }
+
+    fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
+        let n = self.base.nx();
+        let mut guard = self.scratch.lock().expect("scratch lock");
+        let g = &mut guard.1;
+        self.base.noise_gain(k, &x[..n], self.acting(x, u), g);
+        out.fill(0.0);
+        out.view_mut((0, 0), (n, g.ncols())).copy_from(g);
+    }
+
+    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        let (n, m) = (self.base.nx(), self.base.nu());
+        let total = self.nx();
+        // Own scratch per call: knots are linearised in parallel.
+        let mut own = Linearization::new(n, m, self.base.nw());
+        let base = &mut own;
+        self.base.linearize(k, &x[..n], self.acting(x, u), base);
+        lin.a.fill(0.0);
+        lin.b.fill(0.0);
+        lin.noise = base.noise;
+        lin.a.view_mut((0, 0), (n, n)).copy_from(&base.a);
+        if self.steps == 0 {
+            lin.b.copy_from(&base.b);
+        } else {
+            lin.a.view_mut((0, n), (n, m)).copy_from(&base.b);
+            for i in 0..total - n - m {
+                lin.a[(n + i, n + m + i)] = 1.0;
+            }
+            for j in 0..m {
+                lin.b[(total - m + j, j)] = 1.0;
+            }
+        }
+        if base.noise == NoiseKind::None {
+            return;
+        }
+        lin.c.fill(0.0);
+        lin.c
+            .view_mut((0, 0), (n, base.c.ncols()))
+            .copy_from(&base.c);
+        for i in 0..base.cx.len() {
+            lin.cx[i].fill(0.0);
+            lin.cu[i].fill(0.0);
+            lin.cx[i].view_mut((0, 0), (n, n)).copy_from(&base.cx[i]);
+            if self.steps == 0 {
+                lin.cu[i].copy_from(&base.cu[i]);
+            } else {
+                lin.cx[i].view_mut((0, n), (n, m)).copy_from(&base.cu[i]);
+            }
+        }
+    }
+}

@@ -1,0 +1,349 @@
+//! Discrete-time stochastic dynamics, the only thing the solvers see:
+//! `x[k+1] = step(k, x[k], u[k]) + G(k, x[k], u[k]) ε[k]`, `ε ~ N(0, I)` (paper Eq. 10), and its
+//! linearisation `δx' = A δx + B δu + Σ_i (c_i + Cx_i δx + Cu_i δu) ε_i`.
+
+use crate::core::model::{ArmModel, Exogenous};
+use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX, Scalar};
+use nalgebra::DMatrix;
+use num_dual::Dual;
+
+/// What kind of noise a linearisation carries; the backward pass skips what is absent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoiseKind {
+    /// Deterministic.
+    None,
+    /// `c_i` only (`Cx_i = Cu_i = 0`).
+    Additive,
+    /// State- and/or control-dependent.
+    Dependent,
+}
+
+/// The linearisation of one discrete step around (x̄, ū).
+#[derive(Debug, Clone)]
+pub struct Linearization {
+    /// `A = ∂x'/∂x` (n×n).
+    pub a: DMatrix<f64>,
+    /// `B = ∂x'/∂u` (n×m).
+    pub b: DMatrix<f64>,
+    /// Noise columns `c_i` (n×p).
+    pub c: DMatrix<f64>,
+    /// `Cx_i = ∂c_i/∂x` (p matrices n×n).
+    pub cx: Vec<DMatrix<f64>>,
+    /// `Cu_i = ∂c_i/∂u` (p matrices n×m).
+    pub cu: Vec<DMatrix<f64>>,
+    pub noise: NoiseKind,
+}
+
+impl Linearization {
+    /// A zeroed linearisation of the right sizes.
+    pub fn new(nx: usize, nu: usize, nw: usize) -> Self {
+        Linearization {
+            a: DMatrix::zeros(nx, nx),
+            b: DMatrix::zeros(nx, nu),
+            c: DMatrix::zeros(nx, nw),
+            cx: (0..nw).map(|_| DMatrix::zeros(nx, nx)).collect(),
+            cu: (0..nw).map(|_| DMatrix::zeros(nx, nu)).collect(),
+            noise: if nw == 0 {
+                NoiseKind::None
+            } else {
+                NoiseKind::Dependent
+            },
+        }
+    }
+}
+
+/// A discrete-time stochastic plant with exact first derivatives.
+pub trait Dynamics: Send + Sync {
+    /// State dimension.
+    fn nx(&self) -> usize;
+    /// Control dimension.
+    fn nu(&self) -> usize;
+    /// Number of noise channels.
+    fn nw(&self) -> usize;
+    /// Deterministic part of the step.
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]);
+    /// Noise gain `G = √Δ F` (n×p) of the step.
+    fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>);
+    /// Linearisation of the step around (x, u).
+    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization);
+}
+
+/// How the drift is integrated over one control step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Integrator {
+    /// Explicit Euler (the paper's): `x += h f(x, u)`.
+    Euler,
+    /// Semi-implicit (symplectic) Euler: velocities first, then positions with the new
+    /// velocities. Stable for undamped springs (the VSA) where explicit Euler gains energy.
+    SemiImplicit,
+}
+
+/// A continuous model discretised on a fixed grid (paper Eq. 10):
+/// `x[k+1] = Φ_Δ(x[k], u[k]) + √Δ F(x[k], u[k]) ε[k]`, where `Φ_Δ` integrates the drift over Δ in
+/// `substeps` steps of the chosen [`Integrator`] with the control and reference of knot `k` held.
+///
+/// The noise enters once per control step as in Eq. 10; sub-steps only keep a stiff impedance
+/// (large `K_D / J`) numerically stable, which explicit Euler at Δ = 10 ms is not.
+#[derive(Debug, Clone)]
+pub struct EulerModel {
+    pub model: ArmModel,
+    /// Time step Δ [s].
+    pub dt: f64,
+    /// Integration sub-steps per control step (1: the paper's single Euler step).
+    pub substeps: usize,
+    pub integrator: Integrator,
+    /// Exogenous inputs (reference, external torque) at each knot.
+    pub exogenous: Vec<Exogenous>,
+}
+
+impl EulerModel {
+    /// The paper's discretisation: one explicit Euler step per control step.
+    pub fn euler(model: ArmModel, dt: f64, exogenous: Vec<Exogenous>) -> Self {
+        EulerModel {
+            model,
+            dt,
+            substeps: 1,
+            integrator: Integrator::Euler,
+            exogenous,
+        }
+    }
+
+    fn exo(&self, k: usize) -> &Exogenous {
+        &self.exogenous[k.min(self.exogenous.len() - 1)]
+    }
+
+    /// The deterministic step `Φ_Δ(x, u)` in any scalar type (so it can be differentiated).
+    pub fn flow<S: Scalar>(&self, k: usize, x: &[S], u: &[S], next: &mut [S]) {
+        flow(
+            &self.model,
+            self.exo(k),
+            self.dt,
+            self.substeps,
+            self.integrator,
+            x,
+            u,
+            next,
+        );
+    }
+}
+
+/// Integrates the drift of `model` over `dt` in `substeps` steps, control and exogenous input
+/// held. The one integrator of the project: the planner, the Monte Carlo and the board use it.
+#[allow(clippy::too_many_arguments)]
+pub fn flow<S: Scalar>(
+    model: &ArmModel,
+    ex: &Exogenous,
+    dt: f64,
+    substeps: usize,
+    integrator: Integrator,
+    x: &[S],
+    u: &[S],
+    next: &mut [S],
+) {
+    let nx = model.nx();
+    let h = dt / substeps as f64;
+    let mut cur = [S::zero(); MAX_NX];
+    cur[..nx].copy_from_slice(&x[..nx]);
+    let mut xdot = [S::zero(); MAX_NX];
+    for _ in 0..substeps {
+        model.f(&cur[..nx], u, ex, &mut xdot[..nx]);
+        match integrator {
+            Integrator::Euler => {
+                for i in 0..nx {
+                    cur[i] += xdot[i] * h;
+                }
+            }
+            Integrator::SemiImplicit => {
+                let dof = model.dof();
+                // Velocities are the second half of each (position, velocity) block.
+                for block in (0..nx).step_by(2 * dof) {
+                    for i in 0..dof {
+                        cur[block + dof + i] += xdot[block + dof + i] * h;
+                        cur[block + i] += cur[block + dof + i] * h;
+                    }
+                }
+            }
+        }
+    }
+    next[..nx].copy_from_slice(&cur[..nx]);
+}
+
+impl Dynamics for EulerModel {
+    fn nx(&self) -> usize {
+        self.model.nx()
+    }
+    fn nu(&self) -> usize {
+        self.model.nu()
+    }
+    fn nw(&self) -> usize {
+        self.model.nw()
+    }
+
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.flow(k, x, u, next);
+    }
+
+    fn noise_gain(&self, _k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
+        let (nx, nw) = (self.nx(), self.nw());
+        let mut f = [0.0; MAX_NX * MAX_NW];
+        self.model.diffusion(x, u, &mut f);
+        let s = self.dt.sqrt();
+        for i in 0..nw {
+            for r in 0..nx {
+                out[(r, i)] = s * f[i * nx + r];
+            }
+        }
+    }
+
+    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        let (nx, nu) = (self.nx(), self.nu());
+        let mut a = [0.0; MAX_NX * MAX_NX];
+        let mut b = [0.0; MAX_NX * MAX_NU];
+        self.flow_jacobian(k, x, u, &mut a, &mut b);
+        for j in 0..nx {
+            for i in 0..nx {
+                lin.a[(i, j)] = a[j * nx + i];
+            }
+        }
+        for j in 0..nu {
+            for i in 0..nx {
+                lin.b[(i, j)] = b[j * nx + i];
+            }
+        }
+        self.noise_linearization(x, u, lin, true);
+    }
+}
+
+impl EulerModel {
+    /// The noise part of the linearisation: `c_i`, `Cx_i` and (if `with_cu`) `Cu_i`, and whether
+    /// the noise depends on the state or controls at all. SOOC's covariance step, which needs no
+    /// `Cu`, calls it with `with_cu = false`.
+    pub(crate) fn noise_linearization(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        lin: &mut Linearization,
+        with_cu: bool,
+    ) {
+        let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
+        if nw == 0 {
+            lin.noise = NoiseKind::None;
+            return;
+        }
+        let mut g = [0.0; MAX_NX * MAX_NW];
+        let mut dgx = [0.0; MAX_NX * MAX_NX * MAX_NW];
+        let mut dgu = [0.0; MAX_NU * MAX_NX * MAX_NW];
+        self.noise_jacobian(x, u, &mut g, &mut dgx, &mut dgu);
+        let block = nx * nw;
+        let mut dependent = false;
+        for ch in 0..nw {
+            for r in 0..nx {
+                lin.c[(r, ch)] = g[ch * nx + r];
+            }
+            for j in 0..nx {
+                for r in 0..nx {
+                    let v = dgx[j * block + ch * nx + r];
+                    dependent |= v != 0.0;
+                    lin.cx[ch][(r, j)] = v;
+                }
+            }
+            for j in 0..nu {
+                for r in 0..nx {
+                    let v = dgu[j * block + ch * nx + r];
+                    dependent |= v != 0.0;
+                    if with_cu {
+                        lin.cu[ch][(r, j)] = v;
+                    }
+                }
+            }
+        }
+        lin.noise = if dependent {
+            NoiseKind::Dependent
+        } else {
+            NoiseKind::Additive
+        };
+    }
+}
+
+impl EulerModel {
+    /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` of the step (column-major n×n and n×m) by forward-mode AD
+    /// through every sub-step, in any scalar type: with dual numbers in, the result carries the
+    /// second derivatives of the flow (what the moment dynamics of SOOC need).
+    pub fn flow_jacobian<S: Scalar>(&self, k: usize, x: &[S], u: &[S], a: &mut [S], b: &mut [S]) {
+        let (nx, nu) = (self.nx(), self.nu());
+        let mut xd = [Dual::from_re(S::zero()); MAX_NX];
+        let mut ud = [Dual::from_re(S::zero()); MAX_NU];
+        for (d, v) in xd.iter_mut().zip(x) {
+            *d = Dual::from_re(*v);
+        }
+        for (d, v) in ud.iter_mut().zip(u) {
+            *d = Dual::from_re(*v);
+        }
+        let mut out = [Dual::from_re(S::zero()); MAX_NX];
+        for j in 0..nx + nu {
+            seed(&mut xd, &mut ud, nx, j, S::one());
+            self.flow(k, &xd[..nx], &ud[..nu], &mut out[..nx]);
+            seed(&mut xd, &mut ud, nx, j, S::zero());
+            let col = if j < nx {
+                &mut a[j * nx..(j + 1) * nx]
+            } else {
+                &mut b[(j - nx) * nx..(j - nx + 1) * nx]
+            };
+            for (c, o) in col.iter_mut().zip(&out[..nx]) {
+                *c = o.eps;
+            }
+        }
+    }
+
+    /// The noise gain `G = √Δ F` (layout of [`ArmModel::diffusion`]) and its derivatives
+    /// `dgx[j]`, `dgu[j]` with respect to `x_j` and `u_j`, in any scalar type.
+    pub fn noise_jacobian<S: Scalar>(
+        &self,
+        x: &[S],
+        u: &[S],
+        g: &mut [S],
+        dgx: &mut [S],
+        dgu: &mut [S],
+    ) {
+        let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
+        let block = nx * nw;
+        let s = self.dt.sqrt();
+        let mut xd = [Dual::from_re(S::zero()); MAX_NX];
+        let mut ud = [Dual::from_re(S::zero()); MAX_NU];
+        for (d, v) in xd.iter_mut().zip(x) {
+            *d = Dual::from_re(*v);
+        }
+        for (d, v) in ud.iter_mut().zip(u) {
+            *d = Dual::from_re(*v);
+        }
+        let mut big_f = [Dual::from_re(S::zero()); MAX_NX * MAX_NW];
+        for j in 0..nx + nu {
+            seed(&mut xd, &mut ud, nx, j, S::one());
+            self.model.diffusion(&xd[..nx], &ud[..nu], &mut big_f);
+            seed(&mut xd, &mut ud, nx, j, S::zero());
+            if j == 0 {
+                for (dst, v) in g.iter_mut().zip(&big_f[..block]) {
+                    *dst = v.re * s;
+                }
+            }
+            let dst = if j < nx {
+                &mut dgx[j * block..(j + 1) * block]
+            } else {
+                &mut dgu[(j - nx) * block..(j - nx + 1) * block]
+            };
+            for (d, v) in dst.iter_mut().zip(&big_f[..block]) {
+                *d = v.eps * s;
+            }
+        }
+    }
+}
+
+/// Sets the derivative seed of variable `j` of the stacked vector `(x, u)`.
+fn seed<S: Scalar>(x: &mut [Dual<S>], u: &mut [Dual<S>], nx: usize, j: usize, value: S) {
+    if j < nx {
+        x[j].eps = value;
+    } else {
+        u[j - nx].eps = value;
+    }
+}

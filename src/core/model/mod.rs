@@ -1,0 +1,213 @@
+//! Continuous-time stochastic plant models `dx = f(x, u) dt + F(x, u) dw` (paper Eq. 8): a limb
+//! ([`Plant`]), an [`Actuator`], a force [`Field`] on the hand and a [`Noise`] model.
+//!
+//! [`ArmModel::f`] and [`ArmModel::diffusion`] are the only places the equations of motion are
+//! written. They are generic over [`Scalar`], so the same code simulates (with `f64`), gives exact
+//! Jacobians (with dual numbers) and runs inside the board's 1 kHz loop.
+
+pub mod actuator;
+pub mod field;
+pub mod noise;
+pub mod plant;
+
+pub use actuator::{Actuator, Damping};
+pub use field::Field;
+pub use noise::Noise;
+pub use plant::{Plant, SingleJoint, TwoLink};
+
+use crate::core::scalar::{Scalar, c};
+use serde::{Deserialize, Serialize};
+
+/// Inputs to the plant that are not controls: the impedance law's equilibrium trajectory and any
+/// external joint torque (the board's injected disturbances). Not differentiated.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Exogenous {
+    /// Desired joint angles `q_d` [rad].
+    pub q_d: [f64; 2],
+    /// Desired joint velocities `q_d'` [rad/s].
+    pub qd_d: [f64; 2],
+    /// External joint torque [N m] added to the actuator's.
+    pub tau_ext: [f64; 2],
+}
+
+/// A complete continuous-time model: limb, actuator, field and noise.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ArmModel {
+    pub plant: Plant,
+    pub actuator: Actuator,
+    pub field: Field,
+    pub noise: Noise,
+}
+
+impl ArmModel {
+    /// Builds a model, checking that its parts fit together.
+    pub fn new(
+        plant: Plant,
+        actuator: Actuator,
+        field: Field,
+        noise: Noise,
+    ) -> Result<Self, String> {
+        let dof = plant.dof();
+        if let Actuator::Vsa { motor_inertia } = &actuator {
+            if motor_inertia.len() != dof {
+                return Err(format!(
+                    "motor_inertia has {} entries, the plant has {dof} joints",
+                    motor_inertia.len()
+                ));
+            }
+            if motor_inertia.iter().any(|b| b.is_nan() || *b <= 0.0) {
+                return Err("motor_inertia must be positive".into());
+            }
+        }
+        if dof == 1 && !matches!(field, Field::None) {
+            return Err(
+                "force fields act on the hand of the two-link arm; a single joint takes \
+                 field kind = \"none\""
+                    .into(),
+            );
+        }
+        let model = ArmModel {
+            plant,
+            actuator,
+            field,
+            noise,
+        };
+        if let Noise::StateProportional { component, .. } = noise
+            && component >= model.nx()
+        {
+            return Err(format!(
+                "noise component {component} is out of range for a {}-dimensional state",
+                model.nx()
+            ));
+        }
+        Ok(model)
+    }
+
+    /// Number of joints.
+    pub fn dof(&self) -> usize {
+        self.plant.dof()
+    }
+    /// State dimension `n`: `(q, q')`, or `(q, q', θ, θ')` with a VSA.
+    pub fn nx(&self) -> usize {
+        self.actuator.nx(self.dof())
+    }
+    /// Control dimension `m`.
+    pub fn nu(&self) -> usize {
+        self.actuator.nu(self.dof())
+    }
+    /// Number of noise channels `p`.
+    pub fn nw(&self) -> usize {
+        self.noise.nw(self.nx(), self.dof())
+    }
+
+    /// Joint torque produced by the actuator and the exogenous torque (Eq. 3, 4, 6).
+    pub fn joint_torque<S: Scalar>(&self, x: &[S], u: &[S], ex: &Exogenous, tau: &mut [S]) {
+        let n = self.dof();
+        for i in 0..n {
+            let (q, qd) = (x[i], x[n + i]);
+            tau[i] = c::<S>(ex.tau_ext[i])
+                + match &self.actuator {
+                    Actuator::Torque => u[i],
+                    Actuator::Impedance { damping } => {
+                        let k = u[n + i];
+                        u[i] - k * (q - ex.q_d[i]) - damping.gain(k) * (qd - ex.qd_d[i])
+                    }
+                    // The spring between motor and link: τ = K (θ − q).
+                    Actuator::Vsa { .. } => u[n + i] * (x[2 * n + i] - q),
+                };
+        }
+    }
+
+    /// The drift `x' = f(x, u)` (paper Eq. 2).
+    pub fn f<S: Scalar>(&self, x: &[S], u: &[S], ex: &Exogenous, xdot: &mut [S]) {
+        let n = self.dof();
+        let (q, qd) = (&x[..n], &x[n..2 * n]);
+        let mut tau = [S::zero(); 2];
+        self.joint_torque(x, u, ex, &mut tau);
+        let mut bias = [S::zero(); 2];
+        self.plant.bias_torque(q, qd, &mut bias);
+        let mut rhs = [S::zero(); 2];
+        for i in 0..n {
+            rhs[i] = tau[i] - bias[i];
+        }
+        if !self.field.is_none() {
+            // Jᵀ(q) D: the hand force mapped to joint torques.
+            let jac = self.plant.jacobian(q);
+            let v = [
+                jac[0][0] * qd[0] + jac[0][1] * qd[1],
+                jac[1][0] * qd[0] + jac[1][1] * qd[1],
+            ];
+            let force = self.field.force(self.plant.hand_position(q), v);
+            for (i, r) in rhs.iter_mut().enumerate().take(n) {
+                *r += jac[0][i] * force[0] + jac[1][i] * force[1];
+            }
+        }
+        let mut qdd = [S::zero(); 2];
+        self.plant.solve_mass(q, &rhs[..n], &mut qdd[..n]);
+        xdot[..n].copy_from_slice(qd);
+        xdot[n..2 * n].copy_from_slice(&qdd[..n]);
+        if let Actuator::Vsa { motor_inertia } = &self.actuator {
+            for i in 0..n {
+                let theta = x[2 * n + i];
+                xdot[2 * n + i] = x[3 * n + i];
+                xdot[3 * n + i] = (u[i] - u[n + i] * (theta - q[i])) / motor_inertia[i];
+            }
+        }
+    }
+
+    /// The diffusion `F(x, u)` (n × p, column-major: column `i` is `out[i*n .. (i+1)*n]`).
+    pub fn diffusion<S: Scalar>(&self, x: &[S], _u: &[S], out: &mut [S]) {
+        let nx = self.nx();
+        let nw = self.nw();
+        out[..nx * nw].iter_mut().for_each(|v| *v = S::zero());
+        match self.noise {
+            Noise::None => {}
+            Noise::StateProportional { sigma, component } => {
+                let scale = x[component] * sigma;
+                for i in 0..nx {
+                    out[i * nx + i] = scale;
+                }
+            }
+            Noise::Torque { a, b, sample_time } => {
+                let scale = sample_time.sqrt();
+                let n = self.dof();
+                let q = &x[..n];
+                for i in 0..n {
+                    let mut e = [S::zero(); 2];
+                    e[i] = (x[n + i] * b + a) * scale;
+                    let mut acc = [S::zero(); 2];
+                    self.plant.solve_mass(q, &e[..n], &mut acc[..n]);
+                    for j in 0..n {
+                        out[i * nx + n + j] = acc[j];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Joint torque needed to move along `(q, q', q'')`, the inverse dynamics
+    /// `M(q) q'' + C(q, q') + B_v q' + g(q) − Jᵀ D` (used to warm-start the planner).
+    pub fn inverse_dynamics(&self, q: &[f64], qd: &[f64], qdd: &[f64]) -> [f64; 2] {
+        let n = self.dof();
+        let m = self.plant.mass_matrix(q);
+        let mut tau = [0.0; 2];
+        self.plant.bias_torque(q, qd, &mut tau);
+        for i in 0..n {
+            for j in 0..n {
+                tau[i] += m[i][j] * qdd[j];
+            }
+        }
+        if !self.field.is_none() {
+            let jac = self.plant.jacobian(q);
+            let v = [
+                jac[0][0] * qd[0] + jac[0][1] * qd[1],
+                jac[1][0] * qd[0] + jac[1][1] * qd[1],
+            ];
+            let force = self.field.force(self.plant.hand_position(q), v);
+            for (i, t) in tau.iter_mut().enumerate().take(n) {
+                *t -= jac[0][i] * force[0] + jac[1][i] * force[1];
+            }
+        }
+        tau
+    }
+}

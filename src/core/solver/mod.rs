@@ -1,0 +1,67 @@
+//! Solvers over a discrete stochastic [`Dynamics`](crate::core::dynamics::Dynamics) and a
+//! [`Cost`](crate::core::cost::Cost): ILQG (Todorov & Li 2005) with box-constrained controls, and
+//! the stagewise Newton solver of the open-loop moment problem (SOOC, [`sooc_newton`]).
+
+pub mod boxqp;
+pub mod ilqg;
+pub mod moments;
+pub mod sooc;
+pub mod sooc_newton;
+pub mod sparse;
+
+pub use ilqg::{Ilqg, IlqgOptions, Solution, StopReason};
+
+use crate::core::cost::Cost;
+use crate::core::dynamics::Dynamics;
+
+/// Constant lower and upper limits on every control component (`±∞` for none).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bounds {
+    pub lower: Vec<f64>,
+    pub upper: Vec<f64>,
+}
+
+impl Bounds {
+    /// No limits on `nu` controls.
+    pub fn unbounded(nu: usize) -> Self {
+        Bounds {
+            lower: vec![f64::NEG_INFINITY; nu],
+            upper: vec![f64::INFINITY; nu],
+        }
+    }
+
+    /// Clamps `u` into the box.
+    pub fn clamp(&self, u: &mut [f64]) {
+        for ((v, lo), hi) in u.iter_mut().zip(&self.lower).zip(&self.upper) {
+            *v = v.clamp(*lo, *hi);
+        }
+    }
+}
+
+/// A finite-horizon optimal control problem: dynamics, cost, initial state, horizon, limits.
+pub struct Problem<'a> {
+    pub dynamics: &'a dyn Dynamics,
+    pub cost: &'a dyn Cost,
+    pub x0: Vec<f64>,
+    /// Number of control steps N (states `x_0 ..= x_N`).
+    pub horizon: usize,
+    pub bounds: Bounds,
+}
+
+impl Problem<'_> {
+    /// Deterministic rollout of a control sequence: the states and the total cost.
+    pub fn rollout(&self, u: &[nalgebra::DVector<f64>]) -> (Vec<nalgebra::DVector<f64>>, f64) {
+        let nx = self.dynamics.nx();
+        let mut x = vec![nalgebra::DVector::from_column_slice(&self.x0)];
+        let mut cost = 0.0;
+        for (k, uk) in u.iter().enumerate().take(self.horizon) {
+            let mut next = nalgebra::DVector::zeros(nx);
+            self.dynamics
+                .step(k, x[k].as_slice(), uk.as_slice(), next.as_mut_slice());
+            cost += self.cost.running(k, x[k].as_slice(), uk.as_slice());
+            x.push(next);
+        }
+        cost += self.cost.terminal(x[self.horizon].as_slice());
+        (x, cost)
+    }
+}

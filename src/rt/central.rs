@@ -1,0 +1,540 @@
+//! The central controller: plays a plan back as command slices at 50 Hz, with the
+//! strategies the paper compares, behind time-stamped delay lines on the state and command paths.
+//!
+//! [`Central`] is a pure state machine like the board: it is fed the states it receives and
+//! polled with the time, and says which command slices to publish now. The live planner
+//! (`vic-planner`) and the lockstep mode ([`lockstep`]) drive the same code.
+//!
+//! Latency: the feedback of knot `k` uses the state of knot `k − D` (paper Eq. 13, `D` =
+//! `latency_steps`), as the offline [`Feedback::Delayed`] does. Live, the state must also have
+//! passed the sensor delay line before knot `k` is computed, and the slice must pass the command
+//! delay line and reach the board before knot `k` acts; when the state of `k − D` is not there
+//! yet, the freshest released state is used and the knot is counted in `stale_feedback`.
+
+use crate::core::model::Exogenous;
+#[cfg(doc)]
+use crate::core::policy::Feedback;
+use crate::core::policy::{Policy, Seen};
+use crate::core::scalar::{MAX_NU, MAX_NX};
+use crate::rt::board::{Board, Inputs};
+use crate::rt::transport::{
+    CommandSlice, Control, ControlKind, Interpolation, Knot, MAX_KNOTS, Mode, PROTOCOL_VERSION,
+    StateMsg,
+};
+use nalgebra::DVector;
+use std::collections::VecDeque;
+
+/// How the central controller commands the board.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Strategy {
+    /// The (SOOC) plan's torque and stiffness, no central feedback.
+    Stiffness,
+    /// Zero stiffness; the (ILQG) plan plus its gains on the state of `latency` ago (Eq. 13).
+    DelayedFeedback,
+    /// The plan's torque and stiffness plus the delayed feedback.
+    Both,
+}
+
+impl Strategy {
+    pub fn name(self) -> &'static str {
+        match self {
+            Strategy::Stiffness => "stiffness",
+            Strategy::DelayedFeedback => "delayed-feedback",
+            Strategy::Both => "both",
+        }
+    }
+    fn feedback(self) -> bool {
+        !matches!(self, Strategy::Stiffness)
+    }
+}
+
+/// Timing of the central controller.
+#[derive(Debug, Clone, Copy)]
+pub struct Timing {
+    /// Feedback latency `D` in plan steps: knot `k` feeds back the state of knot `k − D`.
+    pub latency_steps: usize,
+    /// Delay lines on the state and command paths [ns].
+    pub sensor_latency_ns: u64,
+    pub command_latency_ns: u64,
+    /// How far past the command's arrival each slice reaches [ns] (default: two planner periods).
+    pub lookahead_ns: u64,
+}
+
+/// A policy with what the board needs besides: the reference it tracks and the start state.
+#[derive(Debug, Clone)]
+pub struct Track {
+    pub dof: usize,
+    pub nx: usize,
+    pub nu: usize,
+    /// Plan step Δ [ns].
+    pub dt_ns: u64,
+    pub steps: usize,
+    pub policy: Policy,
+    pub reference: Vec<Exogenous>,
+    pub x0: [f64; MAX_NX],
+}
+
+impl Track {
+    /// `policy` for a `dof`-joint impedance plant (state `(q, q')`, control `(τ, K)`), planned on
+    /// a grid of `dt` [s], tracking `reference` (one entry per knot `0..=N`) from `x0`.
+    pub fn new(
+        policy: Policy,
+        reference: Vec<Exogenous>,
+        x0: &[f64],
+        dof: usize,
+        dt: f64,
+    ) -> Result<Track, String> {
+        let (nx, nu) = (x0.len(), policy.nu());
+        if nx != 2 * dof || nu != 2 * dof || policy.nx() != nx || nx > MAX_NX || nu > MAX_NU {
+            return Err("the real-time board runs the impedance actuator (type 2) only".into());
+        }
+        if reference.len() != policy.steps() + 1 {
+            return Err(format!(
+                "the reference has {} knots, the policy {} steps",
+                reference.len(),
+                policy.steps()
+            ));
+        }
+        let mut x = [0.0; MAX_NX];
+        x[..nx].copy_from_slice(x0);
+        Ok(Track {
+            dof,
+            nx,
+            nu,
+            dt_ns: (dt * 1e9).round() as u64,
+            steps: policy.steps(),
+            policy,
+            reference,
+            x0: x,
+        })
+    }
+
+    /// The planned command of step `k` (no feedback).
+    fn acting(&self, k: usize) -> [f64; MAX_NU] {
+        let mut a = [0.0; MAX_NU];
+        a[..self.nu].copy_from_slice(self.policy.acting[k].as_slice());
+        a
+    }
+}
+
+/// What one trial gave, as seen by the central controller.
+#[derive(Debug, Clone)]
+pub struct TrialRecord {
+    /// States at the knots `0..=N` (missing knots repeat the previous state).
+    pub x: Vec<DVector<f64>>,
+    /// Commands sent per knot.
+    pub u: Vec<DVector<f64>>,
+    /// Knots whose feedback used a state older than the latency.
+    pub stale_feedback: usize,
+    /// Knots with no state recorded.
+    pub missing_states: usize,
+    /// The board went to safe hold or fault during the movement.
+    pub safe_hold: bool,
+    pub fault: bool,
+}
+
+/// The central controller.
+pub struct Central {
+    pub track: Track,
+    pub strategy: Strategy,
+    pub timing: Timing,
+    trial: u32,
+    start_ns: u64,
+    /// Sequence numbers continue upward from the controller's start time, also across restarts
+    /// ([`crate::rt::transport::session_seq`]); the board refuses numbers that go backwards.
+    seq: u64,
+    control_seq: u64,
+    /// The reset that started the present trial: states of any other (a trial of the same
+    /// number before a restart of this controller) are ignored.
+    reset_seq: u64,
+    recorded: Vec<Option<[f64; MAX_NX]>>,
+    seen: Vec<Option<[f64; MAX_NX]>>,
+    latest_seen: Option<usize>,
+    sensor_line: VecDeque<(u64, usize, [f64; MAX_NX])>,
+    command_line: VecDeque<(u64, CommandSlice)>,
+    knots: Vec<Knot>,
+    sent_u: Vec<[f64; MAX_NU]>,
+    stale_feedback: usize,
+    safe_hold: bool,
+    fault: bool,
+}
+
+impl Central {
+    pub fn new(track: Track, strategy: Strategy, timing: Timing) -> Self {
+        let n = track.steps;
+        Central {
+            strategy,
+            timing,
+            trial: 0,
+            start_ns: 0,
+            seq: crate::rt::transport::session_seq(),
+            control_seq: crate::rt::transport::session_seq(),
+            reset_seq: 0,
+            recorded: vec![None; n + 1],
+            seen: vec![None; n + 1],
+            latest_seen: None,
+            sensor_line: VecDeque::with_capacity(4 * n),
+            command_line: VecDeque::new(),
+            knots: Vec::with_capacity(n),
+            sent_u: Vec::with_capacity(n),
+            stale_feedback: 0,
+            safe_hold: false,
+            fault: false,
+            track,
+        }
+    }
+
+    /// Starts trial `trial` at monotonic time `start_ns`; returns the reset request for the board.
+    pub fn begin_trial(&mut self, trial: u32, seed: u64, start_ns: u64, now_ns: u64) -> Control {
+        self.trial = trial;
+        self.start_ns = start_ns;
+        self.recorded.iter_mut().for_each(|r| *r = None);
+        self.seen.iter_mut().for_each(|r| *r = None);
+        self.latest_seen = None;
+        self.sensor_line.clear();
+        self.command_line.clear();
+        self.knots.clear();
+        self.sent_u.clear();
+        self.stale_feedback = 0;
+        self.safe_hold = false;
+        self.fault = false;
+        let dof = self.track.dof;
+        self.control_seq += 1;
+        self.reset_seq = self.control_seq;
+        let mut c = Control {
+            version: PROTOCOL_VERSION,
+            kind: ControlKind::Reset as u32,
+            seq: self.control_seq,
+            time_ns: now_ns,
+            trial,
+            seed,
+            start_ns,
+            ..Default::default()
+        };
+        c.q0[..dof].copy_from_slice(&self.track.x0[..dof]);
+        c.qd0[..dof].copy_from_slice(&self.track.x0[dof..2 * dof]);
+        c
+    }
+
+    /// How long before a trial's start the controller must begin: the first slice has to cross
+    /// the command delay line (two planner periods of margin).
+    pub fn lead_time_ns(&self, planner_period_ns: u64) -> u64 {
+        self.timing.command_latency_ns + 2 * planner_period_ns
+    }
+
+    /// The request that stops the trial.
+    pub fn stop(&mut self, now_ns: u64) -> Control {
+        self.control_seq += 1;
+        Control {
+            version: PROTOCOL_VERSION,
+            kind: ControlKind::Stop as u32,
+            seq: self.control_seq,
+            time_ns: now_ns,
+            trial: self.trial,
+            ..Default::default()
+        }
+    }
+
+    /// A state arrived at `recv_ns`: record it (truth, for the results) and put it in the sensor
+    /// delay line (what the controller will see).
+    pub fn on_state(&mut self, s: &StateMsg, recv_ns: u64) {
+        if s.trial != self.trial || s.reset_seq != self.reset_seq {
+            return;
+        }
+        let mode = Mode::from_u32(s.mode);
+        if mode == Mode::Idle {
+            return;
+        }
+        let (dof, dt) = (self.track.dof, self.track.dt_ns);
+        let k = (s.trial_time_ns / dt) as usize;
+        if k > self.track.steps {
+            return;
+        }
+        // The first state at or after the knot time (exact unless the board skipped that tick).
+        let mut x = [0.0; MAX_NX];
+        x[..dof].copy_from_slice(&s.q[..dof]);
+        x[dof..2 * dof].copy_from_slice(&s.qd[..dof]);
+        if k < self.track.steps || s.trial_time_ns == k as u64 * dt {
+            match mode {
+                Mode::SafeHold if k < self.track.steps => self.safe_hold = true,
+                Mode::Fault => self.fault = true,
+                _ => {}
+            }
+        }
+        if self.recorded[k].is_none() {
+            self.recorded[k] = Some(x);
+            self.sensor_line
+                .push_back((recv_ns + self.timing.sensor_latency_ns, k, x));
+        }
+    }
+
+    /// Trial time at monotonic `now` [ns].
+    fn trial_time(&self, now_ns: u64) -> u64 {
+        now_ns.saturating_sub(self.start_ns)
+    }
+
+    fn compute_knot(&mut self, k: usize) -> Knot {
+        let t = &self.track;
+        let (dof, nx, nu) = (t.dof, t.nx, t.nu);
+        let mut seen = None;
+        let d = self.timing.latency_steps;
+        if self.strategy.feedback() && k >= d {
+            let j = k - d;
+            let (x, stale) = match (self.seen[j], self.latest_seen) {
+                (Some(x), _) => (Some((j, x)), false),
+                (None, Some(l)) if l < j => (self.seen[l].map(|x| (l, x)), true),
+                _ => (None, true),
+            };
+            if stale {
+                self.stale_feedback += 1;
+            }
+            seen = x.map(|(l, x)| (j, l, x));
+        }
+        let mut u = [0.0; MAX_NU];
+        t.policy.control_into(
+            k,
+            seen.as_ref().map(|(j, l, x)| Seen {
+                gain: *j,
+                knot: *l,
+                x: &x[..nx],
+            }),
+            &mut u,
+        );
+        if self.strategy == Strategy::DelayedFeedback {
+            // No stiffness: the feedback alone must hold the arm (clamped again, should the
+            // bounds exclude zero stiffness).
+            u[dof..2 * dof].iter_mut().for_each(|v| *v = 0.0);
+            t.policy.bounds.clamp(&mut u[..nu]);
+        }
+        let r = &t.reference[k];
+        let mut knot = Knot::default();
+        knot.tau_ff[..dof].copy_from_slice(&u[..dof]);
+        knot.stiffness[..dof].copy_from_slice(&u[dof..2 * dof]);
+        knot.q_d = r.q_d;
+        knot.qd_d = r.qd_d;
+        self.sent_u.push(u);
+        knot
+    }
+
+    /// Called at each planner tick: releases states from the sensor line, computes the knots due,
+    /// and returns the slices that leave the command delay line now (oldest first).
+    pub fn poll(&mut self, now_ns: u64, out: &mut Vec<CommandSlice>) {
+        while let Some(&(release, k, x)) = self.sensor_line.front() {
+            if release > now_ns {
+                break;
+            }
+            self.sensor_line.pop_front();
+            self.seen[k] = Some(x);
+            if self.latest_seen.is_none_or(|l| l < k) {
+                self.latest_seen = Some(k);
+            }
+        }
+        let (dt, steps, dof) = (self.track.dt_ns, self.track.steps, self.track.dof);
+        // Trial time at which a slice sent now reaches the board.
+        let arrival = self.trial_time(now_ns + self.timing.command_latency_ns);
+        let horizon = arrival + self.timing.lookahead_ns;
+        while self.knots.len() < steps && (self.knots.len() as u64) * dt < horizon {
+            let k = self.knots.len();
+            let knot = self.compute_knot(k);
+            self.knots.push(knot);
+        }
+        let first = ((arrival / dt) as usize).saturating_sub(1);
+        let last = self.knots.len();
+        if first < last {
+            let last = last.min(first + MAX_KNOTS);
+            self.seq += 1;
+            let mut c = CommandSlice {
+                version: PROTOCOL_VERSION,
+                joints: dof as u32,
+                seq: self.seq,
+                trial: self.trial,
+                interpolation: Interpolation::Hold as u32,
+                start_ns: first as u64 * dt,
+                knot_dt_ns: dt,
+                count: (last - first) as u32,
+                ..Default::default()
+            };
+            c.knots[..last - first].copy_from_slice(&self.knots[first..last]);
+            self.command_line
+                .push_back((now_ns + self.timing.command_latency_ns, c));
+        }
+        while let Some(&(release, _)) = self.command_line.front() {
+            if release > now_ns {
+                break;
+            }
+            let (_, mut c) = self.command_line.pop_front().expect("non-empty");
+            c.time_ns = now_ns;
+            out.push(c);
+        }
+    }
+
+    /// Whether the final state of the trial has arrived (or the board faulted).
+    pub fn trial_done(&self) -> bool {
+        self.recorded[self.track.steps].is_some() || self.fault
+    }
+
+    /// The trial as recorded.
+    pub fn record(&self) -> TrialRecord {
+        let t = &self.track;
+        let mut missing = 0;
+        let mut last = t.x0;
+        let x = self
+            .recorded
+            .iter()
+            .map(|r| {
+                match r {
+                    Some(x) => last = *x,
+                    None => {
+                        missing += 1;
+                        if self.fault {
+                            last = [f64::NAN; MAX_NX];
+                        }
+                    }
+                }
+                DVector::from_column_slice(&last[..t.nx])
+            })
+            .collect();
+        let u = (0..t.steps)
+            .map(|k| {
+                DVector::from_column_slice(
+                    &self.sent_u.get(k).copied().unwrap_or(t.acting(k))[..t.nu],
+                )
+            })
+            .collect();
+        TrialRecord {
+            x,
+            u,
+            stale_feedback: self.stale_feedback,
+            missing_states: missing,
+            safe_hold: self.safe_hold,
+            fault: self.fault,
+        }
+    }
+}
+
+/// Runs `trials` trials of the board and the central controller in lockstep on a simulated clock
+/// (no sleeping, deterministic): the board ticks every `board.period`, the controller every
+/// `planner_period_ns`, messages arrive instantly (the delay lines still apply).
+pub fn lockstep(
+    board: &mut Board,
+    central: &mut Central,
+    board_period_ns: u64,
+    planner_period_ns: u64,
+    trials: usize,
+    seed: u64,
+) -> Vec<TrialRecord> {
+    let mut now: u64 = 1_000_000_000;
+    let mut inputs = Inputs::default();
+    let mut out = Vec::new();
+    let mut records = Vec::with_capacity(trials);
+    for trial in 0..trials as u32 {
+        let start = (now + central.lead_time_ns(planner_period_ns)).div_ceil(board_period_ns)
+            * board_period_ns;
+        let reset = central.begin_trial(trial, seed, start, now);
+        inputs.push_control(&reset);
+        let limit = start + (central.track.steps as u64 + 50) * central.track.dt_ns;
+        while now < limit {
+            if now.is_multiple_of(planner_period_ns) {
+                out.clear();
+                central.poll(now, &mut out);
+                for c in &out {
+                    inputs.push_command(c);
+                }
+            }
+            let o = board.step(now, &mut inputs);
+            central.on_state(&o.state, now);
+            now += board_period_ns;
+            if central.trial_done() {
+                break;
+            }
+        }
+        inputs.push_control(&central.stop(now));
+        board.step(now, &mut inputs);
+        now += board_period_ns;
+        now = now.div_ceil(planner_period_ns) * planner_period_ns;
+        records.push(central.record());
+    }
+    records
+}
+
+/// Runs `trials` trials live: waits for a board in the namespace, then for each trial resets it,
+/// streams the slices at the planner period and collects the states until the movement's end.
+pub fn run_live(
+    ep: &crate::rt::transport::Endpoint,
+    central: &mut Central,
+    trials: usize,
+    seed: u64,
+    planner_period_ns: u64,
+    board_timeout: std::time::Duration,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<Vec<TrialRecord>, String> {
+    use crate::rt::realtime::Periodic;
+    use crate::rt::transport::monotonic_ns;
+    use std::sync::atomic::Ordering;
+    crate::rt::realtime::set_timer_slack_1ns();
+    let mut records = Vec::with_capacity(trials);
+    let mut out = Vec::new();
+    let movement_ns = central.track.steps as u64 * central.track.dt_ns;
+    let mut last_state_ns = 0;
+    for trial in 0..trials as u32 {
+        // A board must be there (again, if it was restarted after a crash): wait for its
+        // telemetry, woken by its events rather than polling.
+        if ep.latest_state().is_none() && monotonic_ns().saturating_sub(last_state_ns) > 200_000_000
+        {
+            let t0 = std::time::Instant::now();
+            loop {
+                if crate::rt::transport::wait_for_telemetry(
+                    ep,
+                    std::time::Duration::from_millis(100),
+                )
+                .is_some()
+                {
+                    break;
+                }
+                if t0.elapsed() > board_timeout || stop.load(Ordering::Relaxed) {
+                    return Err(format!("no board in namespace \"{}\"", ep.namespace()));
+                }
+            }
+        }
+        let now = monotonic_ns();
+        // Start on a whole millisecond, once the first slice has crossed the command line.
+        let start =
+            (now + central.lead_time_ns(planner_period_ns) + 20_000_000) / 1_000_000 * 1_000_000;
+        let reset = central.begin_trial(trial, seed, start, now);
+        ep.publish_control(&reset).map_err(|e| e.to_string())?;
+        let mut periodic = Periodic::new(planner_period_ns, 0);
+        let limit = start + movement_ns + 2_000_000_000;
+        loop {
+            let wake = periodic.wait();
+            let now = monotonic_ns();
+            if ep.drain_states(|s| central.on_state(s, now)) > 0 {
+                last_state_ns = now;
+            }
+            out.clear();
+            central.poll(wake.deadline_ns.max(now), &mut out);
+            for c in &out {
+                ep.publish_command(c).map_err(|e| e.to_string())?;
+            }
+            if central.trial_done() || now > limit || stop.load(Ordering::Relaxed) {
+                break;
+            }
+        }
+        ep.publish_control(&central.stop(monotonic_ns()))
+            .map_err(|e| e.to_string())?;
+        let rec = central.record();
+        records.push(rec);
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+    }
+    Ok(records)
+}
+
+/// The default split of a feedback latency into the sensor and command delay lines [ms]: what
+/// remains after the slice lookahead and one more planner period (the planner computes a knot at
+/// its first tick inside the lookahead), shared equally.
+pub fn split_latency_ms(latency_ms: f64, lookahead_ms: f64) -> (f64, f64) {
+    let rest = (latency_ms - 1.5 * lookahead_ms).max(0.0);
+    (rest / 2.0, rest / 2.0)
+}

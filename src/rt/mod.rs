@@ -1,0 +1,14 @@
+//! The two-rate real-time controller: [`transport`] (wire types and iceoryx2 services per
+//! namespace), [`realtime`] (clock, absolute-deadline loop, histograms), [`sched`] (OS scheduling),
+//! [`board`] (the 1 kHz impedance law, Eq. 4, against a simulated plant), [`central`] (the 50 Hz
+//! controller that streams a [`crate::core::policy::Policy`]), [`record`] (lossless tick logs) and
+//! [`daemon`] (child processes). Nothing here knows about scenario files: callers hand in a
+//! [`board::BoardConfig`], a core plant and a policy.
+
+pub mod board;
+pub mod central;
+pub mod daemon;
+pub mod realtime;
+pub mod record;
+pub mod sched;
+pub mod transport;

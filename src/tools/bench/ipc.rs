@@ -1,0 +1,596 @@
+//! `vic bench ipc`: latency of the state and command channels against a bare iceoryx2
+//! publish/subscribe ping-pong with the same payload sizes, both as two busy-polling threads of
+//! this process (the same way for vic and the baseline, so the ratio is fair), then the
+//! end-to-end figures of the running `vic-board` + `vic-planner` pair.
+//!
+//! Ping-pong: the "board" thread publishes a state (time-stamped on the monotonic clock), the
+//! "planner" thread receives it and answers with a command slice, the board thread receives that.
+//! One-way latency = receive time − publish time stamp (one clock, two threads); round trip =
+//! answer received − state published.
+
+use super::{Dist, ratio};
+use crate::rt::realtime::{LatencyHistogram, Periodic, set_timer_slack_1ns};
+use crate::rt::transport::{
+    CommandSlice, Disturbance, DisturbanceKind, Endpoint, PROTOCOL_VERSION, Role, StateMsg,
+    monotonic_ns, remove_namespace,
+};
+use iceoryx2::prelude::*;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::sync::{Arc, Barrier};
+use std::time::Duration;
+
+/// Bytes of the state message (the ping payload).
+pub const STATE_BYTES: usize = std::mem::size_of::<StateMsg>();
+/// Bytes of a command slice (the pong payload).
+pub const COMMAND_BYTES: usize = std::mem::size_of::<CommandSlice>();
+
+/// Ping-pongs not recorded at the start.
+const WARM_UP: u64 = 1000;
+/// Re-send a ping not answered within this long (a message lost while connecting).
+const RESEND_NS: u64 = 50_000_000;
+/// Give up after this many re-sends.
+const MAX_RESENDS: u64 = 100;
+
+/// The three figures of a ping-pong.
+#[derive(Debug, Clone, Copy, Serialize, Default)]
+pub struct Channels {
+    /// Board → planner, `StateMsg`-sized.
+    pub state_one_way: Dist,
+    /// Planner → board, `CommandSlice`-sized.
+    pub command_one_way: Dist,
+    pub round_trip: Dist,
+    pub resends: u64,
+}
+
+/// One side of a ping-pong, whatever carries it.
+trait Side {
+    /// Sends `(seq, now)`.
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String>;
+    /// Polls once: the newest `(seq, publish stamp, receive time)`, if any; the receive time is
+    /// taken as soon as the message is in hand.
+    fn poll(&mut self) -> Option<(u64, u64, u64)>;
+}
+
+struct VicBoard(Endpoint);
+struct VicPlanner(Endpoint);
+
+impl Side for VicBoard {
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
+        let s = StateMsg {
+            version: PROTOCOL_VERSION,
+            seq,
+            time_ns,
+            ..Default::default()
+        };
+        self.0.publish_state(&s).map_err(|e| e.to_string())
+    }
+    fn poll(&mut self) -> Option<(u64, u64, u64)> {
+        let mut last = None;
+        self.0
+            .drain_commands(|c| last = Some((c.seq, c.time_ns, monotonic_ns())));
+        last
+    }
+}
+
+impl Side for VicPlanner {
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
+        let c = CommandSlice {
+            seq,
+            time_ns,
+            ..Default::default()
+        };
+        self.0.publish_command(&c).map_err(|e| e.to_string())
+    }
+    fn poll(&mut self) -> Option<(u64, u64, u64)> {
+        let mut last = None;
+        self.0
+            .drain_states(|s| last = Some((s.seq, s.time_ns, monotonic_ns())));
+        last
+    }
+}
+
+type Bytes<const N: usize> = [u8; N];
+
+/// A bare iceoryx2 side: publishes `[u8; OUT]`, subscribes to `[u8; IN]`, sequence number and
+/// time stamp in the first 16 bytes. Default QoS, loan → write → send.
+struct Bare<const OUT: usize, const IN: usize> {
+    publisher: iceoryx2::port::publisher::Publisher<ipc::Service, Bytes<OUT>, ()>,
+    subscriber: iceoryx2::port::subscriber::Subscriber<ipc::Service, Bytes<IN>, ()>,
+    _node: Node<ipc::Service>,
+}
+
+impl<const OUT: usize, const IN: usize> Bare<OUT, IN> {
+    fn open(ns: &str, out: &str, input: &str) -> Result<Self, String> {
+        set_log_level(LogLevel::Error);
+        let mut cfg = Config::default();
+        cfg.global.prefix = FileName::new(crate::rt::transport::prefix(ns).as_bytes())
+            .map_err(|e| format!("{e:?}"))?;
+        let node = NodeBuilder::new()
+            .config(&cfg)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| format!("node: {e:?}"))?;
+        let svc_out = node
+            .service_builder(&ServiceName::new(out).map_err(|e| format!("{e:?}"))?)
+            .publish_subscribe::<Bytes<OUT>>()
+            .open_or_create()
+            .map_err(|e| format!("service {out}: {e:?}"))?;
+        let svc_in = node
+            .service_builder(&ServiceName::new(input).map_err(|e| format!("{e:?}"))?)
+            .publish_subscribe::<Bytes<IN>>()
+            .open_or_create()
+            .map_err(|e| format!("service {input}: {e:?}"))?;
+        Ok(Bare {
+            publisher: svc_out
+                .publisher_builder()
+                .create()
+                .map_err(|e| format!("publisher: {e:?}"))?,
+            subscriber: svc_in
+                .subscriber_builder()
+                .create()
+                .map_err(|e| format!("subscriber: {e:?}"))?,
+            _node: node,
+        })
+    }
+}
+
+impl<const OUT: usize, const IN: usize> Side for Bare<OUT, IN> {
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
+        let mut b = [0u8; OUT];
+        b[..8].copy_from_slice(&seq.to_le_bytes());
+        b[8..16].copy_from_slice(&time_ns.to_le_bytes());
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| format!("loan: {e:?}"))?;
+        sample
+            .write_payload(b)
+            .send()
+            .map(|_| ())
+            .map_err(|e| format!("send: {e:?}"))
+    }
+    fn poll(&mut self) -> Option<(u64, u64, u64)> {
+        let s = self.subscriber.receive().ok()??;
+        let now = monotonic_ns();
+        let b: &Bytes<IN> = &s;
+        let word = |i: usize| u64::from_le_bytes(b[i..i + 8].try_into().expect("8 bytes"));
+        Some((word(0), word(8), now))
+    }
+}
+
+/// The ping-pong: `pinger` plays the board, `ponger` the planner; each side is created inside its
+/// own thread (iceoryx2 ports stay on the thread that made them).
+fn ping_pong<P: Side, Q: Side>(
+    iterations: u64,
+    make_pinger: impl FnOnce() -> Result<P> + Send + 'static,
+    make_ponger: impl FnOnce() -> Result<Q> + Send + 'static,
+) -> Result<Channels, String> {
+    let barrier = Arc::new(Barrier::new(2));
+    let last = WARM_UP + iterations;
+    let b = barrier.clone();
+    let ponger = std::thread::spawn(move || -> Result<LatencyHistogram, String> {
+        let side = make_ponger();
+        b.wait();
+        let mut side = side?;
+        let mut h = LatencyHistogram::new();
+        let mut answered = 0u64;
+        let mut idle_since = monotonic_ns();
+        while answered < last {
+            match side.poll() {
+                Some((seq, t, now)) if seq > answered => {
+                    if seq > WARM_UP {
+                        h.record(now.saturating_sub(t));
+                    }
+                    answered = seq;
+                    side.send(seq, monotonic_ns())?;
+                    idle_since = now;
+                }
+                _ => {
+                    std::hint::spin_loop();
+                    if monotonic_ns() - idle_since > RESEND_NS * MAX_RESENDS {
+                        return Err("the ping side went quiet".into());
+                    }
+                }
+            }
+        }
+        Ok(h)
+    });
+    let pinger = {
+        let b = barrier;
+        std::thread::spawn(
+            move || -> Result<(LatencyHistogram, LatencyHistogram, u64), String> {
+                let side = make_pinger();
+                b.wait();
+                let mut side = side?;
+                let mut one_way = LatencyHistogram::new();
+                let mut rtt = LatencyHistogram::new();
+                let mut resends = 0u64;
+                for seq in 1..=last {
+                    let t0 = monotonic_ns();
+                    side.send(seq, t0)?;
+                    let mut sent = t0;
+                    loop {
+                        if let Some((s, t, now)) = side.poll()
+                            && s >= seq
+                        {
+                            if seq > WARM_UP {
+                                one_way.record(now.saturating_sub(t));
+                                rtt.record(now - t0);
+                            }
+                            break;
+                        }
+                        std::hint::spin_loop();
+                        let now = monotonic_ns();
+                        if now - sent > RESEND_NS {
+                            resends += 1;
+                            if resends > MAX_RESENDS {
+                                return Err(format!("no answer to ping {seq}"));
+                            }
+                            sent = now;
+                            side.send(seq, now)?;
+                        }
+                    }
+                }
+                Ok((one_way, rtt, resends))
+            },
+        )
+    };
+    let pinged = pinger
+        .join()
+        .map_err(|_| "the ping thread panicked".to_string())?;
+    let ponged = ponger
+        .join()
+        .map_err(|_| "the pong thread panicked".to_string())?;
+    let (command, rtt, resends) = pinged?;
+    let state = ponged?;
+    Ok(Channels {
+        state_one_way: Dist::from_histogram(&state),
+        command_one_way: Dist::from_histogram(&command),
+        round_trip: Dist::from_histogram(&rtt),
+        resends,
+    })
+}
+
+type Result<T, E = String> = std::result::Result<T, E>;
+
+/// vic's channels: [`Endpoint`] in the board and planner roles, the real message types.
+pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
+    let ns = super::unique_namespace("bi");
+    let (a, b) = (ns.clone(), ns.clone());
+    let r = ping_pong(
+        iterations,
+        move || {
+            Endpoint::open(&a, Role::Board)
+                .map(VicBoard)
+                .map_err(|e| e.to_string())
+        },
+        move || {
+            Endpoint::open(&b, Role::Planner)
+                .map(VicPlanner)
+                .map_err(|e| e.to_string())
+        },
+    );
+    remove_namespace(&ns);
+    r
+}
+
+/// The baseline: bare iceoryx2 with `[u8; size_of::<StateMsg>()]` one way and
+/// `[u8; size_of::<CommandSlice>()]` back, default QoS, its own `global.prefix`.
+pub fn bare_ping_pong(iterations: u64) -> Result<Channels> {
+    let ns = super::unique_namespace("bb");
+    let (a, b) = (ns.clone(), ns.clone());
+    let r = ping_pong(
+        iterations,
+        move || Bare::<STATE_BYTES, COMMAND_BYTES>::open(&a, "bench/ping", "bench/pong"),
+        move || Bare::<COMMAND_BYTES, STATE_BYTES>::open(&b, "bench/pong", "bench/ping"),
+    );
+    remove_namespace(&ns);
+    r
+}
+
+/// Options of the end-to-end run of the pair.
+#[derive(Debug, Clone)]
+pub struct PairOptions {
+    pub board_bin: PathBuf,
+    pub planner_bin: PathBuf,
+    pub config: PathBuf,
+    pub overrides: Vec<String>,
+    /// A plan for the `stiffness` strategy (`vic plan --method sooc --out`).
+    pub plan: PathBuf,
+    /// Trials the planner runs (about 1.5 s each).
+    pub trials: u64,
+}
+
+/// The end-to-end figures of the running pair.
+#[derive(Debug, Clone, Serialize)]
+pub struct Pair {
+    /// Age of the newest state at a reader polling at 1 kHz on the whole-millisecond deadlines
+    /// the planner's loop uses, with the planner's subscription (now − the state's publish
+    /// stamp): what the planner sees at each of its ticks.
+    pub state_age_us: Dist,
+    /// Age of the command slice the board used at each tick, from its own statistics (slices are
+    /// sent at 50 Hz and cover 320 ms: up to 20 ms by design).
+    pub command_age_us: Dist,
+    /// Pulse published (at a phase spread over the period) → first board state carrying it (its
+    /// publish stamp): the pulse has been applied to the plant by then.
+    pub pulse_to_effect_us: Dist,
+    /// Pulse published → that state received by the injecting tool.
+    pub pulse_to_observed_us: Dist,
+    pub pulses: u64,
+    /// The board's own statistics over the run (jitter, work, command age, ticks …).
+    pub board: serde_json::Value,
+    pub trials: u64,
+}
+
+/// Runs `vic-board` and `vic-planner --strategy stiffness` in a fresh namespace, injects a small
+/// torque pulse every 100 ms and records the state age, the pulse-to-effect delay and the board's
+/// statistics.
+pub fn run_pair(o: &PairOptions) -> Result<Pair> {
+    use std::process::{Command, Stdio};
+    let ns = super::unique_namespace("bp");
+    let mut guard = crate::rt::daemon::Children::new(&ns);
+    let mut board = Command::new(&o.board_bin);
+    board
+        .arg("--config")
+        .arg(&o.config)
+        .args(["--namespace", &ns, "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    for s in &o.overrides {
+        board.args(["--set", s]);
+    }
+    guard.children.push(
+        board
+            .spawn()
+            .map_err(|e| format!("cannot start {}: {e}", o.board_bin.display()))?,
+    );
+    let tool = Endpoint::open(&ns, Role::Tool).map_err(|e| e.to_string())?;
+    let t0 = std::time::Instant::now();
+    while tool.latest_state().is_none() {
+        if t0.elapsed() > Duration::from_secs(10) {
+            return Err("vic-board published no state within 10 s".into());
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let mut planner = Command::new(&o.planner_bin);
+    planner
+        .arg("--config")
+        .arg(&o.config)
+        .arg("--plan")
+        .arg(&o.plan)
+        .args(["--strategy", "stiffness", "--namespace", &ns, "--json"])
+        .args(["--trials", &o.trials.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    for s in &o.overrides {
+        planner.args(["--set", s]);
+    }
+    guard.children.push(
+        planner
+            .spawn()
+            .map_err(|e| format!("cannot start {}: {e}", o.planner_bin.display()))?,
+    );
+    set_timer_slack_1ns();
+    let mut age = LatencyHistogram::new();
+    let mut effect = LatencyHistogram::new();
+    let mut observed = LatencyHistogram::new();
+    let mut periodic = Periodic::new(1_000_000, 0);
+    let mut pulse_seq = 0u64;
+    let mut pending: Option<(u64, u64)> = None;
+    let deadline = std::time::Instant::now() + Duration::from_secs(20 + 5 * o.trials);
+    let mut tick = 0u64;
+    let planner_status = loop {
+        let wake = periodic.wait();
+        tick += 1;
+        let mut newest: Option<StateMsg> = None;
+        let now = {
+            tool.drain_states(|s| {
+                if let Some((seq, t_inject)) = pending
+                    && s.disturbance_seq >= seq
+                {
+                    effect.record(s.time_ns.saturating_sub(t_inject));
+                    observed.record(monotonic_ns().saturating_sub(t_inject));
+                    pending = None;
+                }
+                newest = Some(*s);
+            });
+            monotonic_ns()
+        };
+        if let Some(s) = newest {
+            age.record(now.saturating_sub(s.time_ns));
+        }
+        if tick.is_multiple_of(100) && pending.is_none() {
+            // At a phase spread over the period (379 µs steps), not on the board's deadlines.
+            pulse_seq += 1;
+            crate::rt::realtime::sleep_until(wake.deadline_ns + (pulse_seq * 379_000) % 900_000, 0);
+            let t = monotonic_ns();
+            let d = Disturbance {
+                version: PROTOCOL_VERSION,
+                kind: DisturbanceKind::Pulse as u32,
+                seq: pulse_seq,
+                time_ns: t,
+                torque: [0.05, 0.0],
+                duration_ns: 1_000_000,
+                value: 0.0,
+            };
+            if tool.publish_disturbance(&d).is_ok() {
+                pending = Some((pulse_seq, t));
+            }
+        }
+        if tick.is_multiple_of(50) {
+            let p = guard.children.last_mut().expect("the planner");
+            match p.try_wait() {
+                Ok(Some(status)) => break status,
+                Ok(None) => {}
+                Err(e) => return Err(format!("vic-planner: {e}")),
+            }
+            if std::time::Instant::now() > deadline {
+                return Err("vic-planner did not finish in time".into());
+            }
+        }
+    };
+    if !planner_status.success() {
+        return Err(format!("vic-planner failed ({planner_status})"));
+    }
+    guard.children.pop();
+    let mut board = guard.children.pop().expect("the board");
+    crate::rt::daemon::Children::terminate(&mut board);
+    let mut stdout = String::new();
+    if let Some(mut s) = board.stdout.take() {
+        use std::io::Read;
+        let _ = s.read_to_string(&mut stdout);
+    }
+    drop(tool);
+    drop(guard);
+    let stats: serde_json::Value = serde_json::from_str(stdout.trim())
+        .map_err(|e| format!("vic-board printed no statistics: {e}"))?;
+    let ca = &stats["command_age_us"];
+    let f = |k: &str| ca[k].as_f64().unwrap_or(f64::NAN);
+    Ok(Pair {
+        state_age_us: Dist::from_histogram(&age),
+        command_age_us: Dist {
+            p50_us: f("p50"),
+            p99_us: f("p99"),
+            p999_us: f("p999"),
+            max_us: f("max"),
+            count: ca["count"].as_u64().unwrap_or(0),
+        },
+        pulse_to_effect_us: Dist::from_histogram(&effect),
+        pulse_to_observed_us: Dist::from_histogram(&observed),
+        pulses: effect.count(),
+        board: stats,
+        trials: o.trials,
+    })
+}
+
+/// Options of `vic bench ipc`.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub iterations: u64,
+    /// The running pair, or `None` to skip it.
+    pub pair: Option<PairOptions>,
+}
+
+/// The whole report of `vic bench ipc`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub iterations: u64,
+    pub state_bytes: usize,
+    pub command_bytes: usize,
+    pub method: String,
+    /// State channel one way (the documented summary).
+    pub vic: Dist,
+    pub baseline: Dist,
+    pub ratio_p50: Option<f64>,
+    pub ratio_p99: Option<f64>,
+    pub vic_channels: Channels,
+    pub baseline_channels: Channels,
+    pub ratio_command_p50: Option<f64>,
+    pub ratio_round_trip_p50: Option<f64>,
+    pub pair: Option<Pair>,
+    pub pair_note: Option<String>,
+    pub machine: super::Machine,
+}
+
+/// Runs the baseline, vic, then the pair.
+pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report> {
+    let machine = super::Machine::detect();
+    progress(&format!(
+        "bare iceoryx2 ping-pong, {} + {} bytes, {} iterations",
+        STATE_BYTES, COMMAND_BYTES, o.iterations
+    ));
+    let bare = bare_ping_pong(o.iterations)?;
+    progress(&format!(
+        "vic state/command ping-pong, {} iterations",
+        o.iterations
+    ));
+    let vic = vic_ping_pong(o.iterations)?;
+    let (pair, pair_note) = match &o.pair {
+        Some(p) => {
+            progress(&format!(
+                "vic-board + vic-planner, {} trials of the stiffness strategy",
+                p.trials
+            ));
+            (Some(run_pair(p)?), None)
+        }
+        None => (None, Some("the running pair was skipped".to_string())),
+    };
+    Ok(Report {
+        iterations: o.iterations,
+        state_bytes: STATE_BYTES,
+        command_bytes: COMMAND_BYTES,
+        method: "two busy-polling threads of one process for both vic and the baseline, \
+                 baseline first; one-way = receive time − publish stamp on CLOCK_MONOTONIC"
+            .into(),
+        vic: vic.state_one_way,
+        baseline: bare.state_one_way,
+        ratio_p50: ratio(vic.state_one_way.p50_us, Some(bare.state_one_way.p50_us)),
+        ratio_p99: ratio(vic.state_one_way.p99_us, Some(bare.state_one_way.p99_us)),
+        ratio_command_p50: ratio(
+            vic.command_one_way.p50_us,
+            Some(bare.command_one_way.p50_us),
+        ),
+        ratio_round_trip_p50: ratio(vic.round_trip.p50_us, Some(bare.round_trip.p50_us)),
+        vic_channels: vic,
+        baseline_channels: bare,
+        pair,
+        pair_note,
+        machine,
+    })
+}
+
+/// The report as a table.
+pub fn print(r: &Report) {
+    println!(
+        "transport, {} iterations; state {} B, command {} B; {}",
+        r.iterations, r.state_bytes, r.command_bytes, r.method
+    );
+    println!("machine: {}", r.machine.line());
+    let rows = [
+        (
+            "state one-way",
+            &r.vic_channels.state_one_way,
+            &r.baseline_channels.state_one_way,
+        ),
+        (
+            "command one-way",
+            &r.vic_channels.command_one_way,
+            &r.baseline_channels.command_one_way,
+        ),
+        (
+            "round trip",
+            &r.vic_channels.round_trip,
+            &r.baseline_channels.round_trip,
+        ),
+    ];
+    for (name, v, b) in rows {
+        println!("{name:<16} vic      {}", v.line());
+        println!("{:<16} iceoryx2 {}", "", b.line());
+        println!(
+            "{:<16} ratio p50 {}  p99 {}",
+            "",
+            super::ratio_text(ratio(v.p50_us, Some(b.p50_us))),
+            super::ratio_text(ratio(v.p99_us, Some(b.p99_us)))
+        );
+    }
+    println!(
+        "headline: state one-way p50 {:.2} µs vs bare {:.2} µs: ratio {} (target ≤ 1.2×)",
+        r.vic.p50_us,
+        r.baseline.p50_us,
+        super::ratio_text(r.ratio_p50)
+    );
+    match &r.pair {
+        Some(p) => {
+            println!("running pair ({} trials):", p.trials);
+            println!("  state age at a reader   {}", p.state_age_us.line());
+            println!("  command age at board    {}", p.command_age_us.line());
+            println!("  pulse → board state     {}", p.pulse_to_effect_us.line());
+            println!(
+                "  pulse → state observed  {}",
+                p.pulse_to_observed_us.line()
+            );
+        }
+        None => println!("running pair: {}", r.pair_note.as_deref().unwrap_or("-")),
+    }
+}
