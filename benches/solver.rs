@@ -154,7 +154,9 @@ fn solvers(c: &mut Criterion) {
         let mut section = s.solver.clone();
         section.options.max_iterations = cap;
         section.noise_continuation = vec![1.0];
-        let sol = plan::solve_sooc(&setup, &section, &setup.u_init, &None);
+        let sol = plan::solve_sooc(&setup, &section, &setup.u_init, &None)
+            .expect("SOOC solves")
+            .solution;
         eprintln!(
             "{name}: {} iterations, expected cost {:.6}, {:.3} ms per iteration",
             sol.iterations,

@@ -7,7 +7,10 @@ use crate::core::delay::Delayed;
 use crate::core::dynamics::Dynamics;
 use crate::core::solver::ilqg::Progress;
 use crate::core::solver::sooc::{MomentCost, MomentDynamics, unpack};
-use crate::core::solver::{Ilqg, IlqgOptions, Problem, Solution};
+use crate::core::solver::sooc_newton::{
+    Optimality, SoocOptions, SoocProblem, SoocSolver, SoocStop,
+};
+use crate::core::solver::{Ilqg, IlqgOptions, Problem, Solution, StopReason};
 pub use crate::planning::method::Method;
 use crate::planning::plan_file::plan_file;
 pub use crate::planning::plan_file::{
@@ -42,50 +45,95 @@ pub fn predict_open_loop(setup: &Setup, acting: &[DVector<f64>]) -> OpenLoopPred
     }
 }
 
-/// Iteration limit of the intermediate stages of the noise continuation.
-const INTERMEDIATE_ITERATIONS: usize = 60;
+/// A SOOC solve: the plan as a [`Solution`] (open loop: zero gains) and the optimality verdict.
+#[derive(Debug, Clone)]
+pub struct SoocResult {
+    /// Controls, moment means (the plant states), expected cost, iterations and time; `stop` is
+    /// [`StopReason::SmallGradient`] when converged and [`StopReason::MaxIterations`] or
+    /// [`StopReason::RegularizationLimit`] otherwise (see `stop` below for the precise reason).
+    pub solution: Solution,
+    /// Why the solver stopped.
+    pub stop: SoocStop,
+    /// The first-order optimality at the returned controls.
+    pub optimality: Optimality,
+}
 
-/// SOOC from a warm start, by continuation in the noise level: the open-loop moment problem is
-/// solved at `noise_continuation` fractions of the noise in turn, each from the previous
-/// solution. Started at full noise from the deterministic plan, the solver can settle in poor local
-/// optima (the VSA, whose motor states are noise integrators); the path from small noise follows
-/// the deterministic optimum as it deforms.
+/// SOOC: minimises the open-loop expected cost of the moment dynamics by stagewise Newton
+/// ([`SoocSolver`]) from `warm`, by continuation in the noise level: the problem is solved at
+/// `noise_continuation` fractions of the noise in turn, each from the previous solution (the
+/// default is the full noise at once; see the configuration).
 pub fn solve_sooc(
     setup: &Setup,
     solver: &crate::planning::scenario::IlqgSection,
     warm: &[DVector<f64>],
     progress: &Option<ProgressFn>,
-) -> Solution {
+) -> Result<SoocResult, String> {
+    let start = std::time::Instant::now();
     let mut u = warm.to_vec();
-    let mut total: Option<Solution> = None;
-    let stages = solver.noise_continuation.len();
-    for (stage, &fraction) in solver.noise_continuation.iter().enumerate() {
+    let mut iterations = 0;
+    let mut history = Vec::new();
+    let horizon = u.len();
+    let options = SoocOptions {
+        max_iterations: solver.options.max_iterations,
+        ..SoocOptions::default()
+    };
+    let sizing = MomentDynamics::new(&setup.dynamics);
+    let mut workspace = SoocSolver::new(&sizing, horizon, options);
+    let mut last = None;
+    for &fraction in &solver.noise_continuation {
         let mut dynamics = setup.dynamics.clone();
         dynamics.model.noise = dynamics.model.noise.scaled(fraction);
         let moments = MomentDynamics::new(&dynamics);
-        let cost = MomentCost::new(&setup.cost, u.len());
-        let problem = Problem {
+        let cost = MomentCost::new(&setup.cost, horizon);
+        let problem = SoocProblem {
             dynamics: &moments,
             cost: &cost,
-            x0: moments.initial_state(&setup.x0),
-            horizon: u.len(),
-            bounds: setup.bounds.clone(),
+            x0: &setup.x0,
+            bounds: &setup.bounds,
+            horizon,
         };
-        let mut options = solver.options.clone();
-        if stage + 1 < stages {
-            // Intermediate noise levels only need to bring the plan near the next one's basin.
-            options.max_iterations = options.max_iterations.min(INTERMEDIATE_ITERATIONS);
+        let sol = workspace
+            .solve(&problem, &u)
+            .map_err(|e| format!("SOOC at noise fraction {fraction}: {e}"))?;
+        iterations += sol.iterations;
+        history.extend_from_slice(&sol.history);
+        if let Some(p) = progress {
+            p(
+                "open-loop moments",
+                &Progress {
+                    iteration: iterations,
+                    merit: sol.expected_cost,
+                    mu: 0.0,
+                    alpha: 1.0,
+                },
+            );
         }
-        let mut ilqg = solver_for(&problem, &options, "open-loop moments", progress);
-        let mut sol = ilqg.solve(&problem, &u);
         u = sol.u.clone();
-        if let Some(prev) = total {
-            sol.iterations += prev.iterations;
-            sol.solve_time += prev.solve_time;
-        }
-        total = Some(sol);
+        last = Some(sol);
     }
-    total.expect("at least one continuation stage")
+    let sol = last.ok_or("SOOC needs at least one noise continuation stage")?;
+    let n = setup.x0.len();
+    let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
+    let solution = Solution {
+        x: sol.z.iter().map(|z| z.rows(0, n).into_owned()).collect(),
+        u: sol.u.clone(),
+        gains: vec![DMatrix::zeros(nu, nx); horizon],
+        cost: f64::NAN,
+        expected_cost: sol.expected_cost,
+        iterations,
+        stop: match sol.stop {
+            SoocStop::Converged => StopReason::SmallGradient,
+            SoocStop::MaxIterations => StopReason::MaxIterations,
+            SoocStop::RegularizationLimit => StopReason::RegularizationLimit,
+        },
+        solve_time: start.elapsed(),
+        history,
+    };
+    Ok(SoocResult {
+        solution,
+        stop: sol.stop,
+        optimality: sol.optimality,
+    })
 }
 
 /// A progress report: the phase of the solve and the solver's state after an iteration.
@@ -121,6 +169,7 @@ pub fn plan(
         horizon: steps,
         bounds: setup.bounds.clone(),
     };
+    let mut verdict = None;
     let (solution, d) = match method {
         Method::Sooc => {
             // Warm start from the deterministic optimum, then optimise the open-loop moments.
@@ -141,18 +190,13 @@ pub fn plan(
                     setup.bounds.clamp(u.as_mut_slice());
                 }
             }
-            let mut sol = solve_sooc(&setup, &s.solver, &warm, &progress);
+            let result = solve_sooc(&setup, &s.solver, &warm, &progress)?;
+            verdict = Some((result.stop, result.optimality));
+            let mut sol = result.solution;
             sol.iterations += first.iterations;
             sol.solve_time += first.solve_time;
             // `cost` is the noise-free cost of the plan; `expected_cost` the moment problem's.
             sol.cost = plain.rollout(&sol.u).1;
-            for x in &mut sol.x {
-                *x = x.rows(0, nx).into_owned();
-            }
-            // Executed open loop: no feedback gains.
-            for g in &mut sol.gains {
-                *g = DMatrix::zeros(nu, nx);
-            }
             (sol, 0)
         }
         Method::Ilqg if s.task.delay_steps() == 0 => (
@@ -208,7 +252,13 @@ pub fn plan(
         })
         .collect();
     let open_loop = predict_open_loop(&setup, &acting);
-    Ok(plan_file(s, &setup, &solution, d, nu, method, &open_loop))
+    let mut file = plan_file(s, &setup, &solution, d, nu, method, &open_loop);
+    if let Some((stop, optimality)) = verdict {
+        file.summary.converged = stop == SoocStop::Converged;
+        file.summary.stop = stop.into();
+        file.summary.optimality = Some(optimality);
+    }
+    Ok(file)
 }
 
 /// Solves a stochastic problem by continuation: first the deterministic problem (whose landscape

@@ -45,6 +45,10 @@ pub struct PlanSummary {
     /// `final_error` (for the arm, the square root of the largest eigenvalue of the hand
     /// covariance).
     pub open_loop_final_std: f64,
+    /// SOOC: the convergence criterion's values and tolerances at the plan (`converged` says
+    /// whether they were met).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optimality: Option<crate::core::solver::sooc_newton::Optimality>,
 }
 
 /// A plan as written by `vic plan`.
@@ -91,6 +95,8 @@ pub struct OpenLoopPrediction {
 /// [`StopReason`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Stop {
+    /// SOOC met its optimality criterion (see the summary's `optimality`).
+    Converged,
     SmallGradient,
     SmallImprovement,
     MaxIterations,
@@ -104,6 +110,17 @@ impl From<StopReason> for Stop {
             StopReason::SmallImprovement => Stop::SmallImprovement,
             StopReason::MaxIterations => Stop::MaxIterations,
             StopReason::RegularizationLimit => Stop::RegularizationLimit,
+        }
+    }
+}
+
+impl From<crate::core::solver::sooc_newton::SoocStop> for Stop {
+    fn from(stop: crate::core::solver::sooc_newton::SoocStop) -> Self {
+        use crate::core::solver::sooc_newton::SoocStop;
+        match stop {
+            SoocStop::Converged => Stop::Converged,
+            SoocStop::MaxIterations => Stop::MaxIterations,
+            SoocStop::RegularizationLimit => Stop::RegularizationLimit,
         }
     }
 }
@@ -228,6 +245,7 @@ pub(crate) fn plan_file(
             final_error_unit: unit,
             open_loop_expected_cost: open_loop.expected_cost,
             open_loop_final_std,
+            optimality: None,
         },
     }
 }

@@ -1,10 +1,12 @@
 //! Solvers over a discrete stochastic [`Dynamics`](crate::core::dynamics::Dynamics) and a
-//! [`Cost`](crate::core::cost::Cost): ILQG (Todorov & Li 2005) with box-constrained controls.
+//! [`Cost`](crate::core::cost::Cost): ILQG (Todorov & Li 2005) with box-constrained controls, and
+//! the stagewise Newton solver of the open-loop moment problem (SOOC, [`sooc_newton`]).
 
 pub mod boxqp;
 pub mod ilqg;
 pub mod moments;
 pub mod sooc;
+pub mod sooc_newton;
 pub mod sparse;
 
 pub use ilqg::{Ilqg, IlqgError, IlqgOptions, Solution, StopReason};

@@ -15,6 +15,7 @@
 
 use crate::core::cost::{Cost, CostDerivatives, TrackingCost};
 use crate::core::dynamics::{Dynamics, EulerModel, Linearization, NoiseKind};
+use crate::core::model::Noise;
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
 use nalgebra::DMatrix;
 use num_dual::{Dual, Dual64};
@@ -59,12 +60,6 @@ struct Scratch {
     p: DMatrix<f64>,
     next: DMatrix<f64>,
     t1: DMatrix<f64>,
-    da: DMatrix<f64>,
-    dcx: DMatrix<f64>,
-    dc: Vec<f64>,
-    /// `P Aᵀ` and `P Cx_iᵀ` at the knot being linearised.
-    pat: DMatrix<f64>,
-    pcx: Vec<DMatrix<f64>>,
 }
 
 impl Scratch {
@@ -75,11 +70,6 @@ impl Scratch {
             p: z(n, n),
             next: z(n, n),
             t1: z(n, n),
-            da: z(n, n),
-            dcx: z(n, n),
-            dc: vec![0.0; n],
-            pat: z(n, n),
-            pcx: (0..p).map(|_| z(n, n)).collect(),
         }
     }
 }
@@ -98,6 +88,11 @@ impl<'a> MomentDynamics<'a> {
             base,
             scratch: Mutex::new(Scratch::new(n, m, p)),
         }
+    }
+
+    /// The plant model whose moments these are.
+    pub fn base(&self) -> &EulerModel {
+        self.base
     }
 
     /// The plant's state dimension n.
@@ -203,21 +198,503 @@ impl Dynamics for MomentDynamics<'_> {
     fn noise_gain(&self, _k: usize, _z: &[f64], _u: &[f64], _out: &mut DMatrix<f64>) {}
 
     fn linearize(&self, k: usize, z: &[f64], u: &[f64], lin: &mut Linearization) {
+        // Own expansion per call: knots are linearised in parallel.
+        let mut e = MomentExpansion::new(self.base.nx(), self.base.nu(), self.base.nw());
+        self.expand(k, z, u, false, &mut e);
+        lin.noise = NoiseKind::None;
+        lin.a.copy_from(&e.a);
+        lin.b.copy_from(&e.b);
+    }
+}
+
+/// Everything the moment step's derivatives are built from at one knot, kept so that the
+/// stagewise Newton solver can contract the second derivatives of `z⁺ = F(z, u)` with the costate
+/// of the next knot without evaluating the flow again ([`MomentExpansion::curvature`]).
+///
+/// Notation: `v = (m, u)` stacks the mean and the controls (`n + m` entries); `A = ∂Φ/∂x`,
+/// `dA_j = ∂A/∂v_j`, `c_i` the noise columns, `Cx_i = ∂c_i/∂x`.
+#[derive(Debug, Clone)]
+pub struct MomentExpansion {
+    n: usize,
+    m: usize,
+    nw: usize,
+    /// `∂z⁺/∂z` (nz×nz).
+    pub a: DMatrix<f64>,
+    /// `∂z⁺/∂u` (nz×m).
+    pub b: DMatrix<f64>,
+    /// The plant's linearisation at (m, u): `A`, `B`, `c_i`, `Cx_i`.
+    base: Linearization,
+    /// `P` at the knot.
+    p: DMatrix<f64>,
+    /// `dA_j = ∂A/∂v_j` (n×n each, `n + m` of them): the second derivatives of the flow.
+    da: Vec<DMatrix<f64>>,
+    /// `∂²Φ/∂u_a ∂u_b` (the pairs of `da` cover every pair with a state index), `[a][b][r]`.
+    phi_uu: [[[f64; MAX_NX]; MAX_NU]; MAX_NU],
+    /// `∂²A/∂v_a∂v_b` (n×n each, index `a (n + m) + b`): the third derivatives of the flow.
+    d2a: Vec<DMatrix<f64>>,
+    /// Whether the noise gain is nonlinear in the state (torque noise through `M⁻¹(q)`): then
+    /// `d2c`, `d2cx` hold its second and third derivatives.
+    curved_model: bool,
+    /// `∂²c_i/∂v_a∂v_b` (n×p each, index `a (n + m) + b`).
+    d2c: Vec<DMatrix<f64>>,
+    /// `∂²Cx_i/∂v_a∂v_b`, `[a (n + m) + b][i]` (n×n each).
+    d2cx: Vec<Vec<DMatrix<f64>>>,
+    /// `∂c_i/∂v_j` (n×p each).
+    dc: Vec<DMatrix<f64>>,
+    /// `∂Cx_i/∂v_j`, `[j][i]` (n×n each); zero unless the noise gain is nonlinear in the state.
+    dcx: Vec<Vec<DMatrix<f64>>>,
+    /// Whether the noise gain's state Jacobian varies with `v` (some `dcx` nonzero).
+    curved_noise: bool,
+    // Scratch of `curvature`.
+    lam: DMatrix<f64>,
+    atl: DMatrix<f64>,
+    t1: DMatrix<f64>,
+    t2: DMatrix<f64>,
+    t3: DMatrix<f64>,
+    next: DMatrix<f64>,
+    y: Vec<DMatrix<f64>>,
+    hvv: DMatrix<f64>,
+    hpv: DMatrix<f64>,
+}
+
+impl MomentExpansion {
+    /// An expansion for a plant of `n` states, `m` controls and `p` noise channels whose noise
+    /// gain is linear in the state (the second derivatives of the noise gain are not stored).
+    pub fn new(n: usize, m: usize, p: usize) -> Self {
+        Self::with_noise_curvature(n, m, p, false)
+    }
+
+    /// An expansion sized for `dynamics`.
+    pub fn for_dynamics(dynamics: &MomentDynamics) -> Self {
+        let base = dynamics.base();
+        let curved = !matches!(
+            base.model.noise,
+            Noise::None | Noise::StateProportional { .. }
+        );
+        Self::with_noise_curvature(base.nx(), base.nu(), base.nw(), curved)
+    }
+
+    fn with_noise_curvature(n: usize, m: usize, p: usize, curved: bool) -> Self {
+        let z = |r, c| DMatrix::zeros(r, c);
+        let nz = n + vech_len(n);
+        let nv = n + m;
+        let pairs = if curved { nv * nv } else { 0 };
+        MomentExpansion {
+            d2a: (0..nv * nv).map(|_| z(n, n)).collect(),
+            curved_model: curved,
+            d2c: (0..pairs).map(|_| z(n, p)).collect(),
+            d2cx: (0..pairs)
+                .map(|_| (0..p).map(|_| z(n, n)).collect())
+                .collect(),
+            n,
+            m,
+            nw: p,
+            a: z(nz, nz),
+            b: z(nz, m),
+            base: Linearization::new(n, m, p),
+            p: z(n, n),
+            da: (0..n + m).map(|_| z(n, n)).collect(),
+            phi_uu: [[[0.0; MAX_NX]; MAX_NU]; MAX_NU],
+            dc: (0..n + m).map(|_| z(n, p)).collect(),
+            dcx: (0..n + m)
+                .map(|_| (0..p).map(|_| z(n, n)).collect())
+                .collect(),
+            curved_noise: false,
+            lam: z(n, n),
+            atl: z(n, n),
+            t1: z(n, n),
+            t2: z(n, n),
+            t3: z(n, n),
+            next: z(n, n),
+            y: (0..n + m).map(|_| z(n, n)).collect(),
+            hvv: z(n + m, n + m),
+            hpv: z(vech_len(n), n + m),
+        }
+    }
+
+    /// The costate-weighted second derivatives of the moment step,
+    /// `H = Σ_e λ⁺_e ∂²z⁺_e / ∂(z, u)²`, the term that turns the Gauss–Newton model of the
+    /// moment dynamics into Newton's (Pantoja's stagewise Newton; `λ⁺` is the costate of the
+    /// next knot). Written into `hzz` (nz×nz), `huz` (m×nz) and `huu` (m×m).
+    ///
+    /// With `Λ` the symmetric matrix of the covariance part of `λ⁺` (`tr(Λ δP) = λ⁺_P · δvech P`):
+    ///
+    /// * mean: `Σ_r λ⁺_m[r] ∂²Φ_r/∂v_a ∂v_b`;
+    /// * covariance, `v`–`v`: `2 tr(Λ dA_a P dA_bᵀ) + Σ_i 2 dc_{i,a}ᵀ Λ dc_{i,b} +
+    ///   2 tr(Λ dCx_{i,a} P dCx_{i,b}ᵀ)` — the bilinear part of `A P Aᵀ` that makes stiffness
+    ///   worth buying, and that a Gauss–Newton model drops;
+    ///   and the third derivatives of the flow, `2 tr(Λ ∂²A/∂v_a∂v_b P Aᵀ)`, of the same size
+    ///   (measured: leaving them out changes this block by half and stalls Newton);
+    /// * noise gain nonlinear in the state: `2 c_iᵀ Λ ∂²c_i + 2 tr(Λ ∂²Cx_i P Cx_iᵀ)`;
+    /// * covariance, `P`–`v`: `tr((T_a + T_aᵀ) E_e)` with `T_a = Aᵀ Λ dA_a + Σ_i Cx_iᵀ Λ dCx_{i,a}`
+    ///   (`P⁺` is linear in `P`, so `P`–`P` is zero).
+    pub fn curvature(
+        &mut self,
+        lam_next: &[f64],
+        hzz: &mut DMatrix<f64>,
+        huz: &mut DMatrix<f64>,
+        huu: &mut DMatrix<f64>,
+    ) {
+        let (n, m, nw) = (self.n, self.m, self.nw);
+        let nv = n + m;
+        // Λ from the vech part of the costate: δJ = Σ_e λ_e δP_e = tr(Λ δP).
+        let mut e = 0;
+        for a in 0..n {
+            for b in a..n {
+                let v = lam_next[n + e];
+                if a == b {
+                    self.lam[(a, a)] = v;
+                } else {
+                    self.lam[(a, b)] = 0.5 * v;
+                    self.lam[(b, a)] = 0.5 * v;
+                }
+                e += 1;
+            }
+        }
+        let lm = &lam_next[..n];
+        self.hvv.fill(0.0);
+        // Mean: Σ_r λ_m[r] ∂²Φ_r/∂v_a∂v_b.
+        for a in 0..nv {
+            for b in 0..nv {
+                let mut s = 0.0;
+                for r in 0..n {
+                    let d2 = if b < n {
+                        self.da[a][(r, b)]
+                    } else if a < n {
+                        self.da[b][(r, a)]
+                    } else {
+                        self.phi_uu[a - n][b - n][r]
+                    };
+                    s += lm[r] * d2;
+                }
+                self.hvv[(a, b)] = s;
+            }
+        }
+        // Covariance, bilinear: 2 tr(Λ dA_a P dA_bᵀ) = 2 Σ (Λ dA_a P) ∘ dA_b.
+        for a in 0..nv {
+            self.t1.gemm(1.0, &self.lam, &self.da[a], 0.0);
+            self.y[a].gemm(1.0, &self.t1, &self.p, 0.0);
+        }
+        for a in 0..nv {
+            for b in a..nv {
+                let s = 2.0 * self.y[a].dot(&self.da[b]);
+                self.hvv[(a, b)] += s;
+                if b != a {
+                    self.hvv[(b, a)] += s;
+                }
+            }
+        }
+        // Covariance, third derivatives of the flow: 2 tr(Λ ∂²A/∂v_a∂v_b P Aᵀ)
+        // = 2 Σ (∂²A/∂v_a∂v_b) ∘ (Λ A P).
+        self.t1.gemm(1.0, &self.lam, &self.base.a, 0.0);
+        self.t2.gemm(1.0, &self.t1, &self.p, 0.0);
+        for a in 0..nv {
+            for b in 0..nv {
+                self.hvv[(a, b)] += 2.0 * self.d2a[a * nv + b].dot(&self.t2);
+            }
+        }
+        let noisy = self.base.noise != NoiseKind::None;
+        if noisy && self.curved_model {
+            // 2 c_iᵀ Λ ∂²c_i + 2 tr(Λ ∂²Cx_i P Cx_iᵀ) = 2 Σ ∂²Cx_i ∘ (Λ Cx_i P).
+            for i in 0..nw {
+                self.t1.gemm(1.0, &self.lam, &self.base.cx[i], 0.0);
+                self.t2.gemm(1.0, &self.t1, &self.p, 0.0);
+                for r in 0..n {
+                    let mut s = 0.0;
+                    for c in 0..n {
+                        s += self.lam[(r, c)] * self.base.c[(c, i)];
+                    }
+                    self.t3[(r, 0)] = s;
+                }
+                for a in 0..nv {
+                    for b in 0..nv {
+                        let ab = a * nv + b;
+                        let mut s = self.d2cx[ab][i].dot(&self.t2);
+                        for r in 0..n {
+                            s += self.t3[(r, 0)] * self.d2c[ab][(r, i)];
+                        }
+                        self.hvv[(a, b)] += 2.0 * s;
+                    }
+                }
+            }
+        }
+        if noisy {
+            // 2 Σ_i dc_{i,a}ᵀ Λ dc_{i,b}
+            for a in 0..nv {
+                for b in a..nv {
+                    let mut s = 0.0;
+                    for i in 0..nw {
+                        for r in 0..n {
+                            let mut t = 0.0;
+                            for c in 0..n {
+                                t += self.lam[(r, c)] * self.dc[b][(c, i)];
+                            }
+                            s += self.dc[a][(r, i)] * t;
+                        }
+                    }
+                    self.hvv[(a, b)] += 2.0 * s;
+                    if b != a {
+                        self.hvv[(b, a)] += 2.0 * s;
+                    }
+                }
+            }
+            if self.curved_noise {
+                for i in 0..nw {
+                    for a in 0..nv {
+                        self.t1.gemm(1.0, &self.lam, &self.dcx[a][i], 0.0);
+                        self.y[a].gemm(1.0, &self.t1, &self.p, 0.0);
+                    }
+                    for a in 0..nv {
+                        for b in a..nv {
+                            let s = 2.0 * self.y[a].dot(&self.dcx[b][i]);
+                            self.hvv[(a, b)] += s;
+                            if b != a {
+                                self.hvv[(b, a)] += s;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // P–v: tr((T_a + T_aᵀ) E_e), T_a = Aᵀ Λ dA_a + Σ_i Cx_iᵀ Λ dCx_{i,a}.
+        self.atl.gemm_tr(1.0, &self.base.a, &self.lam, 0.0);
+        for a in 0..nv {
+            self.t1.gemm(1.0, &self.atl, &self.da[a], 0.0);
+            if self.curved_noise {
+                for i in 0..nw {
+                    self.t2.gemm_tr(1.0, &self.base.cx[i], &self.lam, 0.0);
+                    self.t1.gemm(1.0, &self.t2, &self.dcx[a][i], 1.0);
+                }
+            }
+            let mut e = 0;
+            for r in 0..n {
+                for c in r..n {
+                    self.hpv[(e, a)] = if r == c {
+                        2.0 * self.t1[(r, r)]
+                    } else {
+                        2.0 * (self.t1[(r, c)] + self.t1[(c, r)])
+                    };
+                    e += 1;
+                }
+            }
+        }
+        // Scatter into the (z, u) blocks; z = (m, vech P).
+        let np = vech_len(n);
+        hzz.fill(0.0);
+        huz.fill(0.0);
+        for i in 0..n {
+            for j in 0..n {
+                hzz[(i, j)] = self.hvv[(i, j)];
+            }
+            for e in 0..np {
+                hzz[(n + e, i)] = self.hpv[(e, i)];
+                hzz[(i, n + e)] = self.hpv[(e, i)];
+            }
+        }
+        for a in 0..m {
+            for j in 0..n {
+                huz[(a, j)] = self.hvv[(n + a, j)];
+            }
+            for e in 0..np {
+                huz[(a, n + e)] = self.hpv[(e, n + a)];
+            }
+            for b in 0..m {
+                huu[(a, b)] = self.hvv[(n + a, n + b)];
+            }
+        }
+    }
+}
+
+impl MomentDynamics<'_> {
+    /// `∂²A/∂v_a∂v_b`, i.e. `∂³Φ/∂x_c∂v_a∂v_b`, by triple-nested dual numbers (seeds: `x_c`
+    /// outermost, `v_a`, `v_b`), each distinct triple once (the derivative is symmetric in its
+    /// state indices and in `a, b`); and, for a noise gain nonlinear in the state, its second and
+    /// third derivatives.
+    ///
+    /// Also `∂²Φ/∂u_a∂u_b` (the pairs that [`MomentDynamics::expand`]'s first derivatives do not
+    /// cover). Everything [`MomentExpansion::curvature`] needs beyond `expand(.., false, ..)`:
+    /// the expensive part (`O(n (n + m)²)` triple-dual flow evaluations), done only when the
+    /// Newton model is used.
+    pub fn second_order(&self, k: usize, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+        type D3 = Dual<Dual<Dual64>>;
         let base = self.base;
         let (n, m, nw) = (base.nx(), base.nu(), base.nw());
-        let pairs_len = vech_len(n);
-        // Own scratch per call: knots are linearised in parallel.
-        let mut own = Scratch::new(n, m, nw);
-        let s = &mut own;
-        base.linearize(k, &z[..n], u, &mut s.lin);
+        let nv = n + m;
+        {
+            type D2 = Dual<Dual64>;
+            let lift2 = |v: f64| D2::from_re(Dual64::from(v));
+            let mut x2 = [lift2(0.0); MAX_NX];
+            let mut u2 = [lift2(0.0); MAX_NU];
+            for (d, v) in x2.iter_mut().zip(&z[..n]) {
+                *d = lift2(*v);
+            }
+            for (d, v) in u2.iter_mut().zip(u) {
+                *d = lift2(*v);
+            }
+            let mut out = [lift2(0.0); MAX_NX];
+            for a in 0..m {
+                for b in a..m {
+                    u2[a].re.eps = 1.0;
+                    u2[b].eps.re = 1.0;
+                    base.flow(k, &x2[..n], &u2[..m], &mut out[..n]);
+                    u2[a].re.eps = 0.0;
+                    u2[b].eps.re = 0.0;
+                    for r in 0..n {
+                        s.phi_uu[a][b][r] = out[r].eps.eps;
+                        s.phi_uu[b][a][r] = out[r].eps.eps;
+                    }
+                }
+            }
+        }
+        let lift = |v: f64| D3::from_re(Dual::from_re(Dual64::from(v)));
+        let mut x3 = [lift(0.0); MAX_NX];
+        let mut u3 = [lift(0.0); MAX_NU];
+        for (d, v) in x3.iter_mut().zip(&z[..n]) {
+            *d = lift(*v);
+        }
+        for (d, v) in u3.iter_mut().zip(u) {
+            *d = lift(*v);
+        }
+        let mut out = [lift(0.0); MAX_NX];
+        // Canonical triples: state indices in increasing order.
+        let canonical = |c: usize, a: usize| a >= n || c <= a;
+        for a in 0..nv {
+            for b in a..nv {
+                for c in 0..n {
+                    if !canonical(c, a) {
+                        continue;
+                    }
+                    x3[c].eps = Dual::from_re(Dual64::from(1.0));
+                    if a < n {
+                        x3[a].re.eps = Dual64::from(1.0);
+                    } else {
+                        u3[a - n].re.eps = Dual64::from(1.0);
+                    }
+                    if b < n {
+                        x3[b].re.re.eps = 1.0;
+                    } else {
+                        u3[b - n].re.re.eps = 1.0;
+                    }
+                    base.flow(k, &x3[..n], &u3[..m], &mut out[..n]);
+                    x3[c].eps = Dual::from_re(Dual64::from(0.0));
+                    if a < n {
+                        x3[a].re.eps = Dual64::from(0.0);
+                    } else {
+                        u3[a - n].re.eps = Dual64::from(0.0);
+                    }
+                    if b < n {
+                        x3[b].re.re.eps = 0.0;
+                    } else {
+                        u3[b - n].re.re.eps = 0.0;
+                    }
+                    for r in 0..n {
+                        s.d2a[a * nv + b][(r, c)] = out[r].eps.eps.eps;
+                    }
+                }
+            }
+        }
+        // The other triples from their canonical order, then the mirror pairs (b, a).
+        for a in 0..nv {
+            for b in a..nv {
+                for c in 0..n {
+                    if canonical(c, a) {
+                        continue;
+                    }
+                    // c > a, both states: swap them; if b is a state too, sort all three.
+                    let (c2, a2, b2) = if b < n {
+                        let mut t = [c, a, b];
+                        t.sort_unstable();
+                        (t[0], t[1], t[2])
+                    } else {
+                        (a, c, b)
+                    };
+                    for r in 0..n {
+                        let v = s.d2a[a2 * nv + b2][(r, c2)];
+                        s.d2a[a * nv + b][(r, c)] = v;
+                    }
+                }
+                if b != a {
+                    // a < b, so a·nv + b < b·nv + a.
+                    let (head, tail) = s.d2a.split_at_mut(b * nv + a);
+                    tail[0].copy_from(&head[a * nv + b]);
+                }
+            }
+        }
+        if s.curved_model && nw > 0 {
+            type D2 = Dual<Dual64>;
+            let lift2 = |v: f64| D2::from_re(Dual64::from(v));
+            let mut x2 = [lift2(0.0); MAX_NX];
+            let mut u2 = [lift2(0.0); MAX_NU];
+            for (d, v) in x2.iter_mut().zip(&z[..n]) {
+                *d = lift2(*v);
+            }
+            for (d, v) in u2.iter_mut().zip(u) {
+                *d = lift2(*v);
+            }
+            let zero = lift2(0.0);
+            let mut g = [zero; MAX_NX * MAX_NW];
+            let mut dgx = [zero; MAX_NX * MAX_NX * MAX_NW];
+            let mut dgu = [zero; MAX_NU * MAX_NX * MAX_NW];
+            let block = n * nw;
+            for a in 0..nv {
+                for b in a..nv {
+                    if a < n {
+                        x2[a].re.eps = 1.0;
+                    } else {
+                        u2[a - n].re.eps = 1.0;
+                    }
+                    if b < n {
+                        x2[b].eps.re = 1.0;
+                    } else {
+                        u2[b - n].eps.re = 1.0;
+                    }
+                    base.noise_jacobian(&x2[..n], &u2[..m], &mut g, &mut dgx, &mut dgu);
+                    if a < n {
+                        x2[a].re.eps = 0.0;
+                    } else {
+                        u2[a - n].re.eps = 0.0;
+                    }
+                    if b < n {
+                        x2[b].eps.re = 0.0;
+                    } else {
+                        u2[b - n].eps.re = 0.0;
+                    }
+                    for (ab, pair) in [(a * nv + b), (b * nv + a)].into_iter().enumerate() {
+                        if ab == 1 && a == b {
+                            break;
+                        }
+                        for i in 0..nw {
+                            for r in 0..n {
+                                s.d2c[pair][(r, i)] = g[i * n + r].eps.eps;
+                                for j in 0..n {
+                                    s.d2cx[pair][i][(r, j)] = dgx[j * block + i * n + r].eps.eps;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The first derivatives of the moment step at knot `k` into `e.a`, `e.b`, and (with
+    /// `curvature`) what [`MomentExpansion::curvature`] needs besides.
+    ///
+    /// `∂P⁺/∂(m, u)` needs the second derivatives of the flow (`∂A/∂v_j`): one nested-dual flow
+    /// evaluation per pair `(v_j, x_i)`, the state–state pairs once by symmetry; with `curvature`
+    /// also the control–control pairs `∂²Φ/∂u_a∂u_b`.
+    pub fn expand(&self, k: usize, z: &[f64], u: &[f64], curvature: bool, e: &mut MomentExpansion) {
+        let base = self.base;
+        let (n, m, nw) = (base.nx(), base.nu(), base.nw());
+        let s = e;
+        base.linearize(k, &z[..n], u, &mut s.base);
         unpack(n, &z[n..], &mut s.p);
-        lin.noise = NoiseKind::None;
-        lin.a.fill(0.0);
-        lin.b.fill(0.0);
-        lin.a.view_mut((0, 0), (n, n)).copy_from(&s.lin.a);
-        lin.b.view_mut((0, 0), (n, m)).copy_from(&s.lin.b);
-        let noisy = s.lin.noise != NoiseKind::None;
-        let dependent = s.lin.noise == NoiseKind::Dependent;
+        s.a.fill(0.0);
+        s.b.fill(0.0);
+        s.a.view_mut((0, 0), (n, n)).copy_from(&s.base.a);
+        s.b.view_mut((0, 0), (n, m)).copy_from(&s.base.b);
+        let noisy = s.base.noise != NoiseKind::None;
+        let dependent = s.base.noise == NoiseKind::Dependent;
 
         // ∂P⁺/∂P along each symmetric basis matrix E_ab = e_a e_bᵀ + e_b e_aᵀ (E_aa = e_a e_aᵀ
         // counted once as in `vech`): A E Aᵀ = A_a A_bᵀ + A_b A_aᵀ with A_a the a-th column, and
@@ -235,26 +712,23 @@ impl Dynamics for MomentDynamics<'_> {
                                 m[(r, a)] * m[(c, b)] + m[(r, b)] * m[(c, a)]
                             }
                         };
-                        let mut v = pair(&s.lin.a);
+                        let mut v = pair(&s.base.a);
                         if dependent {
                             for i in 0..nw {
-                                v += pair(&s.lin.cx[i]);
+                                v += pair(&s.base.cx[i]);
                             }
                         }
-                        lin.a[(n + e, n + f)] = v;
+                        s.a[(n + e, n + f)] = v;
                         e += 1;
                     }
                 }
                 f += 1;
             }
         }
-        debug_assert_eq!(f, pairs_len);
 
         // ∂A/∂(m,u)_j from the second derivatives of the flow: column i of ∂A/∂z_j is
         // ∂²Φ/∂z_j ∂x_i, one nested-dual flow evaluation per pair. The pairs with both indices
-        // in the state are symmetric, so only i ≤ j is evaluated, and B's second derivatives
-        // (not needed) are never formed.
-        let mut d2 = [[[0.0; MAX_NX]; MAX_NX]; MAX_NX + MAX_NU];
+        // in the state are symmetric, so only i ≤ j is evaluated.
         {
             let zero = Dual::from_re(Dual64::from(0.0));
             let mut xdd = [zero; MAX_NX];
@@ -269,10 +743,13 @@ impl Dynamics for MomentDynamics<'_> {
             for j in 0..n + m {
                 for i in 0..n {
                     if j < n && i < j {
-                        d2[j][i] = d2[i][j];
+                        for r in 0..n {
+                            let v = s.da[i][(r, j)];
+                            s.da[j][(r, i)] = v;
+                        }
                         continue;
                     }
-                    // Inner seed on z_j, outer seed on x_i: out.eps.eps = ∂²Φ/∂x_i ∂z_j.
+                    // Inner seed on v_j, outer seed on x_i: out.eps.eps = ∂²Φ/∂x_i ∂v_j.
                     if j < n {
                         xdd[j].re.eps = 1.0;
                     } else {
@@ -287,23 +764,21 @@ impl Dynamics for MomentDynamics<'_> {
                         udd[j - n].re.eps = 0.0;
                     }
                     for r in 0..n {
-                        d2[j][i][r] = out[r].eps.eps;
+                        s.da[j][(r, i)] = out[r].eps.eps;
                     }
                 }
             }
+        }
+        if curvature {
+            self.second_order(k, z, u, s);
         }
 
         // ∂P⁺/∂m_j and ∂P⁺/∂u_j: d(A P Aᵀ) = X + Xᵀ with X = dA (P Aᵀ), and the same for each
         // Cx_i; P Aᵀ and P Cx_iᵀ do not depend on j.
         // P Aᵀ = (A P)ᵀ, P being symmetric.
-        s.t1.gemm(1.0, &s.lin.a, &s.p, 0.0);
-        s.t1.transpose_to(&mut s.pat);
-        if dependent {
-            for i in 0..nw {
-                s.t1.gemm(1.0, &s.lin.cx[i], &s.p, 0.0);
-                s.t1.transpose_to(&mut s.pcx[i]);
-            }
-        }
+        s.t1.gemm(1.0, &s.base.a, &s.p, 0.0);
+        s.t1.transpose_to(&mut s.atl);
+        let pat = &s.atl;
         let mut xd = [Dual64::from(0.0); MAX_NX];
         let mut ud = [Dual64::from(0.0); MAX_NU];
         for (d, v) in xd.iter_mut().zip(&z[..n]) {
@@ -316,13 +791,9 @@ impl Dynamics for MomentDynamics<'_> {
         let mut dgx = [Dual64::from(0.0); MAX_NX * MAX_NX * MAX_NW];
         let mut dgu = [Dual64::from(0.0); MAX_NU * MAX_NX * MAX_NW];
         let block = n * nw;
+        s.curved_noise = false;
         for j in 0..n + m {
-            for c in 0..n {
-                for r in 0..n {
-                    s.da[(r, c)] = d2[j][c][r];
-                }
-            }
-            s.t1.gemm(1.0, &s.da, &s.pat, 0.0);
+            s.t1.gemm(1.0, &s.da[j], pat, 0.0);
             if noisy {
                 if j < n {
                     xd[j].eps = 1.0;
@@ -341,21 +812,31 @@ impl Dynamics for MomentDynamics<'_> {
                 for i in 0..nw {
                     // dc_i = ∂c_i/∂(m,u)_j; d(c cᵀ) = dc cᵀ + c dcᵀ
                     for r in 0..n {
-                        s.dc[r] = g[i * n + r].eps;
+                        s.dc[j][(r, i)] = g[i * n + r].eps;
                     }
                     for r in 0..n {
                         for c in 0..n {
-                            s.next[(r, c)] += s.dc[r] * s.lin.c[(c, i)] + s.lin.c[(r, i)] * s.dc[c];
+                            s.next[(r, c)] += s.dc[j][(r, i)] * s.base.c[(c, i)]
+                                + s.base.c[(r, i)] * s.dc[j][(c, i)];
                         }
                     }
                     if dependent {
                         // dCx from the second derivatives of the noise gain.
+                        let mut any = false;
                         for c in 0..n {
                             for r in 0..n {
-                                s.dcx[(r, c)] = dgx[c * block + i * n + r].eps;
+                                let v = dgx[c * block + i * n + r].eps;
+                                any |= v != 0.0;
+                                s.dcx[j][i][(r, c)] = v;
                             }
                         }
-                        s.t1.gemm(1.0, &s.dcx, &s.pcx[i], 1.0);
+                        if any {
+                            s.curved_noise = true;
+                            // P Cx_iᵀ = (Cx_i P)ᵀ
+                            s.t2.gemm(1.0, &s.base.cx[i], &s.p, 0.0);
+                            s.t2.transpose_to(&mut s.t3);
+                            s.t1.gemm(1.0, &s.dcx[j][i], &s.t3, 1.0);
+                        }
                     }
                 }
             }
@@ -364,9 +845,9 @@ impl Dynamics for MomentDynamics<'_> {
                 for c in r..n {
                     let v = s.next[(r, c)] + s.t1[(r, c)] + s.t1[(c, r)];
                     if j < n {
-                        lin.a[(n + e, j)] = v;
+                        s.a[(n + e, j)] = v;
                     } else {
-                        lin.b[(n + e, j - n)] = v;
+                        s.b[(n + e, j - n)] = v;
                     }
                     e += 1;
                 }

@@ -4,7 +4,9 @@
 use super::error::ConfigError;
 
 /// Sets `section.key` in `table` to `value` (a TOML value if it parses as one: numbers, booleans,
-/// arrays; else a bare string).
+/// arrays; else a bare string). Setting the key that selects a section's variant (`noise.kind`,
+/// `actuator.type`, ...) to another variant starts that section afresh, so that
+/// `--set noise.kind=none` works on a file whose noise has other keys; later overrides fill it.
 pub(super) fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), ConfigError> {
     let err = |message: &str| ConfigError::Override {
         assignment: assignment.to_string(),
@@ -32,6 +34,9 @@ pub(super) fn apply_override(table: &mut toml::Table, assignment: &str) -> Resul
     let toml::Value::Table(sec) = entry else {
         return Err(err(&format!("{section} is not a section")));
     };
+    if super::raw::tag_of(section) == Some(field) && sec.get(field) != Some(&parsed) {
+        sec.clear();
+    }
     sec.insert(field.to_string(), parsed);
     Ok(())
 }

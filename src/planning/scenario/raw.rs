@@ -274,7 +274,7 @@ impl Default for RawSolver {
             mu_max: d.mu_max,
             stochastic: d.stochastic,
             damp_short_steps: d.damp_short_steps,
-            noise_continuation: vec![0.1, 0.3, 1.0],
+            noise_continuation: vec![1.0],
         }
     }
 }

@@ -11,7 +11,10 @@ pub struct IlqgSection {
     /// The planning method.
     pub method: Method,
     pub options: IlqgOptions,
-    /// SOOC: fractions of the noise solved in turn, ending at 1 (default [0.1, 0.3, 1.0]).
+    /// SOOC: fractions of the noise solved in turn, ending at 1 (default [1.0]: the stagewise
+    /// Newton solver converges from the deterministic plan directly; intermediate stages only
+    /// add iterations on the type-2 arm: 22 Newton steps at [1.0], 44 over [0.1, 0.3, 1.0], same
+    /// optimum. The VSA scenarios keep [0.1, 0.3, 1.0] in their files).
     pub noise_continuation: Vec<f64>,
 }
 

@@ -79,3 +79,13 @@ fn syntax_errors_name_the_file() {
         .to_string();
     assert!(e.contains("missing section [plant]"), "{e}");
 }
+
+#[test]
+fn setting_a_sections_kind_starts_it_afresh() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/icub_elbow.toml");
+    let s = Scenario::load(&path, &["noise.kind=none".to_string()]).expect("noise switched off");
+    assert_eq!(s.model.nw(), 0);
+    // The same kind keeps the file's keys.
+    let same = Scenario::load(&path, &["noise.kind=state".to_string()]).expect("same kind");
+    assert!(same.model.nw() > 0);
+}

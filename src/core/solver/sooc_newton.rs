@@ -1,0 +1,718 @@
+//! Stagewise Newton for stochastic optimal open-loop control: the open-loop expected cost
+//! `J(u) = Σ_k ℓ(m_k, u_k) + ½ tr(ℓ_xx P_k) + g(m_N) + ½ tr(g_xx P_N)` of the moment dynamics
+//! `z = (m, vech P)` ([`MomentDynamics`], after Berret & Jean 2020) minimised over the box-limited
+//! controls.
+//!
+//! Why not the ILQG/iLQR machinery: a Gauss–Newton model of `z⁺ = F(z, u)` keeps `Fᵀ V F` and
+//! drops `λ · F_zz`. The expected cost is linear in `P`, and `P⁺ = A P Aᵀ + …` is where the
+//! stiffness acts (through `A`), so the dropped term holds the curvature that makes stiffness worth
+//! buying; without it the model is badly conditioned (eigenvalues from 1e-6 to 4e4) and the solver
+//! crawls with large regularisation. Here the backward pass adds the costate-weighted second
+//! derivatives ([`MomentExpansion::curvature`]): with the costates `λ` of the current trajectory
+//! this is Pantoja's stagewise Newton (Pantoja 1988; Dunn & Bertsekas 1989), the exact Newton step
+//! of `J` over the whole control sequence computed stage by stage in `O(N)`, up to the third
+//! derivatives of the flow that the curvature leaves out. Box limits are handled per stage as in
+//! control-limited DDP (Tassa, Mansard & Todorov 2014): the stage QP is solved by projected Newton,
+//! clamped controls get no feedback. The step is applied with its feedback on `δz` and a
+//! backtracking line search on the true `J`; Levenberg–Marquardt regularisation (relative to each
+//! control's own cost curvature, which makes it independent of units) guards indefinite models.
+//!
+//! Convergence ([`Optimality`]) is judged on the exact gradient from the adjoint, not on the
+//! model: the scaled projected gradient and the Newton model's predicted decrease, both relative
+//! to `J`.
+
+use super::Bounds;
+use super::boxqp::{MAX_QP, QpStatus, solve_box_qp};
+use super::sooc::{MomentCost, MomentDynamics, MomentExpansion};
+use crate::core::cost::{Cost, CostDerivatives};
+use crate::core::dynamics::Dynamics;
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::time::{Duration, Instant};
+
+/// Relative regularisation above which an iteration gives up on the Newton model and takes a
+/// Gauss–Newton step instead.
+const NEWTON_MU_LIMIT: f64 = 1e6;
+
+/// While the Newton model fails, it is tried again every this many iterations.
+const NEWTON_RETRY: usize = 4;
+
+/// Relative predicted decrease at the level of floating-point round-off of `J`.
+const ROUND_OFF: f64 = 1e-13;
+
+/// Settings of the stagewise Newton solver. Defaults suit the paper's problems.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SoocOptions {
+    /// Iteration limit (default 100; a converging solve needs 5–30).
+    pub max_iterations: usize,
+    /// Converged when the scaled projected gradient, relative to `J`, is at most this
+    /// (default 1e-6; see [`Optimality::projected_gradient`]).
+    pub gradient_tolerance: f64,
+    /// ... and the Newton step's predicted decrease, relative to `J`, at most this (default 1e-9).
+    pub decrease_tolerance: f64,
+    /// Below this relative regularisation μ is set to 0 (default 1e-6).
+    pub mu_min: f64,
+    /// Give up above this μ (default 1e10).
+    pub mu_max: f64,
+}
+
+impl Default for SoocOptions {
+    fn default() -> Self {
+        SoocOptions {
+            max_iterations: 100,
+            gradient_tolerance: 1e-6,
+            decrease_tolerance: 1e-9,
+            mu_min: 1e-6,
+            mu_max: 1e10,
+        }
+    }
+}
+
+/// Why the solver stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SoocStop {
+    /// Both tests of [`Optimality`] passed.
+    Converged,
+    /// The iteration limit was reached.
+    MaxIterations,
+    /// Regularisation grew past its limit without a descent step.
+    RegularizationLimit,
+}
+
+/// The first-order optimality of a control sequence for the box-limited problem, relative to the
+/// cost: what `converged` means.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Optimality {
+    /// `max_{k,j} s_j |Π(∇J)_{k,j}| / |J|`: the largest first-order change of `J` from moving one
+    /// control by its scale `s_j`, relative to `J`. `Π` zeroes the components at a bound whose
+    /// gradient pushes out of the box (the KKT conditions); `s_j` is the width of the control's
+    /// box where it is finite (the stiffness) and 1 (N m) where it is not (the torques).
+    pub projected_gradient: f64,
+    /// `-ΔJ_pred / |J|`: the decrease the Newton model predicts for its full step.
+    pub predicted_decrease: f64,
+    /// The tolerances they were tested against.
+    pub gradient_tolerance: f64,
+    pub decrease_tolerance: f64,
+}
+
+impl Optimality {
+    /// Whether both tests pass.
+    pub fn met(&self) -> bool {
+        self.projected_gradient <= self.gradient_tolerance
+            && self.predicted_decrease <= self.decrease_tolerance
+    }
+}
+
+/// A solution of the open-loop moment problem.
+#[derive(Debug, Clone)]
+pub struct SoocSolution {
+    /// Controls `u_0 .. u_{N−1}`.
+    pub u: Vec<DVector<f64>>,
+    /// Moment states `z_0 ..= z_N`, `z = (m, vech P)`.
+    pub z: Vec<DVector<f64>>,
+    /// The open-loop expected cost `J`.
+    pub expected_cost: f64,
+    /// Number of accepted Newton steps.
+    pub iterations: usize,
+    pub stop: SoocStop,
+    /// The optimality measures at the returned controls.
+    pub optimality: Optimality,
+    pub solve_time: Duration,
+    /// `J` after each accepted step.
+    pub history: Vec<f64>,
+}
+
+/// Errors of a solve: the problem does not fit the workspace, or cannot be started.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SoocError {
+    #[error(
+        "problem size {got:?} (states, controls, horizon) differs from the workspace's {want:?}"
+    )]
+    SizeMismatch {
+        got: (usize, usize, usize),
+        want: (usize, usize, usize),
+    },
+    #[error("{what} has {got} entries, expected {want}")]
+    Length {
+        what: &'static str,
+        got: usize,
+        want: usize,
+    },
+    #[error("the initial controls make the mean or covariance non-finite")]
+    NonFiniteStart,
+    #[error("there is no previous solution to shift; solve once first")]
+    NoPreviousSolution,
+}
+
+/// The open-loop moment problem: moment dynamics and cost over `horizon` steps from a known plant
+/// state `x0` (`P_0 = 0`), with control limits.
+pub struct SoocProblem<'a> {
+    pub dynamics: &'a MomentDynamics<'a>,
+    pub cost: &'a MomentCost<'a>,
+    /// Initial plant state (the mean; the covariance starts at 0).
+    pub x0: &'a [f64],
+    pub bounds: &'a Bounds,
+    pub horizon: usize,
+}
+
+/// Scratch of the backward pass.
+struct Backward {
+    v: DMatrix<f64>,
+    vv: DVector<f64>,
+    va: DMatrix<f64>,
+    vb: DMatrix<f64>,
+    qzz: DMatrix<f64>,
+    quz: DMatrix<f64>,
+    quu: DMatrix<f64>,
+    qz: DVector<f64>,
+    qu: DVector<f64>,
+    hzz: DMatrix<f64>,
+    huz: DMatrix<f64>,
+    huu: DMatrix<f64>,
+    kt_quu: DMatrix<f64>,
+    t_mz: DMatrix<f64>,
+}
+
+/// The solver with its preallocated workspace, sized for one problem size; reuse it across solves
+/// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`] allocates nothing per
+/// iteration).
+pub struct SoocSolver {
+    pub options: SoocOptions,
+    n: usize,
+    nz: usize,
+    nu: usize,
+    horizon: usize,
+    z: Vec<DVector<f64>>,
+    u: Vec<DVector<f64>>,
+    cand_z: Vec<DVector<f64>>,
+    cand_u: Vec<DVector<f64>>,
+    expansions: Vec<MomentExpansion>,
+    derivs: Vec<CostDerivatives>,
+    lam: Vec<DVector<f64>>,
+    grad: Vec<DVector<f64>>,
+    ff: Vec<DVector<f64>>,
+    gains: Vec<DMatrix<f64>>,
+    bw: Backward,
+    dz: DVector<f64>,
+    /// Whether `u` holds a solution that [`SoocSolver::resolve_shifted`] may shift.
+    solved: bool,
+}
+
+impl SoocSolver {
+    /// A workspace for the moment dynamics' sizes (and noise kind) over `horizon` steps.
+    pub fn new(dynamics: &MomentDynamics, horizon: usize, options: SoocOptions) -> Self {
+        let (n, m) = (dynamics.n(), dynamics.nu());
+        assert!(m <= MAX_QP, "at most {MAX_QP} controls");
+        let nz = n + super::sooc::vech_len(n);
+        let zm = |r, c| DMatrix::zeros(r, c);
+        SoocSolver {
+            options,
+            n,
+            nz,
+            nu: m,
+            horizon,
+            z: (0..=horizon).map(|_| DVector::zeros(nz)).collect(),
+            u: (0..horizon).map(|_| DVector::zeros(m)).collect(),
+            cand_z: (0..=horizon).map(|_| DVector::zeros(nz)).collect(),
+            cand_u: (0..horizon).map(|_| DVector::zeros(m)).collect(),
+            expansions: (0..horizon)
+                .map(|_| MomentExpansion::for_dynamics(dynamics))
+                .collect(),
+            derivs: (0..=horizon).map(|_| CostDerivatives::new(nz, m)).collect(),
+            lam: (0..=horizon).map(|_| DVector::zeros(nz)).collect(),
+            grad: (0..horizon).map(|_| DVector::zeros(m)).collect(),
+            ff: (0..horizon).map(|_| DVector::zeros(m)).collect(),
+            gains: (0..horizon).map(|_| DMatrix::zeros(m, nz)).collect(),
+            bw: Backward {
+                v: zm(nz, nz),
+                vv: DVector::zeros(nz),
+                va: zm(nz, nz),
+                vb: zm(nz, m),
+                qzz: zm(nz, nz),
+                quz: zm(m, nz),
+                quu: zm(m, m),
+                qz: DVector::zeros(nz),
+                qu: DVector::zeros(m),
+                hzz: zm(nz, nz),
+                huz: zm(m, nz),
+                huu: zm(m, m),
+                kt_quu: zm(nz, m),
+                t_mz: zm(m, nz),
+            },
+            dz: DVector::zeros(nz),
+            solved: false,
+        }
+    }
+
+    /// A workspace sized for `problem`.
+    pub fn for_problem(problem: &SoocProblem, options: SoocOptions) -> Self {
+        Self::new(problem.dynamics, problem.horizon, options)
+    }
+
+    fn check(&self, problem: &SoocProblem) -> Result<(), SoocError> {
+        let got = (problem.dynamics.n(), problem.dynamics.nu(), problem.horizon);
+        let want = (self.n, self.nu, self.horizon);
+        if got != want {
+            return Err(SoocError::SizeMismatch { got, want });
+        }
+        if problem.x0.len() != self.n {
+            return Err(SoocError::Length {
+                what: "x0",
+                got: problem.x0.len(),
+                want: self.n,
+            });
+        }
+        Ok(())
+    }
+
+    /// Solves from the control sequence `u_init` (clamped into the limits).
+    pub fn solve(
+        &mut self,
+        problem: &SoocProblem,
+        u_init: &[DVector<f64>],
+    ) -> Result<SoocSolution, SoocError> {
+        self.check(problem)?;
+        if u_init.len() != self.horizon {
+            return Err(SoocError::Length {
+                what: "u_init",
+                got: u_init.len(),
+                want: self.horizon,
+            });
+        }
+        for (dst, src) in self.u.iter_mut().zip(u_init) {
+            if src.len() != self.nu {
+                return Err(SoocError::Length {
+                    what: "a control of u_init",
+                    got: src.len(),
+                    want: self.nu,
+                });
+            }
+            dst.copy_from(src);
+        }
+        self.run(problem)
+    }
+
+    /// Re-solves for a receding horizon: the previous solution shifted by `shift` knots (the last
+    /// control repeated) warm-starts `problem`, whose initial state and reference are the new
+    /// ones. The workspace is reused; the problem must have the previous one's size.
+    pub fn resolve_shifted(
+        &mut self,
+        problem: &SoocProblem,
+        shift: usize,
+    ) -> Result<SoocSolution, SoocError> {
+        self.check(problem)?;
+        if !self.solved {
+            return Err(SoocError::NoPreviousSolution);
+        }
+        let h = self.horizon;
+        let s = shift.min(h.saturating_sub(1));
+        self.u.rotate_left(s);
+        for k in h - s..h {
+            let (head, tail) = self.u.split_at_mut(k);
+            tail[0].copy_from(&head[k - 1]);
+        }
+        self.run(problem)
+    }
+
+    /// The solver proper, from the controls in `self.u`.
+    fn run(&mut self, problem: &SoocProblem) -> Result<SoocSolution, SoocError> {
+        let start = Instant::now();
+        self.solved = false;
+        for u in &mut self.u {
+            problem.bounds.clamp(u.as_mut_slice());
+        }
+        for g in &mut self.gains {
+            g.fill(0.0);
+        }
+        self.z[0].fill(0.0);
+        self.z[0].rows_mut(0, self.n).copy_from_slice(problem.x0);
+        let mut cost = rollout(problem, &mut self.z, &self.u);
+        if !cost.is_finite() {
+            return Err(SoocError::NonFiniteStart);
+        }
+        // Control scales: the box width where finite, else 1; the regularisation's metric: each
+        // control's own cost curvature.
+        let mut scale = [1.0; MAX_QP];
+        for j in 0..self.nu {
+            let (lo, hi) = (problem.bounds.lower[j], problem.bounds.upper[j]);
+            if lo.is_finite() && hi.is_finite() && hi > lo {
+                scale[j] = hi - lo;
+            }
+        }
+        let mut mu = 0.0_f64;
+        let mut mu_step = 1.0_f64;
+        let mut history = Vec::new();
+        let mut iterations = 0;
+        let mut stop = SoocStop::MaxIterations;
+        let mut optimality;
+        let mut needs_expansion = true;
+        let mut newton;
+        let mut has_second_order = false;
+        let mut gauss_newton_run = 0usize;
+        loop {
+            if needs_expansion {
+                self.expand(problem);
+                self.costates();
+                needs_expansion = false;
+                has_second_order = false;
+            }
+            // The Newton model costs the flow's third derivatives. While it keeps failing (far
+            // from the optimum), try it only every few iterations and take Gauss–Newton steps
+            // in between.
+            let try_newton = gauss_newton_run.is_multiple_of(NEWTON_RETRY);
+            if try_newton && !has_second_order {
+                self.expand_second_order(problem);
+                has_second_order = true;
+            }
+            let pg = self.projected_gradient(problem.bounds, &scale) / cost.abs().max(1e-300);
+            // Backward pass, raising μ until every stage QP is convex. Far from the optimum the
+            // Newton model can be too indefinite for any sensible μ; then this iteration uses the
+            // Gauss–Newton model (no curvature term, the ILQG model), which is convex in the
+            // controls, and the next iteration tries Newton again.
+            newton = try_newton;
+            let mut mu_here = mu;
+            let predicted = loop {
+                match self.backward(problem.bounds, mu_here, newton) {
+                    Some(dv) => break Some(dv),
+                    None => {
+                        mu_step = (mu_step * 2.0).max(2.0);
+                        mu_here = (mu_here * mu_step).max(self.options.mu_min);
+                        if newton && mu_here > NEWTON_MU_LIMIT {
+                            newton = false;
+                            mu_here = mu;
+                        } else if mu_here > self.options.mu_max {
+                            break None;
+                        }
+                    }
+                }
+            };
+            if newton {
+                mu = mu_here;
+                gauss_newton_run = 0;
+            } else {
+                gauss_newton_run += 1;
+            }
+            let Some((dv1, dv2)) = predicted else {
+                stop = SoocStop::RegularizationLimit;
+                optimality = Optimality {
+                    projected_gradient: pg,
+                    predicted_decrease: f64::INFINITY,
+                    gradient_tolerance: self.options.gradient_tolerance,
+                    decrease_tolerance: self.options.decrease_tolerance,
+                };
+                break;
+            };
+            optimality = Optimality {
+                projected_gradient: pg,
+                // The Gauss–Newton model's prediction says nothing about optimality.
+                predicted_decrease: if newton {
+                    -(dv1 + dv2) / cost.abs().max(1e-300)
+                } else {
+                    f64::INFINITY
+                },
+                gradient_tolerance: self.options.gradient_tolerance,
+                decrease_tolerance: self.options.decrease_tolerance,
+            };
+            if optimality.met() {
+                stop = SoocStop::Converged;
+                break;
+            }
+            if iterations >= self.options.max_iterations {
+                break;
+            }
+            // Line search on the true cost.
+            let mut accepted = None;
+            let mut alpha = 1.0;
+            for _ in 0..12 {
+                let c = self.forward(problem, alpha);
+                let actual = c - cost;
+                let expected = alpha * dv1 + alpha * alpha * dv2;
+                if c.is_finite() && actual < 0.0 && (expected >= 0.0 || actual <= 0.1 * expected) {
+                    accepted = Some(c);
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            match accepted {
+                Some(c) => {
+                    std::mem::swap(&mut self.z, &mut self.cand_z);
+                    std::mem::swap(&mut self.u, &mut self.cand_u);
+                    cost = c;
+                    iterations += 1;
+                    history.push(c);
+                    needs_expansion = true;
+                    // A full step: trust the model more.
+                    if alpha >= 0.5 {
+                        mu_step = (mu_step / 2.0).min(0.5);
+                        mu *= mu_step;
+                        if mu < self.options.mu_min {
+                            mu = 0.0;
+                        }
+                    }
+                }
+                None => {
+                    if optimality.predicted_decrease < ROUND_OFF {
+                        // Nothing left to gain above round-off, yet the gradient test fails:
+                        // stop rather than inflate μ.
+                        stop = SoocStop::RegularizationLimit;
+                        break;
+                    }
+                    mu_step = (mu_step * 2.0).max(2.0);
+                    mu = (mu * mu_step).max(self.options.mu_min.max(1e-3));
+                    if mu > self.options.mu_max {
+                        stop = SoocStop::RegularizationLimit;
+                        break;
+                    }
+                }
+            }
+        }
+        self.solved = true;
+        Ok(SoocSolution {
+            u: self.u.clone(),
+            z: self.z.clone(),
+            expected_cost: cost,
+            iterations,
+            stop,
+            optimality,
+            solve_time: start.elapsed(),
+            history,
+        })
+    }
+
+    /// The second-order pieces of the moment step at every knot (in parallel), for the Newton
+    /// model.
+    fn expand_second_order(&mut self, problem: &SoocProblem) {
+        let (z, u) = (&self.z, &self.u);
+        self.expansions
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(k, e)| {
+                problem
+                    .dynamics
+                    .second_order(k, z[k].as_slice(), u[k].as_slice(), e);
+            });
+    }
+
+    /// First derivatives of the moment step and the cost derivatives at every knot (in
+    /// parallel: the knots are independent).
+    fn expand(&mut self, problem: &SoocProblem) {
+        let h = self.horizon;
+        let (z, u) = (&self.z, &self.u);
+        self.expansions
+            .par_iter_mut()
+            .zip(self.derivs[..h].par_iter_mut())
+            .enumerate()
+            .for_each(|(k, (e, d))| {
+                problem
+                    .dynamics
+                    .expand(k, z[k].as_slice(), u[k].as_slice(), false, e);
+                problem
+                    .cost
+                    .running_derivatives(k, z[k].as_slice(), u[k].as_slice(), d);
+            });
+        problem
+            .cost
+            .terminal_derivatives(self.z[h].as_slice(), &mut self.derivs[h]);
+    }
+
+    /// The costates `λ_N = ∇g`, `λ_k = ℓ_z + Aᵀ λ_{k+1}`, and the exact gradient
+    /// `∇_{u_k} J = ℓ_u + Bᵀ λ_{k+1}`.
+    fn costates(&mut self) {
+        let h = self.horizon;
+        self.lam[h].copy_from(&self.derivs[h].lx);
+        for k in (0..h).rev() {
+            let (head, tail) = self.lam.split_at_mut(k + 1);
+            let next = &tail[0];
+            let e = &self.expansions[k];
+            head[k].copy_from(&self.derivs[k].lx);
+            head[k].gemv_tr(1.0, &e.a, next, 1.0);
+            self.grad[k].copy_from(&self.derivs[k].lu);
+            self.grad[k].gemv_tr(1.0, &e.b, next, 1.0);
+        }
+    }
+
+    /// `max_{k,j} s_j |Π(∇J)_{k,j}|`, `Π` zeroing the components that push out of the box at a
+    /// bound.
+    fn projected_gradient(&self, bounds: &Bounds, scale: &[f64]) -> f64 {
+        let mut worst = 0.0_f64;
+        for (u, g) in self.u.iter().zip(&self.grad) {
+            for j in 0..self.nu {
+                let gj = g[j];
+                let blocked =
+                    (u[j] <= bounds.lower[j] && gj > 0.0) || (u[j] >= bounds.upper[j] && gj < 0.0);
+                if !blocked {
+                    worst = worst.max(scale[j] * gj.abs());
+                }
+            }
+        }
+        worst
+    }
+
+    /// The Riccati recursion of the Newton step with box-limited stage QPs; the predicted
+    /// decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)`, or `None` if some stage QP is not convex at
+    /// this μ.
+    fn backward(&mut self, bounds: &Bounds, mu: f64, newton: bool) -> Option<(f64, f64)> {
+        let h = self.horizon;
+        let m = self.nu;
+        let bw = &mut self.bw;
+        bw.v.copy_from(&self.derivs[h].lxx);
+        bw.vv.copy_from(&self.derivs[h].lx);
+        let (mut dv1, mut dv2) = (0.0, 0.0);
+        for k in (0..h).rev() {
+            let e = &mut self.expansions[k];
+            let d = &self.derivs[k];
+            if newton {
+                e.curvature(
+                    self.lam[k + 1].as_slice(),
+                    &mut bw.hzz,
+                    &mut bw.huz,
+                    &mut bw.huu,
+                );
+            } else {
+                bw.hzz.fill(0.0);
+                bw.huz.fill(0.0);
+                bw.huu.fill(0.0);
+            }
+            // Q terms.
+            bw.va.gemm(1.0, &bw.v, &e.a, 0.0);
+            bw.vb.gemm(1.0, &bw.v, &e.b, 0.0);
+            bw.qzz.copy_from(&d.lxx);
+            bw.qzz += &bw.hzz;
+            bw.qzz.gemm_tr(1.0, &e.a, &bw.va, 1.0);
+            bw.quz.copy_from(&d.lux);
+            bw.quz += &bw.huz;
+            bw.quz.gemm_tr(1.0, &e.b, &bw.va, 1.0);
+            bw.quu.copy_from(&d.luu);
+            bw.quu += &bw.huu;
+            bw.quu.gemm_tr(1.0, &e.b, &bw.vb, 1.0);
+            bw.qz.copy_from(&d.lx);
+            bw.qz.gemv_tr(1.0, &e.a, &bw.vv, 1.0);
+            bw.qu.copy_from(&d.lu);
+            bw.qu.gemv_tr(1.0, &e.b, &bw.vv, 1.0);
+            // Stage QP on the regularised Q_uu within the box around u_k.
+            let mut lo = [0.0; MAX_QP];
+            let mut hi = [0.0; MAX_QP];
+            let mut reg = [0.0; MAX_QP];
+            for j in 0..m {
+                lo[j] = bounds.lower[j] - self.u[k][j];
+                hi[j] = bounds.upper[j] - self.u[k][j];
+                reg[j] = mu * d.luu[(j, j)].abs().max(1e-12);
+            }
+            let quu = &bw.quu;
+            let hq = |i: usize, j: usize| {
+                0.5 * (quu[(i, j)] + quu[(j, i)]) + if i == j { reg[i] } else { 0.0 }
+            };
+            let qp = solve_box_qp(
+                hq,
+                bw.qu.as_slice(),
+                &lo[..m],
+                &hi[..m],
+                self.ff[k].as_slice(),
+            );
+            if qp.status == QpStatus::NotPositiveDefinite {
+                return None;
+            }
+            let ff = &mut self.ff[k];
+            for j in 0..m {
+                ff[j] = qp.x[j];
+            }
+            // Gains: free rows −(Q_uu,ff)⁻¹ Q_uz,f; clamped rows 0.
+            let gain = &mut self.gains[k];
+            gain.fill(0.0);
+            let mut free = [0usize; MAX_QP];
+            let mut nf = 0;
+            for j in 0..m {
+                if qp.free[j] {
+                    free[nf] = j;
+                    nf += 1;
+                }
+            }
+            if nf > 0 {
+                let factor = qp.factor.as_ref()?;
+                let mut col = [0.0; MAX_QP];
+                for c in 0..self.nz {
+                    for (i, &j) in free[..nf].iter().enumerate() {
+                        col[i] = -bw.quz[(j, c)];
+                    }
+                    factor.solve(&mut col[..nf]);
+                    for (i, &j) in free[..nf].iter().enumerate() {
+                        gain[(j, c)] = col[i];
+                    }
+                }
+            }
+            // Predicted decrease with the unregularised model.
+            let mut quu_k = 0.0;
+            for i in 0..m {
+                for j in 0..m {
+                    quu_k += ff[i] * bw.quu[(i, j)] * ff[j];
+                }
+            }
+            dv1 += ff.dot(&bw.qu);
+            dv2 += 0.5 * quu_k;
+            // V = Q_zz + Kᵀ Q_uu K + Kᵀ Q_uz + Q_uzᵀ K, v = Q_z + Kᵀ Q_uu k + Kᵀ Q_u + Q_uzᵀ k.
+            bw.kt_quu.gemm_tr(1.0, gain, &bw.quu, 0.0);
+            bw.t_mz.copy_from(&bw.quz);
+            bw.t_mz.gemm(1.0, &bw.quu, gain, 1.0);
+            bw.v.copy_from(&bw.qzz);
+            bw.v.gemm_tr(1.0, gain, &bw.t_mz, 1.0);
+            bw.v.gemm_tr(1.0, &bw.quz, gain, 1.0);
+            bw.vv.copy_from(&bw.qz);
+            bw.vv.gemv(1.0, &bw.kt_quu, ff, 1.0);
+            bw.vv.gemv_tr(1.0, gain, &bw.qu, 1.0);
+            bw.vv.gemv_tr(1.0, &bw.quz, ff, 1.0);
+            let nz = self.nz;
+            for i in 0..nz {
+                for j in 0..i {
+                    let s = 0.5 * (bw.v[(i, j)] + bw.v[(j, i)]);
+                    bw.v[(i, j)] = s;
+                    bw.v[(j, i)] = s;
+                }
+            }
+        }
+        Some((dv1, dv2))
+    }
+
+    /// Rolls out `u + α k + K (z' − z)` (clamped) into the candidate; its cost.
+    fn forward(&mut self, problem: &SoocProblem, alpha: f64) -> f64 {
+        let h = self.horizon;
+        self.cand_z[0].copy_from(&self.z[0]);
+        let mut cost = 0.0;
+        for k in 0..h {
+            self.dz.copy_from(&self.cand_z[k]);
+            self.dz -= &self.z[k];
+            let u = &mut self.cand_u[k];
+            u.copy_from(&self.u[k]);
+            u.axpy(alpha, &self.ff[k], 1.0);
+            u.gemv(1.0, &self.gains[k], &self.dz, 1.0);
+            problem.bounds.clamp(u.as_mut_slice());
+            let (head, tail) = self.cand_z.split_at_mut(k + 1);
+            cost += problem.cost.running(k, head[k].as_slice(), u.as_slice());
+            problem
+                .dynamics
+                .step(k, head[k].as_slice(), u.as_slice(), tail[0].as_mut_slice());
+            if !cost.is_finite() || tail[0].iter().any(|v| !v.is_finite()) {
+                return f64::INFINITY;
+            }
+        }
+        cost + problem.cost.terminal(self.cand_z[h].as_slice())
+    }
+}
+
+/// Rolls `u` out from `z[0]`; the cost (infinite if the moments blow up).
+fn rollout(problem: &SoocProblem, z: &mut [DVector<f64>], u: &[DVector<f64>]) -> f64 {
+    let mut cost = 0.0;
+    for (k, uk) in u.iter().enumerate() {
+        let (head, tail) = z.split_at_mut(k + 1);
+        cost += problem.cost.running(k, head[k].as_slice(), uk.as_slice());
+        problem
+            .dynamics
+            .step(k, head[k].as_slice(), uk.as_slice(), tail[0].as_mut_slice());
+        if !cost.is_finite() || tail[0].iter().any(|v| !v.is_finite()) {
+            return f64::INFINITY;
+        }
+    }
+    cost + problem.cost.terminal(z[u.len()].as_slice())
+}
