@@ -81,7 +81,7 @@ fn iterations_do_not_allocate() {
 fn delayed_iterations_do_not_allocate() {
     let (s, setup) = load(
         "single_joint_delay.toml",
-        &["noise.kind=none", "noise.sigma=0"],
+        &["noise.kind=none"],
     );
     let delayed = Delayed::new(setup.dynamics.clone(), s.task.delay_steps());
     let cost = DelayedCost::new(&setup.cost, setup.x0.len());
@@ -181,7 +181,7 @@ fn shifted_warm_start_reconverges_to_the_cold_cost() {
 fn undelayed_guess_is_the_deterministic_delayed_optimum() {
     let (s, setup) = load(
         "single_joint_delay.toml",
-        &["noise.kind=none", "noise.sigma=0"],
+        &["noise.kind=none"],
     );
     let d = s.task.delay_steps();
     let steps = s.task.steps;
