@@ -76,3 +76,14 @@ fn main() -> ExitCode {
     };
     finish("vic-board", run(&options))
 }
+
+#[cfg(test)]
+mod tests {
+    /// clap's own consistency checks (every `mut_arg` names an argument that exists, no two
+    /// flags clash), which it otherwise runs only when a command is parsed.
+    #[test]
+    fn flags_are_consistent() {
+        use clap::CommandFactory;
+        super::Args::command().debug_assert();
+    }
+}

@@ -102,3 +102,14 @@ fn run_args(a: Args) -> anyhow::Result<()> {
 fn main() -> ExitCode {
     finish("vic-planner", run_args(Args::parse()))
 }
+
+#[cfg(test)]
+mod tests {
+    /// clap's own consistency checks (every `mut_arg` names an argument that exists, no two
+    /// flags clash), which it otherwise runs only when a command is parsed.
+    #[test]
+    fn flags_are_consistent() {
+        use clap::CommandFactory;
+        super::Args::command().debug_assert();
+    }
+}

@@ -111,3 +111,14 @@ impl Command {
 fn main() -> ExitCode {
     vic::tools::cli::finish("vic", Cli::parse().command.run())
 }
+
+#[cfg(test)]
+mod tests {
+    /// clap's own consistency checks (every `mut_arg` names an argument that exists, no two
+    /// flags clash), which it otherwise runs only when a command is parsed.
+    #[test]
+    fn flags_are_consistent() {
+        use clap::CommandFactory;
+        super::Cli::command().debug_assert();
+    }
+}

@@ -6,7 +6,9 @@
 
 use crate::planning::plan::{Method, PlanFile, plan, setup};
 use crate::planning::scenario::Scenario;
-use crate::rt::central::{Central, Strategy, Timing, lockstep, run_live, split_latency_ms};
+use crate::rt::central::{
+    Central, Strategy, Timing, TrialRecord, lockstep, run_live, split_latency_ms,
+};
 use crate::rt::transport::{Endpoint, Role};
 use crate::tools::cli::{
     Classify, divergence_or_default, input_error, print_json, stop_on_signal, whole_steps,
@@ -79,33 +81,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         lookahead_ns: (lookahead_ms * 1e6) as u64,
     };
     let mut central = Central::new(track, o.strategy, timing);
-    let records = if o.lockstep {
-        // The board the live daemon would run (same limits), at 1 kHz.
-        let s = Scenario::load(&o.config, &o.overrides).input()?;
-        let cfg = crate::tools::launch::board_config(&s, 1_000_000);
-        let mut board = crate::rt::board::Board::new(s.model.clone(), cfg, &setup.x0).input()?;
-        lockstep(
-            &mut board,
-            &mut central,
-            1_000_000,
-            period_ns,
-            o.trials,
-            o.seed,
-        )
-    } else {
-        let stop = stop_on_signal()?;
-        let ep = Endpoint::open(&o.namespace, Role::Planner)?;
-        run_live(
-            &ep,
-            &mut central,
-            o.trials,
-            o.seed,
-            period_ns,
-            o.board_timeout,
-            &stop,
-        )
-        .runtime()?
-    };
+    let records = run_trials(o, &mut central, &setup.x0, period_ns)?;
     let divergence = divergence_or_default(o.divergence, setup.dynamics.model.dof());
     let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
     if o.json {
@@ -113,6 +89,37 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     } else {
         print_result(&result, &delays);
         Ok(())
+    }
+}
+
+/// The trials, live against the board of the namespace or in lockstep with a board in this
+/// process (the one the live daemon would run, same limits, at 1 kHz) on a simulated clock.
+fn run_trials(
+    o: &CentralOptions,
+    central: &mut Central,
+    x0: &[f64],
+    period_ns: u64,
+) -> anyhow::Result<Vec<TrialRecord>> {
+    if o.lockstep {
+        let s = Scenario::load(&o.config, &o.overrides).input()?;
+        let cfg = crate::tools::launch::board_config(&s, 1_000_000);
+        let mut board = crate::rt::board::Board::new(s.model.clone(), cfg, x0).input()?;
+        Ok(lockstep(
+            &mut board, central, 1_000_000, period_ns, o.trials, o.seed,
+        ))
+    } else {
+        let stop = stop_on_signal()?;
+        let ep = Endpoint::open(&o.namespace, Role::Planner)?;
+        run_live(
+            &ep,
+            central,
+            o.trials,
+            o.seed,
+            period_ns,
+            o.board_timeout,
+            &stop,
+        )
+        .runtime()
     }
 }
 
@@ -155,7 +162,7 @@ fn delay_lines(o: &CentralOptions, latency_ms: f64, lookahead_ms: f64) -> anyhow
 }
 
 /// A distance as printed in the tables: "diverged" for a trial that left the workspace.
-pub fn distance_text(v: f64) -> String {
+fn distance_text(v: f64) -> String {
     if v >= 1e9 {
         "diverged".to_string()
     } else {

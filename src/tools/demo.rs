@@ -352,3 +352,86 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
         num(&a["p99"]),
     );
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(latency_ms: f64) -> DemoOptions {
+        DemoOptions {
+            config: "config/two_link_divergent.toml".into(),
+            overrides: vec![],
+            latency_ms,
+            trials: 1,
+            seed: 1,
+            plans_dir: None,
+            stiffness_plan: None,
+            feedback_plan: None,
+            spin_us: 0,
+            json: true,
+        }
+    }
+
+    #[test]
+    fn the_zero_latency_reference_runs_only_when_the_latency_is_not_zero() {
+        let plans = DemoPlans {
+            stiffness: "s.json".into(),
+            feedback: "f.json".into(),
+            feedback_at_zero: Some("f0.json".into()),
+        };
+        let runs = strategy_runs(&options(200.0), &plans);
+        let rows: Vec<_> = runs
+            .iter()
+            .map(|r| (r.name, r.latency_ms, r.rate_hz))
+            .collect();
+        assert_eq!(
+            rows,
+            [
+                ("stiffness", 200.0, 50),
+                ("delayed-feedback", 200.0, 50),
+                ("delayed-feedback", 0.0, 250)
+            ]
+        );
+        let plans = DemoPlans {
+            feedback_at_zero: None,
+            ..plans
+        };
+        assert_eq!(strategy_runs(&options(0.0), &plans).len(), 2);
+    }
+
+    #[test]
+    fn a_temporary_plan_store_is_removed_and_a_kept_one_is_not() {
+        let ns = format!("demotest{}", std::process::id());
+        let tmp = PlanStore::new(None, &ns).unwrap();
+        let dir = tmp.dir.clone();
+        assert!(dir.is_dir());
+        drop(tmp);
+        assert!(!dir.exists());
+        let kept = std::env::temp_dir().join(format!("vic-kept-{ns}"));
+        drop(PlanStore::new(Some(&kept), &ns).unwrap());
+        assert!(kept.is_dir());
+        std::fs::remove_dir_all(&kept).unwrap();
+    }
+
+    #[test]
+    fn the_document_gives_every_strategy_the_board_timing() {
+        let stats = serde_json::json!({
+            "jitter_us": {"p50": 1.0}, "work_us": {"p50": 2.0},
+            "command_age_us": {"p50": 3.0}, "late_ticks": 4, "ticks": 5
+        });
+        let result: StrategyResult = serde_json::from_value(serde_json::json!({
+            "name": "stiffness", "latency_ms": 200.0, "sensor_latency_ms": 90.0,
+            "command_latency_ms": 90.0, "trials": 1, "unit": "mm", "rms_error": 1.0,
+            "final_error_mean": 1.0, "final_error_max": 1.0, "final_errors": [1.0],
+            "max_error": 2.0, "diverged": 0, "safe_hold_trials": 0, "fault_trials": 0,
+            "stale_feedback": 0, "missing_states": 0, "expected_cost": 0.5
+        }))
+        .unwrap();
+        let doc = document(&options(200.0), &[result], &stats, &[]);
+        let s = &doc["strategies"][0];
+        assert_eq!(s["late_ticks"], 4);
+        assert_eq!(s["work_us"]["p50"], 2.0);
+        assert_eq!(doc["board"]["ticks"], 5);
+        assert_eq!(doc["latency_ms"], 200.0);
+    }
+}

@@ -122,3 +122,40 @@ pub fn run_monitor(namespace: &str, interval_s: f64, count: Option<u64>) -> anyh
     })
     .runtime()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torques_are_one_or_two_finite_values() {
+        assert_eq!(joint_torques(&[1.5]).unwrap(), [1.5, 0.0]);
+        assert_eq!(joint_torques(&[1.0, -2.0]).unwrap(), [1.0, -2.0]);
+        for bad in [
+            &[][..],
+            &[1.0, 2.0, 3.0],
+            &[f64::NAN],
+            &[f64::INFINITY, 0.0],
+        ] {
+            let e = joint_torques(bad).unwrap_err();
+            assert_eq!(crate::tools::cli::exit_code(&e), 2, "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn requests_check_their_values() {
+        assert_eq!(
+            pulse(&[2.0], 50.0).unwrap(),
+            Request::Pulse {
+                torque: [2.0, 0.0],
+                duration: 0.05
+            }
+        );
+        assert!(pulse(&[2.0], 0.0).is_err());
+        assert!(pulse(&[2.0], f64::NAN).is_err());
+        assert!(field(f64::INFINITY).is_err());
+        assert_eq!(field(-3.0).unwrap(), Request::Field { beta: -3.0 });
+        assert!(noise(-0.5).is_err());
+        assert_eq!(noise(0.0).unwrap(), Request::Noise { factor: 0.0 });
+    }
+}
