@@ -33,6 +33,18 @@ impl Feedback {
     }
 }
 
+impl std::fmt::Display for Feedback {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Feedback::OpenLoop => write!(f, "open loop"),
+            Feedback::Full => write!(f, "feedback"),
+            Feedback::Delayed { latency_steps } => {
+                write!(f, "delayed feedback ({latency_steps} steps)")
+            }
+        }
+    }
+}
+
 /// A state the controller has seen: the state at knot `knot`, fed back through the gain of knot
 /// `gain` (the same knot, unless a live controller falls back to an older state).
 #[derive(Debug, Clone, Copy)]

@@ -1,0 +1,150 @@
+//! Fig. 2: the single joint (angle and velocity trials, commands).
+
+use super::*;
+
+pub(super) const JOINT_ANGLE_HEIGHT: u32 = 280;
+pub(super) const JOINT_TIME_HEIGHT: u32 = 235;
+
+pub(super) struct JointFigure<'a> {
+    pub(super) columns: &'a [ColumnPlot],
+    pub(super) time: (f64, f64),
+    pub(super) angle: (f64, f64),
+    pub(super) velocity: (f64, f64),
+    pub(super) torque: (f64, f64),
+    pub(super) stiffness: Option<(f64, f64)>,
+}
+
+impl<'a> JointFigure<'a> {
+    pub(super) fn new(columns: &'a [ColumnPlot]) -> Self {
+        let trial_values = |data: fn(&ColumnPlot) -> &Vec<Vec<Vec<f64>>>| -> Vec<Vec<f64>> {
+            columns
+                .iter()
+                .map(|c| {
+                    data(c)
+                        .iter()
+                        .flatten()
+                        .flat_map(|knot| knot.iter().take(c.dof).map(|v| v * RAD_TO_DEG))
+                        .collect()
+                })
+                .collect()
+        };
+        let reference: Vec<f64> = columns
+            .iter()
+            .flat_map(|c| c.reference_q.iter().flatten().map(|q| q * RAD_TO_DEG))
+            .collect();
+        JointFigure {
+            columns,
+            time: time_range(columns),
+            angle: shared_range(trial_values(|c| &c.q), &reference, false),
+            velocity: shared_range(trial_values(|c| &c.qd), &[], false),
+            torque: shared_range(command_values(columns, Commands::Torque), &[], true),
+            stiffness: columns
+                .iter()
+                .any(|c| n_controls(c) > n_torques(c))
+                .then(|| shared_range(command_values(columns, Commands::Stiffness), &[], true)),
+        }
+    }
+
+    pub(super) fn heights(&self) -> Vec<u32> {
+        let mut h = vec![JOINT_ANGLE_HEIGHT, JOINT_TIME_HEIGHT, JOINT_TIME_HEIGHT];
+        if self.stiffness.is_some() {
+            h.push(JOINT_TIME_HEIGHT);
+        }
+        *h.last_mut().unwrap() += X_LABEL_AREA_DESC - X_LABEL_AREA;
+        h
+    }
+
+    /// Every trial of every joint's angle [deg] (with the reference) or velocity [deg/s].
+    pub(super) fn draw_trials<'c, DB: DrawingBackend + 'c>(
+        &self,
+        chart: &mut Chart<'c, DB>,
+        c: usize,
+        angles: bool,
+    ) -> DrawResult<(), DB> {
+        let col = &self.columns[c];
+        let view = View::of(chart);
+        let data = if angles { &col.q } else { &col.qd };
+        let mut drawn = Vec::new();
+        for j in 0..col.dof {
+            let colour = joint_colour(j);
+            for trial in data {
+                let points: Vec<(f64, f64)> = col
+                    .time
+                    .iter()
+                    .zip(trial)
+                    .map(|(&t, knot)| (t, knot.get(j).map_or(f64::NAN, |v| v * RAD_TO_DEG)))
+                    .collect();
+                lines(
+                    chart,
+                    &view,
+                    points.iter().copied(),
+                    colour.mix(0.45).stroke_width(1),
+                )?;
+                drawn.extend(points);
+            }
+            if angles {
+                let reference: Vec<(f64, f64)> = col
+                    .time
+                    .iter()
+                    .zip(&col.reference_q)
+                    .map(|(&t, q)| (t, q.get(j).map_or(f64::NAN, |q| q * RAD_TO_DEG)))
+                    .collect();
+                dashed(chart, &view, &reference, BLACK.stroke_width(2))?;
+            }
+        }
+        // The legend once, on the first column's angles.
+        if c == 0 && angles {
+            if col.dof > 1 {
+                for j in 0..col.dof {
+                    legend_line(
+                        chart,
+                        &format!("joint {}", j + 1),
+                        joint_colour(j).stroke_width(2),
+                    )?;
+                }
+            } else {
+                legend_line(chart, "trials", joint_colour(0).mix(0.6).stroke_width(1))?;
+            }
+            if !col.reference_q.is_empty() {
+                legend_dashed(chart, "reference", BLACK.stroke_width(2))?;
+            }
+            legend(chart, quiet_corner(&view, &drawn))?;
+        }
+        Ok(())
+    }
+}
+
+impl Figure for JointFigure<'_> {
+    fn size(&self) -> (u32, u32) {
+        let width = GUTTER + COLUMN_WIDTH * self.columns.len() as u32;
+        (width, self.heights().iter().sum())
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
+        let heights = self.heights();
+        let breaks = breakpoints(&heights);
+        let (gutter, body) = root.split_horizontally(GUTTER);
+        for (c, column) in body
+            .split_evenly((1, self.columns.len()))
+            .iter()
+            .enumerate()
+        {
+            let panels = column.split_by_breakpoints::<i32, i32, _, _>([], &breaks);
+            let top = titled(&panels[0], &self.columns[c].title)?;
+            let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
+            self.draw_trials(&mut chart, c, true)?;
+            let mut chart = time_chart(
+                &panels[1],
+                self.time,
+                self.velocity,
+                "velocity [deg/s]",
+                false,
+            )?;
+            self.draw_trials(&mut chart, c, false)?;
+            let ranges = (self.time, self.torque, self.stiffness);
+            draw_command_rows(&panels[2..], ranges, &self.columns[c], c == 0)?;
+        }
+        let starts = [0, breaks[0], breaks[1]];
+        row_letters(&gutter, &starts, &[0, 4, 4])
+    }
+}

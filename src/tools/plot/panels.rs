@@ -1,0 +1,349 @@
+//! Panels and legends shared by both figures.
+
+use super::*;
+
+#[derive(Clone, Copy, PartialEq)]
+pub(super) enum Commands {
+    Torque,
+    Stiffness,
+}
+
+impl Commands {
+    pub(super) fn name(self) -> &'static str {
+        match self {
+            Commands::Torque => "torque",
+            Commands::Stiffness => "stiffness",
+        }
+    }
+
+    pub(super) fn desc(self) -> &'static str {
+        match self {
+            Commands::Torque => "torque [N m]",
+            Commands::Stiffness => "stiffness [N m/rad]",
+        }
+    }
+
+    /// Indices of this kind of command in a column's control vector.
+    pub(super) fn indices(self, col: &ColumnPlot) -> std::ops::Range<usize> {
+        match self {
+            Commands::Torque => 0..n_torques(col),
+            Commands::Stiffness => n_torques(col)..n_controls(col),
+        }
+    }
+}
+
+/// Number of commands per step (from the names, or the data when they are missing).
+pub(super) fn n_controls(col: &ColumnPlot) -> usize {
+    if col.control_names.is_empty() {
+        col.u.iter().flatten().map(Vec::len).max().unwrap_or(0)
+    } else {
+        col.control_names.len()
+    }
+}
+
+/// The first `dof` commands are torques, the rest stiffnesses.
+pub(super) fn n_torques(col: &ColumnPlot) -> usize {
+    n_controls(col).min(col.dof.max(1))
+}
+
+pub(super) fn control_name(col: &ColumnPlot, i: usize) -> String {
+    col.control_names
+        .get(i)
+        .cloned()
+        .unwrap_or_else(|| format!("u{}", i + 1))
+}
+
+pub(super) fn command_values(columns: &[ColumnPlot], kind: Commands) -> Vec<Vec<f64>> {
+    columns
+        .iter()
+        .map(|c| {
+            let range = kind.indices(c);
+            c.u.iter()
+                .flatten()
+                .flat_map(|step| step.get(range.clone()).unwrap_or_default().iter().copied())
+                .collect()
+        })
+        .collect()
+}
+
+/// Every trial's commands of one kind, held over each step.
+pub(super) fn draw_commands<'c, DB: DrawingBackend + 'c>(
+    chart: &mut Chart<'c, DB>,
+    col: &ColumnPlot,
+    kind: Commands,
+    with_legend: bool,
+) -> DrawResult<(), DB> {
+    let view = View::of(chart);
+    let range = kind.indices(col);
+    if range.is_empty() {
+        return note(chart, &format!("no {} commands", kind.name()));
+    }
+    let alpha = if col.u.len() > 1 { 0.45 } else { 1.0 };
+    let mut drawn = Vec::new();
+    for i in range.clone() {
+        let colour = joint_colour(i - range.start);
+        for trial in &col.u {
+            let mut points = Vec::with_capacity(2 * trial.len());
+            for (k, step) in trial.iter().enumerate() {
+                let (Some(&t0), Some(&v)) = (col.time.get(k), step.get(i)) else {
+                    continue;
+                };
+                let t1 = match (
+                    col.time.get(k + 1),
+                    k.checked_sub(1).and_then(|p| col.time.get(p)),
+                ) {
+                    (Some(&t1), _) => t1,
+                    (None, Some(&before)) => t0 + (t0 - before),
+                    (None, None) => t0,
+                };
+                points.push((t0, v));
+                points.push((t1, v));
+            }
+            lines(
+                chart,
+                &view,
+                points.iter().copied(),
+                colour.mix(alpha).stroke_width(2),
+            )?;
+            drawn.extend(points);
+        }
+        if with_legend {
+            legend_line(chart, &control_name(col, i), colour.stroke_width(2))?;
+        }
+    }
+    if with_legend {
+        legend(chart, quiet_corner(&view, &drawn))?;
+    }
+    Ok(())
+}
+
+/// A panel with time on the x axis.
+pub(super) fn time_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    time: (f64, f64),
+    y: (f64, f64),
+    y_desc: &str,
+    bottom: bool,
+) -> DrawResult<Chart<'a, DB>, DB> {
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(6)
+        .margin_bottom(2)
+        .margin_left(4)
+        .margin_right(14)
+        .x_label_area_size(if bottom {
+            X_LABEL_AREA_DESC
+        } else {
+            X_LABEL_AREA
+        })
+        .y_label_area_size(Y_LABEL_AREA)
+        .build_cartesian_2d(time.0..time.1, y.0..y.1)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.x_labels(6)
+        .y_labels(5)
+        .max_light_lines(0)
+        .bold_line_style(GRID)
+        .x_label_formatter(&tick)
+        .y_label_formatter(&tick)
+        .label_style((FONT, TICK_SIZE))
+        .axis_desc_style((FONT, DESC_SIZE))
+        .y_desc(y_desc);
+    if bottom {
+        mesh.x_desc("time [s]");
+    }
+    mesh.draw()?;
+    Ok(chart)
+}
+
+/// Draws `title` (bold, shrunk to fit the width) on top of `area`; returns the area below.
+pub(super) fn titled<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+) -> DrawResult<DrawingArea<DB, Shift>, DB> {
+    let (width, _) = area.dim_in_pixel();
+    let mut size = TITLE_SIZE;
+    let style = loop {
+        let style = TextStyle::from(bold(size));
+        let (w, _) = area.estimate_text_size(title, &style)?;
+        if w + 16 <= width || size <= 9.0 {
+            break style;
+        }
+        size -= 1.0;
+    };
+    area.titled(title, style)
+}
+
+/// Bold letters A, B, C in the left strip at the top of each row.
+pub(super) fn row_letters<DB: DrawingBackend>(
+    gutter: &DrawingArea<DB, Shift>,
+    starts: &[i32],
+    offsets: &[i32],
+) -> DrawResult<(), DB> {
+    let style = TextStyle::from(bold(20.0));
+    for ((letter, &y), &dy) in ["A", "B", "C"].iter().zip(starts).zip(offsets) {
+        gutter.draw_text(letter, &style, (7, y + 4 + dy))?;
+    }
+    Ok(())
+}
+
+/// Cumulative heights: where each panel but the first starts.
+pub(super) fn breakpoints(heights: &[u32]) -> Vec<i32> {
+    heights[..heights.len() - 1]
+        .iter()
+        .scan(0, |y, &h| {
+            *y += h as i32;
+            Some(*y)
+        })
+        .collect()
+}
+
+/// DejaVu Sans Bold (`FontDesc::style` would keep the regular face's glyphs).
+pub(super) fn bold(size: f64) -> FontDesc<'static> {
+    FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Bold)
+}
+
+/// Tick labels with as many decimals as the value needs: "0.35", "100", "-2".
+pub(super) fn tick(v: &f64) -> String {
+    let s = format!("{v:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".to_string()
+    } else {
+        s.to_string()
+    }
+}
+
+/// A grey note centred in a panel that has nothing to show.
+pub(super) fn note<'c, DB: DrawingBackend + 'c>(
+    chart: &mut Chart<'c, DB>,
+    text: &str,
+) -> DrawResult<(), DB> {
+    let view = View::of(chart);
+    let style = TextStyle::from((FONT, DESC_SIZE).into_font())
+        .color(&MEAN_GREY)
+        .pos(Pos::new(HPos::Center, VPos::Center));
+    let centre = ((view.x0 + view.x1) / 2.0, (view.y0 + view.y1) / 2.0);
+    chart.draw_series(std::iter::once(Text::new(text.to_string(), centre, style)))?;
+    Ok(())
+}
+
+/// The corner of `view` with the fewest of `points` (the legend goes there).
+pub(super) fn quiet_corner(view: &View, points: &[(f64, f64)]) -> SeriesLabelPosition {
+    let (w, h) = (0.4 * (view.x1 - view.x0), 0.4 * (view.y1 - view.y0));
+    let corners = [
+        (SeriesLabelPosition::UpperRight, view.x1 - w, view.y1 - h),
+        (SeriesLabelPosition::UpperLeft, view.x0, view.y1 - h),
+        (SeriesLabelPosition::LowerRight, view.x1 - w, view.y0),
+        (SeriesLabelPosition::LowerLeft, view.x0, view.y0),
+    ];
+    let mut best = (usize::MAX, SeriesLabelPosition::UpperRight);
+    for (position, x0, y0) in corners {
+        let count = points
+            .iter()
+            .filter(|p| (x0..=x0 + w).contains(&p.0) && (y0..=y0 + h).contains(&p.1))
+            .count();
+        if count < best.0 {
+            best = (count, position);
+        }
+    }
+    best.1
+}
+
+pub(super) fn joint_colour(j: usize) -> RGBColor {
+    JOINT_COLOURS[j % JOINT_COLOURS.len()]
+}
+
+pub(super) fn thin(colour: &RGBColor) -> ShapeStyle {
+    colour.stroke_width(1)
+}
+
+/// The span of all knot times (0..1 s when there is none).
+pub(super) fn time_range(columns: &[ColumnPlot]) -> (f64, f64) {
+    let b = Bounds::of(
+        columns
+            .iter()
+            .flat_map(|c| c.time.iter().map(|&t| (t, 0.0))),
+    );
+    match b.size() {
+        Some(span) if span > 0.0 => (b.x0, b.x1),
+        Some(_) => (b.x0, b.x0 + 1.0),
+        None => (0.0, 1.0),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Legends
+
+pub(super) fn legend_line<'c, DB: DrawingBackend + 'c>(
+    chart: &mut Chart<'c, DB>,
+    label: &str,
+    style: ShapeStyle,
+) -> DrawResult<(), DB> {
+    chart
+        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
+    Ok(())
+}
+
+pub(super) fn legend_dashed<'c, DB: DrawingBackend + 'c>(
+    chart: &mut Chart<'c, DB>,
+    label: &str,
+    style: ShapeStyle,
+) -> DrawResult<(), DB> {
+    chart
+        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
+        .label(label)
+        .legend(move |(x, y)| {
+            EmptyElement::at((x, y))
+                + PathElement::new(vec![(0, 0), (6, 0)], style)
+                + PathElement::new(vec![(11, 0), (17, 0)], style)
+        });
+    Ok(())
+}
+
+pub(super) fn legend_band<'c, DB: DrawingBackend + 'c>(
+    chart: &mut Chart<'c, DB>,
+    label: &str,
+    colour: RGBAColor,
+) -> DrawResult<(), DB> {
+    chart
+        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
+        .label(label)
+        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], colour.filled()));
+    Ok(())
+}
+
+pub(super) fn legend<'c, DB: DrawingBackend + 'c>(
+    chart: &mut Chart<'c, DB>,
+    position: SeriesLabelPosition,
+) -> DrawResult<(), DB> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .margin(6)
+        .legend_area_size(24)
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(180, 180, 180))
+        .label_font((FONT, 11.0))
+        .draw()
+}
+
+/// The command rows of a column: torque, then stiffness when some column plans it, each on its
+/// own panel from `panels[0]` on; the last panel carries the time axis.
+pub(super) fn draw_command_rows<DB: DrawingBackend>(
+    panels: &[DrawingArea<DB, Shift>],
+    (time, torque, stiffness): ((f64, f64), (f64, f64), Option<(f64, f64)>),
+    column: &ColumnPlot,
+    with_legend: bool,
+) -> DrawResult<(), DB> {
+    let mut rows = vec![(Commands::Torque, torque)];
+    if let Some(range) = stiffness {
+        rows.push((Commands::Stiffness, range));
+    }
+    let last = rows.len() - 1;
+    for (r, (kind, range)) in rows.into_iter().enumerate() {
+        let mut chart = time_chart(&panels[r], time, range, kind.desc(), r == last)?;
+        draw_commands(&mut chart, column, kind, with_legend)?;
+    }
+    Ok(())
+}
