@@ -10,7 +10,7 @@ use crate::rt::board::Board;
 use crate::rt::realtime::{BoardLoopOptions, BoardStats, PercentilesJson, run_board};
 use crate::rt::record::{RecordOptions, Recorder};
 use crate::rt::transport::{Endpoint, Role};
-use crate::tools::cli::{Classify, input_error, print_json, stop_on_signal};
+use crate::tools::cli::{Classify, input_error, non_negative_seconds, print_json, stop_on_signal};
 use std::path::PathBuf;
 
 /// What `vic-board` was asked for.
@@ -46,6 +46,7 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
             o.rate_hz
         )));
     }
+    non_negative_seconds("--duration-s", o.duration_s)?;
     crate::rt::transport::validate_namespace(&o.namespace).input()?;
     let scenario = Scenario::load(&o.config, &o.overrides).input()?;
     let period_ns = 1_000_000_000 / o.rate_hz;

@@ -99,7 +99,8 @@ fn plot_trials(
     scenario: &Scenario,
     trials: &[Trial],
 ) -> anyhow::Result<()> {
-    let title = format!("{feedback:?}");
+    // The figure names the execution in words ("delayed feedback (20 steps)").
+    let title = feedback.to_string();
     let column = crate::tools::experiment::column_plot(&title, plan, scenario, trials);
     let svg = png.with_extension("svg");
     if scenario.model.dof() == 2 {
