@@ -16,6 +16,7 @@ use vic::core::dynamics::{Dynamics, EulerModel, Integrator, Linearization, Noise
 use vic::core::model::{
     Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
 };
+use vic::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
 
 /// Random points per model.
 const POINTS: usize = 6;
@@ -404,7 +405,8 @@ fn arm_model_jacobians_match_finite_differences() {
             let mut fu = vec![f64::NAN; nx * nu];
             let mut dfx = vec![f64::NAN; nx * nx * nw];
             let mut dfu = vec![f64::NAN; nu * nx * nw];
-            model.jacobians(
+            jacobians(
+                &model,
                 &x,
                 &u,
                 &ex,
@@ -438,7 +440,7 @@ fn arm_model_jacobians_match_finite_differences() {
             // Without the noise request the drift Jacobians are the same.
             let mut fx2 = vec![f64::NAN; nx * nx];
             let mut fu2 = vec![f64::NAN; nx * nu];
-            model.jacobians(&x, &u, &ex, &mut fx2, &mut fu2, None);
+            jacobians(&model, &x, &u, &ex, &mut fx2, &mut fu2, None);
             assert_eq!(fx.as_slice(), &fx2[..], "{name}: f_x without noise request");
             assert_eq!(fu.as_slice(), &fu2[..], "{name}: f_u without noise request");
         }
@@ -566,7 +568,7 @@ fn euler_linearization_matches_finite_differences() {
                     // The paper's discretisation: A = I + Δ f_x, B = Δ f_u exactly.
                     let mut fx = vec![0.0; nx * nx];
                     let mut fu = vec![0.0; nx * nu];
-                    model.jacobians(&x, &u, &ex, &mut fx, &mut fu, None);
+                    jacobians(&model, &x, &u, &ex, &mut fx, &mut fu, None);
                     let a = eye.clone() + DMatrix::from_column_slice(nx, nx, &fx) * dt;
                     let b = DMatrix::from_column_slice(nx, nu, &fu) * dt;
                     assert_close(&format!("{what}: A = I + Δ f_x"), &lin.a, &a, 1e-13, 0.0);
@@ -621,4 +623,67 @@ fn finite_differences_are_exact_on_affine_maps() {
             .collect()
     });
     assert_close("affine map", &fd.value, &a, 1e-9, 1e-9);
+}
+
+/// The continuous model's Jacobians by forward-mode AD, column by column: the reference the
+/// discrete linearisations are checked against.
+/// Exact Jacobians of `f` and of `F` at (x, u) by forward-mode automatic differentiation.
+///
+/// `fx` (n×n) and `fu` (n×m) are column-major; `dfx[j]` / `dfu[j]` hold `∂F/∂x_j` / `∂F/∂u_j`
+/// in the layout of `ArmModel::diffusion`. Pass `None` for the noise derivatives when the
+/// model is noise-free or they are not needed.
+fn jacobians(
+    model: &ArmModel,
+    x: &[f64],
+    u: &[f64],
+    ex: &Exogenous,
+    fx: &mut [f64],
+    fu: &mut [f64],
+    mut noise: Option<(&mut [f64], &mut [f64])>,
+) {
+    use num_dual::Dual64;
+    let (nx, nu, nw) = (model.nx(), model.nu(), model.nw());
+    let mut xd = [Dual64::from(0.0); MAX_NX];
+    let mut ud = [Dual64::from(0.0); MAX_NU];
+    for (d, v) in xd.iter_mut().zip(x) {
+        *d = Dual64::from(*v);
+    }
+    for (d, v) in ud.iter_mut().zip(u) {
+        *d = Dual64::from(*v);
+    }
+    let mut out = [Dual64::from(0.0); MAX_NX];
+    let mut big_f = [Dual64::from(0.0); MAX_NX * MAX_NW];
+    for j in 0..nx + nu {
+        if j < nx {
+            xd[j].eps = 1.0;
+        } else {
+            ud[j - nx].eps = 1.0;
+        }
+        model.f(&xd[..nx], &ud[..nu], ex, &mut out[..nx]);
+        let col = if j < nx {
+            &mut fx[j * nx..(j + 1) * nx]
+        } else {
+            &mut fu[(j - nx) * nx..(j - nx + 1) * nx]
+        };
+        for (dst, o) in col.iter_mut().zip(&out[..nx]) {
+            *dst = o.eps;
+        }
+        if let Some((dfx, dfu)) = noise.as_mut() {
+            model.diffusion(&xd[..nx], &ud[..nu], &mut big_f);
+            let block = nx * nw;
+            let dst = if j < nx {
+                &mut dfx[j * block..(j + 1) * block]
+            } else {
+                &mut dfu[(j - nx) * block..(j - nx + 1) * block]
+            };
+            for (d, v) in dst.iter_mut().zip(&big_f[..block]) {
+                *d = v.eps;
+            }
+        }
+        if j < nx {
+            xd[j].eps = 0.0;
+        } else {
+            ud[j - nx].eps = 0.0;
+        }
+    }
 }

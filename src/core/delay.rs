@@ -1,4 +1,4 @@
-//! Feedback delay by state augmentation (paper Eq. 11–13 and 19, DESIGN §6).
+//! Feedback delay by state augmentation (paper Eq. 11–13 and 19).
 //!
 //! A central controller `d` steps away sees the state `d` steps late, and what it sends acts at
 //! once. Relabelled in the controller's time, a command computed from `x_k` acts `d` steps later:

@@ -1,6 +1,6 @@
 //! Discrete-time stochastic dynamics, the only thing the solvers see:
 //! `x[k+1] = step(k, x[k], u[k]) + G(k, x[k], u[k]) ε[k]`, `ε ~ N(0, I)` (paper Eq. 10), and its
-//! linearisation `δx' = A δx + B δu + Σ_i (c_i + Cx_i δx + Cu_i δu) ε_i` (DESIGN §4).
+//! linearisation `δx' = A δx + B δu + Σ_i (c_i + Cx_i δx + Cu_i δu) ε_i`.
 
 use crate::core::model::{ArmModel, Exogenous};
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX, Scalar};

@@ -2,7 +2,8 @@
 //! and the law that turns a seen state into a command (paper Eq. 9 and 13). The Monte Carlo, the
 //! lockstep pair and the live central controller all call [`Policy::control_into`].
 
-use crate::core::scalar::MAX_NU;
+use crate::core::dynamics::Dynamics;
+use crate::core::scalar::{MAX_NU, MAX_NX};
 use crate::core::solver::Bounds;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -20,6 +21,14 @@ pub enum Feedback {
     /// (Eq. 13 with a plan made for that delay; a naive delayed controller with one made without).
     #[serde(rename = "delayed-feedback")]
     Delayed { latency_steps: usize },
+    /// The best a controller that sees the state `D` steps late can do without stiffness: it
+    /// predicts the present state from the one it sees by running the noise-free model over the
+    /// commands it applied since (a Smith predictor, [`predict_present`]) and feeds the present
+    /// gain back on the prediction, `u_k = ū_k + L_k (x̂_k − x̄_k)`. Without noise the prediction is
+    /// exact and the delay costs nothing (the paper's footnote 1); with noise its error grows with
+    /// `D`. Execute an undelayed plan with it.
+    #[serde(rename = "predictor")]
+    Predicted { latency_steps: usize },
 }
 
 impl Feedback {
@@ -28,7 +37,9 @@ impl Feedback {
         match self {
             Feedback::OpenLoop => None,
             Feedback::Full => Some(k),
-            Feedback::Delayed { latency_steps } => k.checked_sub(latency_steps),
+            Feedback::Delayed { latency_steps } | Feedback::Predicted { latency_steps } => {
+                k.checked_sub(latency_steps)
+            }
         }
     }
 }
@@ -40,6 +51,9 @@ impl std::fmt::Display for Feedback {
             Feedback::Full => write!(f, "feedback"),
             Feedback::Delayed { latency_steps } => {
                 write!(f, "delayed feedback ({latency_steps} steps)")
+            }
+            Feedback::Predicted { latency_steps } => {
+                write!(f, "predictor ({latency_steps} steps)")
             }
         }
     }
@@ -113,5 +127,24 @@ impl Policy {
             }
         }
         self.bounds.clamp(&mut u[..nu]);
+    }
+}
+
+/// The present state `x̂_k` predicted from the state `x_seen` of knot `j = k − D`: the noise-free
+/// step of `dynamics` applied over the commands `applied[j..k]` that acted since (a Smith
+/// predictor). With `D = 0` it is `x_seen` itself. Allocates nothing (`n ≤ MAX_NX`).
+pub fn predict_present<'a>(
+    dynamics: &dyn Dynamics,
+    seen_knot: usize,
+    x_seen: &[f64],
+    applied: impl IntoIterator<Item = &'a [f64]>,
+    out: &mut [f64],
+) {
+    let n = x_seen.len();
+    out[..n].copy_from_slice(x_seen);
+    let mut next = [0.0; MAX_NX];
+    for (j, u) in applied.into_iter().enumerate() {
+        dynamics.step(seen_knot + j, &out[..n], u, &mut next[..n]);
+        out[..n].copy_from_slice(&next[..n]);
     }
 }

@@ -1,4 +1,4 @@
-//! What a Monte Carlo evaluation reports (DESIGN §7): final spread, 95 % confidence ellipse,
+//! What a Monte Carlo evaluation reports: final spread, 95 % confidence ellipse,
 //! tracking and final errors, divergence, and the Monte Carlo expected cost next to the predicted.
 
 use crate::core::model::ArmModel;

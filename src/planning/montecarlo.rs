@@ -5,7 +5,7 @@
 //! depend on how many threads run the trials or in which order.
 
 use crate::core::dynamics::{Dynamics, EulerModel};
-use crate::core::policy::{Feedback, Policy, Seen};
+use crate::core::policy::{Feedback, Policy, Seen, predict_present};
 use crate::core::rng::{add_diffusion, trial_rng};
 use crate::planning::plan::Setup;
 use nalgebra::{DMatrix, DVector};
@@ -37,14 +37,33 @@ pub fn run_trial(
     let mut x = vec![DVector::from_column_slice(x0)];
     let mut us = Vec::with_capacity(steps);
     let mut g = DMatrix::zeros(nx, nw);
+    let mut predicted = DVector::zeros(nx);
     let mut total = 0.0;
     for k in 0..steps {
         let mut u = DVector::zeros(policy.nu());
-        let seen = feedback.seen_knot(k).map(|j| Seen {
-            gain: j,
-            knot: j,
-            x: x[j].as_slice(),
-        });
+        let seen = match (feedback, feedback.seen_knot(k)) {
+            (_, None) => None,
+            (Feedback::Predicted { .. }, Some(j)) => {
+                let applied = us[j..k].iter().map(|u: &DVector<f64>| u.as_slice());
+                predict_present(
+                    dynamics,
+                    j,
+                    x[j].as_slice(),
+                    applied,
+                    predicted.as_mut_slice(),
+                );
+                Some(Seen {
+                    gain: k,
+                    knot: k,
+                    x: predicted.as_slice(),
+                })
+            }
+            (_, Some(j)) => Some(Seen {
+                gain: j,
+                knot: j,
+                x: x[j].as_slice(),
+            }),
+        };
         policy.control_into(k, seen, u.as_mut_slice());
         let mut next = DVector::zeros(nx);
         dynamics.step(k, x[k].as_slice(), u.as_slice(), next.as_mut_slice());

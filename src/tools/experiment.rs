@@ -288,6 +288,7 @@ fn column_result(
             Feedback::Delayed { latency_steps } => {
                 format!("delayed-feedback ({latency_steps} steps)")
             }
+            Feedback::Predicted { latency_steps } => format!("predictor ({latency_steps} steps)"),
         },
         final_std_mm: arm.then_some(report.final_std),
         final_std_deg: (!arm).then_some(report.final_std),

@@ -1,4 +1,4 @@
-//! Actuators: how the control vector becomes joint torque (paper Eq. 3–7, DESIGN §2).
+//! Actuators: how the control vector becomes joint torque (paper Eq. 3–7).
 //!
 //! | type | law | extra state | control |
 //! |---|---|---|---|

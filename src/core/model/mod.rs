@@ -15,7 +15,7 @@ pub use field::Field;
 pub use noise::Noise;
 pub use plant::{Plant, SingleJoint, TwoLink};
 
-use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX, Scalar, c};
+use crate::core::scalar::{Scalar, c};
 use serde::{Deserialize, Serialize};
 
 /// Inputs to the plant that are not controls: the impedance law's equilibrium trajectory and any
@@ -209,73 +209,5 @@ impl ArmModel {
             }
         }
         tau
-    }
-
-    /// Exact Jacobians of `f` and of `F` at (x, u) by forward-mode automatic differentiation.
-    ///
-    /// `fx` (n×n) and `fu` (n×m) are column-major; `dfx[j]` / `dfu[j]` hold `∂F/∂x_j` / `∂F/∂u_j`
-    /// in the layout of [`ArmModel::diffusion`]. Pass `None` for the noise derivatives when the
-    /// model is noise-free or they are not needed.
-    pub fn jacobians(
-        &self,
-        x: &[f64],
-        u: &[f64],
-        ex: &Exogenous,
-        fx: &mut [f64],
-        fu: &mut [f64],
-        mut noise: Option<(&mut [f64], &mut [f64])>,
-    ) {
-        use num_dual::Dual64;
-        let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
-        let mut xd = [Dual64::from(0.0); MAX_NX];
-        let mut ud = [Dual64::from(0.0); MAX_NU];
-        for (d, v) in xd.iter_mut().zip(x) {
-            *d = Dual64::from(*v);
-        }
-        for (d, v) in ud.iter_mut().zip(u) {
-            *d = Dual64::from(*v);
-        }
-        let mut out = [Dual64::from(0.0); MAX_NX];
-        let mut big_f = [Dual64::from(0.0); MAX_NX * MAX_NW];
-        for j in 0..nx + nu {
-            if j < nx {
-                xd[j].eps = 1.0;
-            } else {
-                ud[j - nx].eps = 1.0;
-            }
-            self.f(&xd[..nx], &ud[..nu], ex, &mut out[..nx]);
-            let col = if j < nx {
-                &mut fx[j * nx..(j + 1) * nx]
-            } else {
-                &mut fu[(j - nx) * nx..(j - nx + 1) * nx]
-            };
-            for (dst, o) in col.iter_mut().zip(&out[..nx]) {
-                *dst = o.eps;
-            }
-            if let Some((dfx, dfu)) = noise.as_mut() {
-                self.diffusion(&xd[..nx], &ud[..nu], &mut big_f);
-                let block = nx * nw;
-                let dst = if j < nx {
-                    &mut dfx[j * block..(j + 1) * block]
-                } else {
-                    &mut dfu[(j - nx) * block..(j - nx + 1) * block]
-                };
-                for (d, v) in dst.iter_mut().zip(&big_f[..block]) {
-                    *d = v.eps;
-                }
-            }
-            if j < nx {
-                xd[j].eps = 0.0;
-            } else {
-                ud[j - nx].eps = 0.0;
-            }
-        }
-    }
-}
-
-/// Lifts an `f64` slice into a scalar array (helper for callers that differentiate).
-pub fn lift_slice<S: Scalar>(src: &[f64], dst: &mut [S]) {
-    for (d, s) in dst.iter_mut().zip(src) {
-        *d = c(*s);
     }
 }

@@ -250,8 +250,14 @@ impl Figure for ArmFigure<'_> {
                 let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
                 self.draw_joint_stats(&mut chart, c, r == 0)?;
             }
-            let ranges = (self.time, self.torque, self.stiffness);
-            draw_command_rows(&panels[3..], ranges, &self.columns[c], c == 0)?;
+            draw_command_rows(
+                &panels[3..],
+                self.time,
+                self.torque,
+                self.stiffness,
+                &self.columns[c],
+                c == 0,
+            )?;
         }
         let starts = [0, breaks[0], breaks[2]];
         row_letters(&gutter, &starts, &[0, 4, 4])

@@ -141,8 +141,14 @@ impl Figure for JointFigure<'_> {
                 false,
             )?;
             self.draw_trials(&mut chart, c, false)?;
-            let ranges = (self.time, self.torque, self.stiffness);
-            draw_command_rows(&panels[2..], ranges, &self.columns[c], c == 0)?;
+            draw_command_rows(
+                &panels[2..],
+                self.time,
+                self.torque,
+                self.stiffness,
+                &self.columns[c],
+                c == 0,
+            )?;
         }
         let starts = [0, breaks[0], breaks[1]];
         row_letters(&gutter, &starts, &[0, 4, 4])

@@ -332,7 +332,9 @@ pub(super) fn legend<'c, DB: DrawingBackend + 'c>(
 /// own panel from `panels[0]` on; the last panel carries the time axis.
 pub(super) fn draw_command_rows<DB: DrawingBackend>(
     panels: &[DrawingArea<DB, Shift>],
-    (time, torque, stiffness): ((f64, f64), (f64, f64), Option<(f64, f64)>),
+    time: (f64, f64),
+    torque: (f64, f64),
+    stiffness: Option<(f64, f64)>,
     column: &ColumnPlot,
     with_legend: bool,
 ) -> DrawResult<(), DB> {
