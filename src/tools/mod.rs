@@ -8,8 +8,8 @@
 //!   (`vic inject`, `status`, `monitor`), [`bench_command`], [`board_daemon`] (`vic-board`) and
 //!   [`central_daemon`] (`vic-planner`).
 //! - The work they share: [`operator`] (inject, status, monitor), [`experiment`] (the paper's
-//!   figures), [`identify`] (noise identification), [`plot`], [`bench`], [`report`] (a live run's
-//!   results) and [`launch`] (turning a scenario into the board's and the central controller's
+//!   figures), [`sweep`] (delay versus stiffness over latencies), [`identify`] (noise
+//!   identification), [`plot`], [`bench`], [`report`] (a live run's results) and [`launch`] (turning a scenario into the board's and the central controller's
 //!   configuration).
 
 pub mod bench;
@@ -29,3 +29,4 @@ pub mod plot;
 pub mod report;
 pub mod reproduce;
 pub mod simulate;
+pub mod sweep;

@@ -1,0 +1,200 @@
+//! Delay versus stiffness as a curve: for each feedback latency and each strategy of a central
+//! controller, plan (for that latency where the strategy needs it), run the Monte Carlo and
+//! report how close the movements end to the target.
+//!
+//! The strategies: `naive-delayed` (Eq. 13: the gains of a plan made for the delay, on the state
+//! seen `D` steps late, no stiffness), `predictor` (the best delayed feedback without stiffness:
+//! a Smith predictor across the latency, [`Feedback::Predicted`]) and `stiffness` (the open-loop
+//! SOOC plan of torque and stiffness, which no latency affects).
+
+use crate::core::policy::Feedback;
+use crate::planning::evaluation::summarize;
+use crate::planning::montecarlo::run_trials;
+use crate::planning::plan::{Method, PlanFile, plan, setup};
+use crate::planning::scenario::Scenario;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// How the central controller acts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Strategy {
+    NaiveDelayed,
+    Predictor,
+    Stiffness,
+}
+
+impl Strategy {
+    pub const ALL: [Strategy; 3] = [
+        Strategy::NaiveDelayed,
+        Strategy::Predictor,
+        Strategy::Stiffness,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Strategy::NaiveDelayed => "naive-delayed",
+            Strategy::Predictor => "predictor",
+            Strategy::Stiffness => "stiffness",
+        }
+    }
+
+    /// How its plan is made.
+    pub fn method(self) -> Method {
+        match self {
+            Strategy::Stiffness => Method::Sooc,
+            _ => Method::Ilqg,
+        }
+    }
+
+    /// The scenario overrides of its plan at `latency_ms`: the feedback strategies get no
+    /// stiffness (feedback is all they have); only the naive law is planned for the delay (Eq. 13
+    /// needs the augmented plan's gains), the predictor uses the undelayed gains on its prediction.
+    pub fn overrides(self, latency_ms: f64) -> Vec<String> {
+        let no_stiffness = [
+            "actuator.stiffness_min=0".to_string(),
+            "actuator.stiffness_max=0".into(),
+            "actuator.initial_stiffness=0".into(),
+        ];
+        match self {
+            Strategy::NaiveDelayed => {
+                let mut o = no_stiffness.to_vec();
+                o.push(format!("task.delay_ms={latency_ms}"));
+                o
+            }
+            Strategy::Predictor => {
+                let mut o = no_stiffness.to_vec();
+                o.push("task.delay_ms=0".into());
+                o
+            }
+            Strategy::Stiffness => vec!["task.delay_ms=0".into()],
+        }
+    }
+
+    /// Whether its plan depends on the latency.
+    fn plan_per_latency(self) -> bool {
+        self == Strategy::NaiveDelayed
+    }
+
+    /// How its plan is executed at a latency of `steps`.
+    pub fn feedback(self, steps: usize) -> Feedback {
+        match self {
+            Strategy::NaiveDelayed => Feedback::Delayed {
+                latency_steps: steps,
+            },
+            Strategy::Predictor => Feedback::Predicted {
+                latency_steps: steps,
+            },
+            Strategy::Stiffness => Feedback::OpenLoop,
+        }
+    }
+}
+
+/// What to sweep.
+#[derive(Debug, Clone)]
+pub struct SweepOptions {
+    pub latencies_ms: Vec<f64>,
+    pub strategies: Vec<Strategy>,
+    pub trials: usize,
+    pub seed: u64,
+    /// A trial ending further than this from the target (in the report's unit) diverged.
+    pub divergence: Option<f64>,
+}
+
+/// One strategy at one latency. Errors are over all trials, `None` when every trial diverged
+/// (never a sentinel number).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SweepPoint {
+    pub strategy: Strategy,
+    pub latency_ms: f64,
+    pub final_error_mean: Option<f64>,
+    pub final_error_max: Option<f64>,
+    pub rms_error: Option<f64>,
+    pub diverged_fraction: f64,
+    pub expected_cost_mc: Option<f64>,
+    /// The plan's own prediction of the executed policy's expected cost, where one exists: the
+    /// open-loop prediction for `stiffness`, the plan's for `predictor` at 0 latency; `None`
+    /// where the plan predicts another policy than the one executed.
+    pub expected_cost_predicted: Option<f64>,
+    pub mean_stiffness: f64,
+    pub unit: String,
+}
+
+/// The whole curve.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Sweep {
+    pub scenario: String,
+    pub trials: usize,
+    pub seed: u64,
+    pub points: Vec<SweepPoint>,
+}
+
+/// Runs the sweep on the scenario at `path` (with `overrides`); `progress` is told each point.
+pub fn sweep_latency(
+    path: &Path,
+    overrides: &[String],
+    opts: &SweepOptions,
+    progress: &dyn Fn(&str),
+) -> Result<Sweep, String> {
+    let load = |extra: Vec<String>| -> Result<Scenario, String> {
+        let all: Vec<String> = overrides.iter().cloned().chain(extra).collect();
+        Scenario::load(path, &all).map_err(|e| e.to_string())
+    };
+    let mut points = Vec::new();
+    for &strategy in &opts.strategies {
+        let mut cached: Option<(Scenario, PlanFile)> = None;
+        for &latency_ms in &opts.latencies_ms {
+            progress(&format!("{} at {latency_ms} ms", strategy.name()));
+            if cached.is_none() || strategy.plan_per_latency() {
+                let s = load(strategy.overrides(latency_ms))?;
+                let p = plan(&s, strategy.method(), None)?;
+                cached = Some((s, p));
+            }
+            let (s, p) = cached.as_ref().expect("planned above");
+            let set = setup(s)?;
+            let steps = latency_steps(latency_ms, s.task.dt)?;
+            let feedback = strategy.feedback(steps);
+            let trials = run_trials(&set, &p.policy(&set)?, feedback, opts.trials, opts.seed);
+            let divergence =
+                opts.divergence
+                    .unwrap_or(if s.model.dof() == 1 { 10.0 } else { 50.0 });
+            let r = summarize(&set, &trials, divergence);
+            let kept = r.diverged < r.trials;
+            let finite = |v: f64| (kept && v.is_finite()).then_some(v);
+            points.push(SweepPoint {
+                strategy,
+                latency_ms,
+                final_error_mean: finite(r.final_error_mean),
+                final_error_max: finite(r.final_error_max),
+                rms_error: finite(r.rms_error),
+                diverged_fraction: r.diverged_fraction,
+                expected_cost_mc: r.expected_cost_mc.is_finite().then_some(r.expected_cost_mc),
+                expected_cost_predicted: match feedback {
+                    Feedback::OpenLoop => Some(p.summary.open_loop_expected_cost),
+                    Feedback::Predicted { latency_steps: 0 } => Some(p.summary.expected_cost),
+                    _ => None,
+                },
+                mean_stiffness: p.summary.mean_stiffness,
+                unit: r.unit.clone(),
+            });
+        }
+    }
+    Ok(Sweep {
+        scenario: path.display().to_string(),
+        trials: opts.trials,
+        seed: opts.seed,
+        points,
+    })
+}
+
+/// A latency in whole plan steps.
+fn latency_steps(latency_ms: f64, dt: f64) -> Result<usize, String> {
+    let steps = latency_ms / 1000.0 / dt;
+    if steps.is_nan() || steps < 0.0 || (steps - steps.round()).abs() > 1e-6 {
+        return Err(format!(
+            "latency {latency_ms} ms: not a whole number of {} ms steps",
+            dt * 1000.0
+        ));
+    }
+    Ok(steps.round() as usize)
+}
