@@ -9,8 +9,8 @@
 //!   [`central_daemon`] (`vic-planner`).
 //! - The work they share: [`operator`] (inject, status, monitor), [`experiment`] (the paper's
 //!   figures), [`sweep`] (delay versus stiffness over latencies), [`identify`] (noise
-//!   identification), [`plot`], [`bench`], [`report`] (a live run's results) and [`launch`] (turning a scenario into the board's and the central controller's
-//!   configuration).
+//!   identification), [`plot`], [`bench`], [`report`] (a live run's results) and [`launch`]
+//!   (turning a scenario into the board's and the central controller's configuration).
 
 pub mod bench;
 pub mod bench_command;
