@@ -2,7 +2,7 @@
 //! ordering the paper's argument rests on.
 
 use std::path::Path;
-use vic::tools::sweep::{Strategy, SweepOptions, sweep_latency};
+use vic::tools::sweep::{Strategy, SweepOptions, sweep_latency, write_figure};
 
 #[test]
 fn the_sweep_orders_the_strategies_as_the_paper_argues() {
@@ -45,4 +45,16 @@ fn the_sweep_orders_the_strategies_as_the_paper_argues() {
     assert_eq!(s0.final_error_mean, s200.final_error_mean);
     assert!(s0.mean_stiffness > 0.0);
     assert_eq!(at(Strategy::Predictor, 0.0).mean_stiffness, 0.0);
+    let dir = std::env::temp_dir().join(format!("vic_sweep_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (png, svg) = (dir.join("sweep.png"), dir.join("sweep.svg"));
+    write_figure(&sweep, &png, &svg).expect("figure");
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for s in Strategy::ALL {
+        assert!(text.contains(s.name()), "legend lacks {}", s.name());
+    }
+    if std::env::var_os("VIC_KEEP_FIGURES").is_none() {
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -198,3 +198,37 @@ fn latency_steps(latency_ms: f64, dt: f64) -> Result<usize, String> {
     }
     Ok(steps.round() as usize)
 }
+
+/// The sweep's figure: final error (mean, spread to the worst trial) against the latency, one line
+/// per strategy, PNG and SVG.
+pub fn write_figure(
+    sweep: &Sweep,
+    png: &Path,
+    svg: &Path,
+) -> Result<(), crate::tools::plot::PlotError> {
+    let mut curves: Vec<crate::tools::plot::Curve> = Vec::new();
+    for p in &sweep.points {
+        let name = p.strategy.name();
+        let i = match curves.iter().position(|c| c.name == name) {
+            Some(i) => i,
+            None => {
+                curves.push(crate::tools::plot::Curve {
+                    name: name.into(),
+                    points: Vec::new(),
+                });
+                curves.len() - 1
+            }
+        };
+        curves[i]
+            .points
+            .push((p.latency_ms, p.final_error_mean, p.final_error_max));
+    }
+    let unit = sweep.points.first().map_or("", |p| p.unit.as_str());
+    crate::tools::plot::curve_figure(
+        &curves,
+        &format!("Delay versus stiffness ({} trials)", sweep.trials),
+        &format!("final error [{unit}]"),
+        png,
+        svg,
+    )
+}

@@ -22,12 +22,15 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 mod arm;
 mod clip;
+mod curves;
 mod joint;
 mod panels;
 mod ranges;
 
 use arm::*;
 use clip::*;
+pub use curves::Curve;
+use curves::CurveFigure;
 use joint::*;
 use panels::*;
 use ranges::*;
@@ -93,6 +96,33 @@ pub enum PlotError {
 pub fn arm_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {
     check_columns(columns, png)?;
     render(&ArmFigure::new(columns), png, svg)
+}
+
+/// Lines of an error (log scale) against the feedback latency, one per strategy, with the spread
+/// from the mean to the worst trial shaded; a latency where every trial diverged is a cross at
+/// the top. Writes PNG and SVG, 760 × 520 px.
+pub fn curve_figure(
+    curves: &[Curve],
+    title: &str,
+    y_label: &str,
+    png: &Path,
+    svg: &Path,
+) -> Result<(), PlotError> {
+    if curves.iter().all(|c| c.points.is_empty()) {
+        return Err(PlotError::NoData {
+            path: png.to_path_buf(),
+            reason: "no points".into(),
+        });
+    }
+    render(
+        &CurveFigure {
+            curves,
+            title,
+            y_label,
+        },
+        png,
+        svg,
+    )
 }
 
 /// Fig. 2 layout for a single joint: columns side by side; rows: angle [deg] of every trial with
