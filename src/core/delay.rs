@@ -13,8 +13,11 @@
 //! state it sees; keeping only that block and ignoring the in-flight commands (no predictor) is
 //! the paper's Eq. 13. For `d = 0` the wrapper is the plain model.
 
+use crate::core::cost::{Cost, CostDerivatives};
 use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
-use nalgebra::DMatrix;
+use crate::core::solver::ilqg::IlqgError;
+use crate::core::solver::{Ilqg, IlqgOptions, Problem};
+use nalgebra::{DMatrix, DVector};
 use std::sync::Mutex;
 
 /// A discrete model whose commands act `steps` steps after they are issued.
@@ -98,12 +101,22 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
         out.view_mut((0, 0), (n, g.ncols())).copy_from(g);
     }
 
+    fn parallel_linearization(&self) -> bool {
+        // The augmented part is a fixed shift: the cost is the base model's.
+        self.base.parallel_linearization()
+    }
+
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         let (n, m) = (self.base.nx(), self.base.nu());
         let total = self.nx();
-        // Own scratch per call: knots are linearised in parallel.
-        let mut own = Linearization::new(n, m, self.base.nw());
-        let base = &mut own;
+        // The shared scratch when free (the solvers linearise a cheap model's knots in order, and
+        // then nothing is allocated); an own one when another thread holds it.
+        let mut guard = self.scratch.try_lock();
+        let mut own = None;
+        let base = match guard.as_mut() {
+            Ok(g) => &mut g.0,
+            Err(_) => own.insert(Linearization::new(n, m, self.base.nw())),
+        };
         self.base.linearize(k, &x[..n], self.acting(x, u), base);
         lin.a.fill(0.0);
         lin.b.fill(0.0);
@@ -138,4 +151,128 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
             }
         }
     }
+}
+
+/// A model or cost read `offset` knots later: knot `k` of the wrapper is knot `k + offset` of
+/// the inner one (its reference and exogenous inputs). The tail of a horizon as a problem of its
+/// own, for [`undelayed_guess`] and for replanning from a later knot.
+pub struct Offset<'a, T: ?Sized> {
+    inner: &'a T,
+    offset: usize,
+}
+
+impl<'a, T: ?Sized> Offset<'a, T> {
+    /// Knot `k` of the result is knot `k + offset` of `inner`.
+    pub fn new(inner: &'a T, offset: usize) -> Self {
+        Offset { inner, offset }
+    }
+}
+
+impl<T: Dynamics + ?Sized> Dynamics for Offset<'_, T> {
+    fn nx(&self) -> usize {
+        self.inner.nx()
+    }
+    fn nu(&self) -> usize {
+        self.inner.nu()
+    }
+    fn nw(&self) -> usize {
+        self.inner.nw()
+    }
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.inner.step(k + self.offset, x, u, next);
+    }
+    fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
+        self.inner.noise_gain(k + self.offset, x, u, out);
+    }
+    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.inner.linearize(k + self.offset, x, u, lin);
+    }
+    fn parallel_linearization(&self) -> bool {
+        self.inner.parallel_linearization()
+    }
+}
+
+impl<T: Cost + ?Sized> Cost for Offset<'_, T> {
+    fn running(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
+        self.inner.running(k + self.offset, x, u)
+    }
+    fn terminal(&self, x: &[f64]) -> f64 {
+        self.inner.terminal(x)
+    }
+    fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
+        self.inner.running_derivatives(k + self.offset, x, u, d);
+    }
+    fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
+        self.inner.terminal_derivatives(x, d);
+    }
+}
+
+/// A first guess for the delayed problem from the undelayed plant, exact without noise.
+///
+/// With `d` steps of delay the first `d` commands that act are the ones already in flight
+/// (`pending`): the plant runs open loop to `x_d`, and a command issued at `k` acts at `k + d`.
+/// For a cost that adds a control term to a state term (Eq. 14 does), the deterministic delayed
+/// problem is therefore the undelayed problem from `x_d` over knots `d..N`, whose command `j` is
+/// issued at `j`; the last `d` issued commands act after the horizon and only pay their control
+/// cost. Solving that 2-state problem instead of the `n + m d`-state one is much cheaper, and
+/// ILQG on the delayed problem then starts at its optimum (it only needs the backward pass for
+/// the delayed gains of Eq. 13). The last `d` commands minimise their control cost. `plain` is
+/// the undelayed problem (plant, cost, start state, horizon, limits), `pending` the command in
+/// flight in every slot, `u_init` a guess for the undelayed plant (its knots `d..N` are used).
+pub fn undelayed_guess(
+    plain: &Problem,
+    pending: &[f64],
+    delay: usize,
+    options: &IlqgOptions,
+    u_init: &[DVector<f64>],
+) -> Result<Vec<DVector<f64>>, IlqgError> {
+    let (base, cost, bounds) = (plain.dynamics, plain.cost, &plain.bounds);
+    let steps = plain.horizon;
+    if delay == 0 {
+        return Ok(plain_solve(plain, options, u_init)?.u);
+    }
+    let mut x = plain.x0.clone();
+    let mut next = x.clone();
+    for k in 0..delay.min(steps) {
+        base.step(k, &x, pending, &mut next);
+        std::mem::swap(&mut x, &mut next);
+    }
+    if delay >= steps {
+        return Ok(vec![DVector::from_column_slice(pending); steps]);
+    }
+    let (dynamics, tail_cost) = (Offset::new(base, delay), Offset::new(cost, delay));
+    let problem = Problem {
+        dynamics: &dynamics,
+        cost: &tail_cost,
+        x0: x,
+        horizon: steps - delay,
+        bounds: bounds.clone(),
+    };
+    let sol = plain_solve(&problem, options, &u_init[delay..])?;
+    let x_end = sol.x[sol.x.len() - 1].as_slice();
+    let mut u = sol.u;
+    let last = u[u.len() - 1].clone();
+    u.resize(steps, last);
+    // The last `delay` commands act after the horizon: only their control cost counts. One
+    // Newton step on it (exact for a quadratic control cost), clamped into the limits.
+    let mut d = CostDerivatives::new(base.nx(), base.nu());
+    for (k, uk) in u.iter_mut().enumerate().skip(steps - delay) {
+        cost.running_derivatives(k, x_end, uk.as_slice(), &mut d);
+        if let Some(step) = d.luu.clone().cholesky().map(|c| c.solve(&d.lu)) {
+            *uk -= step;
+            bounds.clamp(uk.as_mut_slice());
+        }
+    }
+    Ok(u)
+}
+
+/// Deterministic ILQG on `problem` (the noise-free plan is what [`undelayed_guess`] needs).
+fn plain_solve(
+    problem: &Problem,
+    options: &IlqgOptions,
+    u_init: &[DVector<f64>],
+) -> Result<crate::core::solver::Solution, IlqgError> {
+    let mut solver = Ilqg::new(problem, options.clone());
+    solver.options.stochastic = false;
+    solver.try_solve(problem, u_init)
 }

@@ -66,6 +66,12 @@ pub trait Dynamics: Send + Sync {
     fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>);
     /// Linearisation of the step around (x, u).
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization);
+    /// Whether one linearisation costs enough (microseconds or more) that the solvers should
+    /// linearise the knots of a trajectory in parallel. Default true; cheap models (a few states,
+    /// first derivatives only) say false and are linearised in order, without allocating.
+    fn parallel_linearization(&self) -> bool {
+        true
+    }
 }
 
 /// How the drift is integrated over one control step.
@@ -200,7 +206,7 @@ impl Dynamics for EulerModel {
         let (nx, nu) = (self.nx(), self.nu());
         let mut a = [0.0; MAX_NX * MAX_NX];
         let mut b = [0.0; MAX_NX * MAX_NU];
-        self.flow_jacobian(k, x, u, &mut a, &mut b);
+        self.flow_jacobian_f64(k, x, u, &mut a, &mut b);
         for j in 0..nx {
             for i in 0..nx {
                 lin.a[(i, j)] = a[j * nx + i];
@@ -212,6 +218,11 @@ impl Dynamics for EulerModel {
             }
         }
         self.noise_linearization(x, u, lin, true);
+    }
+
+    fn parallel_linearization(&self) -> bool {
+        // One flow with a vector dual number: well under a microsecond for the paper's limbs.
+        false
     }
 }
 
@@ -292,6 +303,56 @@ impl EulerModel {
             };
             for (c, o) in col.iter_mut().zip(&out[..nx]) {
                 *c = o.eps;
+            }
+        }
+    }
+
+    /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` in `f64` (layout of [`EulerModel::flow_jacobian`]) by one flow
+    /// with a vector dual number carrying all `nx + nu` directions at once: the model's
+    /// trigonometry and mass-matrix solve run once instead of once per direction. The same
+    /// derivative arithmetic per direction, so the same numbers.
+    pub fn flow_jacobian_f64(&self, k: usize, x: &[f64], u: &[f64], a: &mut [f64], b: &mut [f64]) {
+        macro_rules! by_width {
+            ($($n:literal)*) => {
+                match self.nx() + self.nu() {
+                    $($n => self.flow_jacobian_vec::<$n>(k, x, u, a, b),)*
+                    _ => self.flow_jacobian(k, x, u, a, b),
+                }
+            };
+        }
+        by_width!(3 4 6 8 12);
+    }
+
+    fn flow_jacobian_vec<const N: usize>(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        a: &mut [f64],
+        b: &mut [f64],
+    ) {
+        use nalgebra::{Const, U1};
+        use num_dual::{Derivative, DualSVec64};
+        let (nx, nu) = (self.nx(), self.nu());
+        debug_assert_eq!(nx + nu, N);
+        let zero = DualSVec64::<N>::from_re(0.0);
+        let mut xd = [zero; MAX_NX];
+        let mut ud = [zero; MAX_NU];
+        for (j, (d, v)) in xd.iter_mut().zip(x).take(nx).enumerate() {
+            *d = DualSVec64::new(*v, Derivative::derivative_generic(Const::<N>, U1, j));
+        }
+        for (j, (d, v)) in ud.iter_mut().zip(u).take(nu).enumerate() {
+            *d = DualSVec64::new(*v, Derivative::derivative_generic(Const::<N>, U1, nx + j));
+        }
+        let mut out = [zero; MAX_NX];
+        self.flow(k, &xd[..nx], &ud[..nu], &mut out[..nx]);
+        for (i, o) in out[..nx].iter().enumerate() {
+            let eps = o.eps.unwrap_generic(Const::<N>, U1);
+            for j in 0..nx {
+                a[j * nx + i] = eps[j];
+            }
+            for j in 0..nu {
+                b[j * nx + i] = eps[nx + j];
             }
         }
     }

@@ -406,7 +406,7 @@ pub fn plan(
             (sol, 0)
         }
         Method::Ilqg if s.task.delay_steps() == 0 => (
-            solve_in_phases(&plain, &s.solver.options, &setup.u_init, &progress),
+            solve_in_phases(&plain, &s.solver.options, &setup.u_init, &progress)?,
             0,
         ),
         Method::Ilqg => {
@@ -424,11 +424,20 @@ pub fn plan(
                 horizon: steps,
                 bounds: setup.bounds.clone(),
             };
-            // A command issued at k acts at k + d: warm-start with the shifted guess.
-            let u_init: Vec<DVector<f64>> = (0..steps)
-                .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
-                .collect();
-            let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init, &progress);
+            // A command issued at k acts at k + d: start from the undelayed plant's plan from
+            // the state the commands in flight lead to (the deterministic optimum, exactly).
+            let guess_time = std::time::Instant::now();
+            let u_init = crate::core::delay::undelayed_guess(
+                &plain,
+                setup.u_init[0].as_slice(),
+                d,
+                &s.solver.options,
+                &setup.u_init,
+            )
+            .map_err(|e| format!("planning the undelayed first guess: {e}"))?;
+            let guess_time = guess_time.elapsed();
+            let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init, &progress)?;
+            sol.solve_time += guess_time;
             for x in &mut sol.x {
                 *x = x.rows(0, nx).into_owned();
             }
@@ -461,18 +470,21 @@ pub fn solve_in_phases(
     options: &IlqgOptions,
     u_init: &[DVector<f64>],
     progress: &Option<ProgressFn>,
-) -> Solution {
+) -> Result<Solution, String> {
+    let start = |e: crate::core::solver::IlqgError| format!("ILQG: {e}");
     if !options.stochastic || problem.dynamics.nw() == 0 {
-        return solver_for(problem, options, "ilqg", progress).solve(problem, u_init);
+        return solver_for(problem, options, "ilqg", progress)
+            .try_solve(problem, u_init)
+            .map_err(start);
     }
     let mut solver = solver_for(problem, options, "deterministic", progress);
     solver.options.stochastic = false;
-    let first = solver.solve(problem, u_init);
+    let first = solver.try_solve(problem, u_init).map_err(start)?;
     let mut solver = solver_for(problem, options, "stochastic", progress);
-    let mut second = solver.solve(problem, &first.u);
+    let mut second = solver.try_solve(problem, &first.u).map_err(start)?;
     second.iterations += first.iterations;
     second.solve_time += first.solve_time;
-    second
+    Ok(second)
 }
 
 /// The cost of the plain plant applied to the plant block of a delay-augmented state.
@@ -502,27 +514,15 @@ impl crate::core::cost::Cost for DelayedCost<'_> {
         u: &[f64],
         d: &mut crate::core::cost::CostDerivatives,
     ) {
-        // The augmented derivatives are zero outside the plant block; write that block only.
-        let (n, m) = (self.nx, u.len());
-        let mut inner = crate::core::cost::CostDerivatives::new(n, m);
-        self.inner.running_derivatives(k, &x[..n], u, &mut inner);
-        d.lx.fill(0.0);
-        d.lxx.fill(0.0);
-        d.lux.fill(0.0);
-        d.lx.rows_mut(0, n).copy_from(&inner.lx);
-        d.lxx.view_mut((0, 0), (n, n)).copy_from(&inner.lxx);
-        d.lux.view_mut((0, 0), (m, n)).copy_from(&inner.lux);
-        d.lu.copy_from(&inner.lu);
-        d.luu.copy_from(&inner.luu);
+        // The augmented derivatives are zero outside the plant block. The tracking cost clears
+        // every entry it is given and writes only the joint angles and velocities (the first
+        // 2·dof components), so it fills the augmented derivatives in place, without a copy
+        // (and without allocating in the solver's iterations).
+        debug_assert!(self.inner.nx <= x.len());
+        self.inner.running_derivatives(k, x, u, d);
     }
     fn terminal_derivatives(&self, x: &[f64], d: &mut crate::core::cost::CostDerivatives) {
-        let n = self.nx;
-        let mut inner = crate::core::cost::CostDerivatives::new(n, d.lu.len());
-        self.inner.terminal_derivatives(&x[..n], &mut inner);
-        d.lx.fill(0.0);
-        d.lxx.fill(0.0);
-        d.lx.rows_mut(0, n).copy_from(&inner.lx);
-        d.lxx.view_mut((0, 0), (n, n)).copy_from(&inner.lxx);
+        self.inner.terminal_derivatives(x, d);
     }
 }
 

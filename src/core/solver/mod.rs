@@ -7,7 +7,7 @@ pub mod moments;
 pub mod sooc;
 pub mod sparse;
 
-pub use ilqg::{Ilqg, IlqgOptions, Solution, StopReason};
+pub use ilqg::{Ilqg, IlqgError, IlqgOptions, Solution, StopReason};
 
 use crate::core::cost::Cost;
 use crate::core::dynamics::Dynamics;

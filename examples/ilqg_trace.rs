@@ -1,0 +1,87 @@
+//! Prints ILQG's progress on a scenario, iteration by iteration (step length, μ, merit):
+//! `cargo run --release --example ilqg_trace -- config/single_joint_delay.toml task.delay_ms=0`.
+
+use nalgebra::DVector;
+use std::path::Path;
+use vic::core::delay::Delayed;
+use vic::core::solver::{Ilqg, Problem};
+use vic::planning::plan::{self, DelayedCost};
+use vic::planning::scenario::Scenario;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let file = args
+        .first()
+        .cloned()
+        .unwrap_or("config/single_joint_delay.toml".into());
+    let s = Scenario::load(Path::new(&file), &args[1.min(args.len())..]).expect("scenario loads");
+    let setup = plan::setup(&s).expect("scenario sets up");
+    let (steps, d) = (s.task.steps, s.task.delay_steps());
+    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+    let problem = Problem {
+        dynamics: &delayed,
+        cost: &cost,
+        x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
+        horizon: steps,
+        bounds: setup.bounds.clone(),
+    };
+    let plain = Problem {
+        dynamics: &setup.dynamics,
+        cost: &setup.cost,
+        x0: setup.x0.clone(),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    let u_init: Vec<DVector<f64>> = if std::env::var("UNDELAYED").is_ok() {
+        let t = std::time::Instant::now();
+        let u = vic::core::delay::undelayed_guess(
+            &plain,
+            setup.u_init[0].as_slice(),
+            d,
+            &s.solver.options,
+            &setup.u_init,
+        )
+        .expect("undelayed solve");
+        println!("undelayed guess: {:.2} ms", t.elapsed().as_secs_f64() * 1e3);
+        u
+    } else {
+        (0..steps)
+            .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
+            .collect()
+    };
+    let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+    solver.on_iteration = Some(Box::new(|p| {
+        println!(
+            "{:4} alpha {:8.5} mu {:10.3e} merit {:.10e}",
+            p.iteration, p.alpha, p.mu, p.merit
+        )
+    }));
+    let mut sol = solver.try_solve(&problem, &u_init).expect("solves");
+    let (later_dynamics, later_cost) = (
+        vic::core::delay::Offset::new(&delayed, 2),
+        vic::core::delay::Offset::new(&cost, 2),
+    );
+    if std::env::var("WARM").is_ok() {
+        println!(
+            "cold: {} iterations; warm re-solve two knots later:",
+            sol.iterations
+        );
+        let later = Problem {
+            dynamics: &later_dynamics,
+            cost: &later_cost,
+            x0: sol.x[2].as_slice().to_vec(),
+            horizon: steps,
+            bounds: setup.bounds.clone(),
+        };
+        sol = solver.resolve_shifted(&later, 2).expect("warm start");
+    }
+    println!(
+        "{} iterations, {:?}, cost {:.10e}, expected {:.10e}, {:.2} ms",
+        sol.iterations,
+        sol.stop,
+        sol.cost,
+        sol.expected_cost,
+        sol.solve_time.as_secs_f64() * 1e3
+    );
+}

@@ -1,0 +1,228 @@
+//! The ILQG workspace: iterations allocate nothing (a counting allocator), a diverging initial
+//! guess is an error and not a panic, and a warm start from the shifted converged plan
+//! re-converges to the cold start's cost in fewer iterations.
+
+mod common;
+
+use common::alloc::{Counting, allocations};
+use nalgebra::DVector;
+use std::path::Path;
+use vic::core::delay::{Delayed, Offset};
+use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem};
+use vic::planning::plan::{self, DelayedCost, Setup};
+use vic::planning::scenario::Scenario;
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(file);
+    let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let s = Scenario::load(&path, &o).expect("scenario loads");
+    let setup = plan::setup(&s).expect("scenario sets up");
+    (s, setup)
+}
+
+fn problem<'a>(s: &Scenario, setup: &'a Setup) -> Problem<'a> {
+    Problem {
+        dynamics: &setup.dynamics,
+        cost: &setup.cost,
+        x0: setup.x0.clone(),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    }
+}
+
+/// Allocations of one solve capped at `iterations` (the solution's copies are the same for
+/// every cap, so a difference between caps is what the iterations allocate).
+fn allocations_of_solve(
+    solver: &mut Ilqg,
+    problem: &Problem,
+    u: &[DVector<f64>],
+    iterations: usize,
+) -> (u64, usize) {
+    solver.options.max_iterations = iterations;
+    let before = allocations();
+    let sol = solver.try_solve(problem, u).expect("solves");
+    (allocations() - before, sol.iterations)
+}
+
+fn assert_iterations_do_not_allocate(file: &str, overrides: &[&str], caps: (usize, usize)) {
+    let (s, setup) = load(file, overrides);
+    let problem = problem(&s, &setup);
+    let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+    let (few, it_few) = allocations_of_solve(&mut solver, &problem, &setup.u_init, caps.0);
+    let (many, it_many) = allocations_of_solve(&mut solver, &problem, &setup.u_init, caps.1);
+    assert!(
+        it_many > it_few,
+        "{file}: the caps must change the work ({it_few} vs {it_many} iterations)"
+    );
+    assert_eq!(
+        few, many,
+        "{file}: {it_few} iterations allocated {few} times, {it_many} iterations {many} times"
+    );
+}
+
+#[test]
+fn iterations_do_not_allocate() {
+    // Unbounded (Newton policy), box-bounded (the QP) and stochastic (the noise terms and merit).
+    assert_iterations_do_not_allocate("two_link_reach.toml", &[], (1, 2));
+    assert_iterations_do_not_allocate(
+        "two_link_reach.toml",
+        &["actuator.torque_limit=0.25"],
+        (1, 8),
+    );
+    assert_iterations_do_not_allocate("icub_elbow.toml", &[], (2, 20));
+}
+
+#[test]
+fn delayed_iterations_do_not_allocate() {
+    let (s, setup) = load(
+        "single_joint_delay.toml",
+        &["noise.kind=none", "noise.sigma=0"],
+    );
+    let delayed = Delayed::new(setup.dynamics.clone(), s.task.delay_steps());
+    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+    let problem = Problem {
+        dynamics: &delayed,
+        cost: &cost,
+        x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+    let (few, a) = allocations_of_solve(&mut solver, &problem, &setup.u_init, 1);
+    let (many, b) = allocations_of_solve(&mut solver, &problem, &setup.u_init, 6);
+    assert!(b > a);
+    assert_eq!(few, many, "{a} iterations: {few} allocations, {b}: {many}");
+}
+
+#[test]
+fn a_diverging_initial_guess_is_an_error() {
+    let (s, setup) = load("two_link_reach.toml", &[]);
+    let problem = problem(&s, &setup);
+    let mut solver = Ilqg::new(&problem, IlqgOptions::default());
+    let wild = vec![DVector::from_element(2, 1e300); s.task.steps];
+    match solver.try_solve(&problem, &wild) {
+        Err(IlqgError::DivergingInitialGuess { step, horizon }) => {
+            assert!(step >= 1 && step <= horizon)
+        }
+        other => panic!("expected a diverging-guess error, got {other:?}"),
+    }
+    assert_eq!(
+        solver.resolve_shifted(&problem, 1).unwrap_err(),
+        IlqgError::NoPreviousSolution
+    );
+    // The workspace still solves afterwards.
+    assert!(
+        solver
+            .try_solve(&problem, &setup.u_init)
+            .unwrap()
+            .stop
+            .converged()
+    );
+}
+
+/// The plan advanced `shift` knots: the same horizon from the predicted state, reference read
+/// `shift` knots later. Warm (shifted solution) and cold (the scenario's guess) must agree.
+fn warm_matches_cold(file: &str, overrides: &[&str], shift: usize) {
+    let (s, setup) = load(file, overrides);
+    let first = problem(&s, &setup);
+    let mut solver = Ilqg::new(&first, s.solver.options.clone());
+    let sol = solver.try_solve(&first, &setup.u_init).expect("solves");
+    assert!(sol.stop.converged());
+    let (dynamics, cost) = (
+        Offset::new(&setup.dynamics, shift),
+        Offset::new(&setup.cost, shift),
+    );
+    let later = Problem {
+        dynamics: &dynamics,
+        cost: &cost,
+        x0: sol.x[shift].as_slice().to_vec(),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    let warm = solver.resolve_shifted(&later, shift).expect("warm start");
+    let mut cold_solver = Ilqg::new(&later, s.solver.options.clone());
+    let cold = cold_solver
+        .try_solve(&later, &setup.u_init)
+        .expect("cold start");
+    println!(
+        "{file}: warm {} it, cost {:.12e}; cold {} it, cost {:.12e}",
+        warm.iterations, warm.cost, cold.iterations, cold.cost
+    );
+    assert!(warm.stop.converged() && cold.stop.converged());
+    let rel = (warm.cost - cold.cost).abs() / cold.cost;
+    assert!(
+        rel < 1e-5,
+        "{file}: warm {} vs cold {} (rel {rel:e})",
+        warm.cost,
+        cold.cost
+    );
+    assert!(
+        warm.iterations <= cold.iterations,
+        "{file}: warm {} iterations, cold {}",
+        warm.iterations,
+        cold.iterations
+    );
+}
+
+#[test]
+fn shifted_warm_start_reconverges_to_the_cold_cost() {
+    warm_matches_cold("two_link_reach.toml", &[], 5);
+    warm_matches_cold("two_link_reach.toml", &["actuator.torque_limit=0.25"], 3);
+}
+
+/// Without noise the delayed problem is the undelayed one from the state the commands in flight
+/// lead to: the first guess from the undelayed plant is already the delayed optimum.
+#[test]
+fn undelayed_guess_is_the_deterministic_delayed_optimum() {
+    let (s, setup) = load(
+        "single_joint_delay.toml",
+        &["noise.kind=none", "noise.sigma=0"],
+    );
+    let d = s.task.delay_steps();
+    let steps = s.task.steps;
+    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+    let problem = Problem {
+        dynamics: &delayed,
+        cost: &cost,
+        x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
+        horizon: steps,
+        bounds: setup.bounds.clone(),
+    };
+    let plain = Problem {
+        dynamics: &setup.dynamics,
+        cost: &setup.cost,
+        x0: setup.x0.clone(),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    let guess = vic::core::delay::undelayed_guess(
+        &plain,
+        setup.u_init[0].as_slice(),
+        d,
+        &s.solver.options,
+        &setup.u_init,
+    )
+    .expect("undelayed guess");
+    let shifted: Vec<DVector<f64>> = (0..steps)
+        .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
+        .collect();
+    let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+    let from_guess = solver.try_solve(&problem, &guess).expect("solves");
+    let guess_cost = problem.rollout(&guess).1;
+    let cold = solver.try_solve(&problem, &shifted).expect("solves");
+    println!(
+        "guess {guess_cost:.12e}; from it {} it {:.12e}; cold {} it {:.12e}",
+        from_guess.iterations, from_guess.cost, cold.iterations, cold.cost
+    );
+    assert!(from_guess.stop.converged() && cold.stop.converged());
+    // The guess is within the solver's tolerance of the optimum the cold start finds.
+    assert!((guess_cost - cold.cost).abs() / cold.cost < 1e-5);
+    assert!(from_guess.cost <= cold.cost * (1.0 + 1e-9));
+    assert!(from_guess.iterations * 5 <= cold.iterations);
+}
