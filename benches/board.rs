@@ -16,7 +16,7 @@ use std::path::Path;
 use vic::planning::scenario::Scenario;
 use vic::rt::board::{Board, Inputs};
 use vic::rt::realtime::{BoardHistograms, Wake, board_tick};
-use vic::rt::transport::{Control, ControlKind, Endpoint, PROTOCOL_VERSION, Role};
+use vic::rt::transport::{BoardPorts, CentralPorts, Control, ControlKind, Header};
 use vic::tools::bench::loop_bench::{PERIOD_NS, board_config, hold_slice};
 
 fn running_board() -> (Board, Vec<f64>, usize) {
@@ -28,9 +28,8 @@ fn running_board() -> (Board, Vec<f64>, usize) {
     let mut b = Board::new(s.model.clone(), board_config(&s, PERIOD_NS), &q0).expect("a board");
     let mut inputs = Inputs::default();
     let mut reset = Control {
-        version: PROTOCOL_VERSION,
+        header: Header::new(1, 0),
         kind: ControlKind::Reset as u32,
-        seq: 1,
         trial: 1,
         seed: 1,
         start_ns: 0,
@@ -91,8 +90,8 @@ fn board(c: &mut Criterion) {
 
     let ns = vic::tools::bench::unique_namespace("bc");
     {
-        let ep = Endpoint::open(&ns, Role::Board).expect("board endpoint");
-        let reader = Endpoint::open(&ns, Role::Planner).expect("planner endpoint");
+        let ep = BoardPorts::open(&ns).expect("board endpoint");
+        let reader = CentralPorts::open(&ns).expect("planner endpoint");
         let (mut b, _, _) = running_board();
         let mut inputs = Inputs::default();
         let mut hist = BoardHistograms::default();

@@ -7,7 +7,8 @@
 
 use std::time::{Duration, Instant};
 use vic::rt::transport::{
-    CommandSlice, Disturbance, DisturbanceKind, Endpoint, PROTOCOL_VERSION, Role, monotonic_ns,
+    CentralPorts, CommandSlice, Disturbance, DisturbanceKind, Header, PROTOCOL_VERSION, ToolPorts,
+    monotonic_ns,
 };
 
 fn main() {
@@ -24,11 +25,11 @@ fn main() {
         let _ = ctrlc::set_handler(move || stop.store(true, std::sync::atomic::Ordering::Relaxed));
     }
     // Malformed commands go out on a planner's port, disturbances on a tool's.
-    let planner = Endpoint::open(ns, Role::Planner).unwrap_or_else(|e| {
+    let planner = CentralPorts::open(ns).unwrap_or_else(|e| {
         eprintln!("malformed: {e}");
         std::process::exit(1)
     });
-    let tool = Endpoint::open(ns, Role::Tool).unwrap_or_else(|e| {
+    let tool = ToolPorts::open(ns).unwrap_or_else(|e| {
         eprintln!("malformed: {e}");
         std::process::exit(1)
     });
@@ -37,20 +38,18 @@ fn main() {
     while Instant::now() < end && !stop.load(std::sync::atomic::Ordering::Relaxed) {
         n += 1;
         let d = Disturbance {
-            version: PROTOCOL_VERSION,
+            header: Header::new(vic::rt::transport::session_seq() + n, monotonic_ns()),
             kind: DisturbanceKind::Pulse as u32,
-            seq: vic::rt::transport::session_seq() + n,
-            time_ns: monotonic_ns(),
             torque: [0.2, -0.1],
             duration_ns: 10_000_000,
             value: 0.0,
+            ..Default::default()
         };
         sent_dist += tool.publish_disturbance(&d).is_ok() as u64;
         let mut c = CommandSlice {
             joints: 2,
             // Sequence 0 is never newer than the last slice: always out of order.
-            seq: 0,
-            time_ns: monotonic_ns(),
+            header: Header::new(0, monotonic_ns()),
             trial: 0,
             start_ns: 0,
             knot_dt_ns: 10_000_000,
@@ -59,7 +58,7 @@ fn main() {
         };
         match n % 5 {
             0 => c.knots[1].tau_ff[0] = f64::NAN,
-            1 => c.version = PROTOCOL_VERSION + 7,
+            1 => c.header.version = PROTOCOL_VERSION + 7,
             2 => {} // out of order only
             3 => c.knots[0].stiffness = [f64::MAX, 1e9],
             _ => c.joints = 9,

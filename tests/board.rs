@@ -32,9 +32,8 @@ fn board() -> (Board, [f64; 2]) {
 
 fn reset(q0: [f64; 2], start: u64) -> Control {
     Control {
-        version: PROTOCOL_VERSION,
+        header: Header::new(1, 0),
         kind: ControlKind::Reset as u32,
-        seq: 1,
         trial: 1,
         seed: 5,
         start_ns: start,
@@ -45,8 +44,8 @@ fn reset(q0: [f64; 2], start: u64) -> Control {
 
 fn hold_slice(q0: [f64; 2], seq: u64, start: u64, k: f64) -> CommandSlice {
     let mut c = CommandSlice {
+        header: Header::new(seq, 0),
         joints: 2,
-        seq,
         trial: 1,
         start_ns: start,
         knot_dt_ns: 10_000_000,
@@ -161,9 +160,8 @@ fn the_plant_guard_latches_until_a_reset() {
     b.step(0, &mut inp);
     // A hard pulse with no stiffness: the shoulder speeds past 0.5 rad/s.
     inp.push_disturbance(&Disturbance {
-        version: PROTOCOL_VERSION,
+        header: Header::new(1, 0),
         kind: DisturbanceKind::Pulse as u32,
-        seq: 1,
         torque: [5.0, 0.0],
         duration_ns: 20 * ms,
         ..Default::default()
@@ -193,12 +191,12 @@ fn the_plant_guard_latches_until_a_reset() {
     // Stop does not clear it either; only a reset does.
     let mut stop = reset(q0, 0);
     stop.kind = ControlKind::Stop as u32;
-    stop.seq = 2;
+    stop.header.seq = 2;
     inp.push_control(&stop);
     b.step(400 * ms, &mut inp);
     assert_eq!(b.mode(), Mode::Fault);
     let mut again = reset(q0, 401 * ms);
-    again.seq = 3;
+    again.header.seq = 3;
     inp.push_control(&again);
     b.step(401 * ms, &mut inp);
     assert_eq!(b.mode(), Mode::Running);
@@ -214,7 +212,7 @@ fn rejections_are_counted_by_reason_and_the_last_valid_command_stays() {
     inp.push_command(&hold_slice(q0, 5, 0, 60.0));
     b.step(0, &mut inp);
     let mut future = hold_slice(q0, 6, 0, 90.0);
-    future.time_ns = 1_000 * ms;
+    future.header.time_ns = 1_000 * ms;
     inp.push_command(&future);
     let mut nan = hold_slice(q0, 7, 0, 90.0);
     nan.knots[0].q_d[0] = f64::INFINITY;
@@ -237,10 +235,8 @@ fn rejections_are_counted_by_reason_and_the_last_valid_command_stays() {
     assert_eq!(b.counters.rejected, 5);
     // Disturbances beyond the limits, repeated or from the future are refused.
     let pulse = |seq: u64, torque: f64, time_ns: u64| Disturbance {
-        version: PROTOCOL_VERSION,
+        header: Header::new(seq, time_ns),
         kind: DisturbanceKind::Pulse as u32,
-        seq,
-        time_ns,
         torque: [torque, 0.0],
         duration_ns: 5 * ms,
         ..Default::default()
@@ -282,7 +278,7 @@ fn rejects_invalid_commands() {
     bad.count = 0;
     assert_eq!(b.validate(&bad), Err(Rejection::Shape));
     let mut bad = hold_slice(q0, 1, 0, 50.0);
-    bad.version = 99;
+    bad.header.version = 99;
     assert_eq!(b.validate(&bad), Err(Rejection::Version));
     inp.push_command(&hold_slice(q0, 2, 0, 50.0));
     inp.push_command(&hold_slice(q0, 2, 0, 50.0));
@@ -297,7 +293,8 @@ fn rejects_invalid_commands() {
             offset: -0.0015,
         },
     };
-    let mut c = Board::new(icub, BoardConfig::default(), &q0).unwrap();
+    let cfg = vic::tools::launch::board_config(&scenario(), 1_000_000);
+    let mut c = Board::new(icub, cfg, &q0).unwrap();
     let mut ci = Inputs::default();
     ci.push_control(&reset(q0, 0));
     c.step(0, &mut ci);
@@ -328,9 +325,8 @@ fn pulse_shows_in_the_state_at_the_tick_it_is_applied() {
     inp.push_command(&hold_slice(q0, 1, 0, 100.0));
     b.step(0, &mut inp);
     inp.push_disturbance(&Disturbance {
-        version: PROTOCOL_VERSION,
+        header: Header::new(42, 0),
         kind: DisturbanceKind::Pulse as u32,
-        seq: 42,
         torque: [1.0, 0.0],
         duration_ns: 3_000_000,
         ..Default::default()

@@ -6,7 +6,9 @@ use common::alloc::{Counting, allocations};
 use std::path::Path;
 use vic::planning::scenario::Scenario;
 use vic::rt::board::{Board, Inputs};
-use vic::rt::transport::{CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind};
+use vic::rt::transport::{
+    CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Header,
+};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -29,9 +31,8 @@ fn a_board_step_does_not_allocate() {
     let mut inputs = Inputs::default();
     let ms = 1_000_000u64;
     let reset = Control {
-        version: vic::rt::transport::PROTOCOL_VERSION,
+        header: Header::new(1, 0),
         kind: ControlKind::Reset as u32,
-        seq: 1,
         trial: 0,
         seed: 3,
         start_ns: 0,
@@ -49,9 +50,8 @@ fn a_board_step_does_not_allocate() {
         k.stiffness = [80.0, 80.0];
     }
     let pulse = Disturbance {
-        version: vic::rt::transport::PROTOCOL_VERSION,
+        header: Header::new(1, 0),
         kind: DisturbanceKind::Pulse as u32,
-        seq: 1,
         torque: [0.5, 0.0],
         duration_ns: 5 * ms,
         ..Default::default()
@@ -64,7 +64,7 @@ fn a_board_step_does_not_allocate() {
         }
         // A gap in the commands: the watchdog ramps the board into its safe hold and back.
         if tick % 20 == 0 && !(500..700).contains(&tick) {
-            slice.seq = tick + 1;
+            slice.header.seq = tick + 1;
             slice.start_ns = tick * ms;
             inputs.push_command(&slice);
         }

@@ -8,7 +8,7 @@ mod common;
 use common::daemons::{CONFIG, Daemons, planner_command, run_planner, sooc_plan, unique_namespace};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use vic::rt::transport::{Endpoint, Mode, Role, StateMsg, namespace_files};
+use vic::rt::transport::{BoardObserver, Mode, StateMsg, ToolPorts, namespace_files};
 
 /// The tests run one at a time: each runs a 1 kHz board and a planner, and four pairs at once on
 /// a 2-core machine would test the machine, not the board.
@@ -19,7 +19,7 @@ fn serial() -> std::sync::MutexGuard<'static, ()> {
 }
 
 /// Collects the board's states for `dur` (drained often enough that none is lost).
-fn watch(ep: &Endpoint, dur: Duration, states: &mut Vec<StateMsg>) {
+fn watch(ep: &BoardObserver, dur: Duration, states: &mut Vec<StateMsg>) {
     let t0 = Instant::now();
     while t0.elapsed() < dur {
         ep.drain_states(|s| states.push(*s));
@@ -29,7 +29,7 @@ fn watch(ep: &Endpoint, dur: Duration, states: &mut Vec<StateMsg>) {
 }
 
 /// Waits until a state satisfies `f` (at most `timeout`).
-fn wait_for(ep: &Endpoint, timeout: Duration, f: impl Fn(&StateMsg) -> bool) -> StateMsg {
+fn wait_for(ep: &BoardObserver, timeout: Duration, f: impl Fn(&StateMsg) -> bool) -> StateMsg {
     let t0 = Instant::now();
     loop {
         let mut hit = None;
@@ -60,7 +60,7 @@ fn a_killed_planner_leaves_the_board_in_safe_hold_and_a_new_one_resumes() {
     let ns = unique_namespace("fp");
     let mut d = Daemons::default();
     let board = d.board(&ns, &[]);
-    let ep = Endpoint::open(&ns, Role::Tool).unwrap();
+    let ep = ToolPorts::open(&ns).unwrap();
     let planner = d.planner(&ns, &plan, "stiffness", 1);
     // Mid-movement: 300 ms into the trial.
     wait_for(&ep, Duration::from_secs(30), |s| {
@@ -112,7 +112,7 @@ fn a_killed_board_is_replaced_and_the_planner_carries_on() {
     let ns = unique_namespace("fb");
     let mut d = Daemons::default();
     let first = d.board(&ns, &[]);
-    let ep = Endpoint::open(&ns, Role::Tool).unwrap();
+    let ep = ToolPorts::open(&ns).unwrap();
     wait_for(&ep, Duration::from_secs(10), |_| true);
 
     // A second board in the same namespace refuses to start.
@@ -174,7 +174,7 @@ fn injected_pulses_show_within_two_ticks_and_namespaces_do_not_cross() {
     let mut d = Daemons::default();
     let board_a = d.board(&a, &[]);
     let board_b = d.board(&b, &[]);
-    let ep = Endpoint::open(&a, Role::Tool).unwrap();
+    let ep = ToolPorts::open(&a).unwrap();
     let planner = d.planner(&a, &plan, "stiffness", 1);
     wait_for(&ep, Duration::from_secs(30), |s| {
         s.mode == Mode::Running as u32 && s.trial_time_ns > 200_000_000

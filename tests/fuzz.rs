@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::{Board, BoardConfig, Inputs, Outputs};
 use vic::rt::transport::{
-    CommandSlice, Control, ControlKind, Disturbance, Knot, MAX_JOINTS, MAX_KNOTS, PROTOCOL_VERSION,
+    CommandSlice, Control, ControlKind, Disturbance, Header, Knot, MAX_JOINTS, MAX_KNOTS,
+    PROTOCOL_VERSION,
 };
 
 const CONFIG: &str = concat!(
@@ -29,9 +30,8 @@ fn board() -> (Board, [f64; 2], BoardConfig) {
 
 fn reset(q0: [f64; 2]) -> Control {
     Control {
-        version: PROTOCOL_VERSION,
+        header: Header::new(1, 0),
         kind: ControlKind::Reset as u32,
-        seq: 1,
         trial: 1,
         seed: 5,
         start_ns: 0,
@@ -43,8 +43,8 @@ fn reset(q0: [f64; 2]) -> Control {
 /// A valid slice holding `q0` with stiffness `k` over 200 ms of trial time from `start`.
 fn slice(q0: [f64; 2], seq: u64, start: u64, k: f64) -> CommandSlice {
     let mut c = CommandSlice {
+        header: Header::new(seq, 0),
         joints: 2,
-        seq,
         trial: 1,
         start_ns: start,
         knot_dt_ns: 10 * MS,
@@ -146,16 +146,16 @@ fn command(huge: bool) -> impl Strategy<Value = CommandSlice> {
         .prop_map(
             |((version, joints, seq, trial, interpolation, start, dt, count), k, odd)| {
                 let mut c = CommandSlice {
-                    version,
+                    header: Header {
+                        version,
+                        ..Header::new(seq, 0)
+                    },
                     joints,
-                    seq,
-                    time_ns: 0,
                     trial,
                     interpolation,
                     start_ns: start,
                     knot_dt_ns: dt,
                     count,
-                    _pad: 0,
                     knots: [k; MAX_KNOTS],
                 };
                 for (i, k) in odd {
@@ -177,12 +177,12 @@ fn control(huge: bool) -> impl Strategy<Value = Control> {
         pair_of(huge),
     )
         .prop_map(|(version, kind, trial, seed, start_ns, q0, qd0)| Control {
-            version,
+            header: Header {
+                version,
+                ..Header::new(2, 0)
+            },
             kind,
-            seq: 2,
-            time_ns: 0,
             trial,
-            _pad: 0,
             seed,
             start_ns,
             q0,
@@ -201,10 +201,12 @@ fn disturbance(huge: bool) -> impl Strategy<Value = Disturbance> {
     )
         .prop_map(
             |(version, kind, seq, torque, duration_ns, value)| Disturbance {
-                version,
+                header: Header {
+                    version,
+                    ..Header::new(seq, 0)
+                },
                 kind,
-                seq,
-                time_ns: 0,
+                _pad: 0,
                 torque,
                 duration_ns,
                 value,

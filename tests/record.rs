@@ -11,11 +11,10 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 use vic::planning::scenario::Scenario;
-use vic::rt::board::{Board, BoardConfig, Inputs};
+use vic::rt::board::{Board, Inputs};
 use vic::rt::record::{RecordOptions, Recorder, Sample};
 use vic::rt::transport::{
-    CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Endpoint, PROTOCOL_VERSION,
-    Role,
+    CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Header, ToolPorts,
 };
 
 #[global_allocator]
@@ -26,7 +25,8 @@ fn building_and_pushing_a_sample_does_not_allocate_even_when_the_queue_is_full()
     let scenario = Scenario::load(Path::new(CONFIG), &[]).unwrap();
     let setup = vic::planning::plan::setup(&scenario).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
-    let mut board = Board::new(scenario.model.clone(), BoardConfig::default(), &q0).unwrap();
+    let cfg = vic::tools::launch::board_config(&scenario, 1_000_000);
+    let mut board = Board::new(scenario.model.clone(), cfg, &q0).unwrap();
     let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("record_alloc.csv");
     let mut rec = Recorder::start(
         &path,
@@ -41,7 +41,7 @@ fn building_and_pushing_a_sample_does_not_allocate_even_when_the_queue_is_full()
     let ms = 1_000_000u64;
     let mut inputs = Inputs::default();
     inputs.push_control(&Control {
-        version: PROTOCOL_VERSION,
+        header: Header::new(0, 0),
         kind: ControlKind::Reset as u32,
         seed: 3,
         q0,
@@ -61,15 +61,14 @@ fn building_and_pushing_a_sample_does_not_allocate_even_when_the_queue_is_full()
     let mut accepted = 0;
     for tick in 1..=1000u64 {
         if tick % 20 == 1 {
-            slice.seq = tick;
+            slice.header.seq = tick;
             slice.start_ns = (tick - 1) * ms;
             inputs.push_command(&slice);
         }
         if tick == 100 {
             inputs.push_disturbance(&Disturbance {
-                version: PROTOCOL_VERSION,
+                header: Header::new(1, 0),
                 kind: DisturbanceKind::Pulse as u32,
-                seq: 1,
                 torque: [0.5, 0.0],
                 duration_ns: 5 * ms,
                 ..Default::default()
@@ -163,7 +162,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     guard.children.push(planner);
 
     // A pulse while the trial runs: the file must show it.
-    let tool = Endpoint::open(&ns, Role::Tool).unwrap();
+    let tool = ToolPorts::open(&ns).unwrap();
     let deadline = std::time::Instant::now() + Duration::from_secs(10);
     loop {
         let running = tool
@@ -177,13 +176,12 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     }
     std::thread::sleep(Duration::from_millis(100));
     tool.publish_disturbance(&Disturbance {
-        version: PROTOCOL_VERSION,
+        header: Header::new(77, vic::rt::transport::monotonic_ns()),
         kind: DisturbanceKind::Pulse as u32,
-        seq: 77,
-        time_ns: vic::rt::transport::monotonic_ns(),
         torque: [0.25, -0.125],
         duration_ns: 20_000_000,
         value: 0.0,
+        ..Default::default()
     })
     .unwrap();
     drop(tool);

@@ -27,7 +27,7 @@ enum BenchCommand {
     ///
     /// Example: vic bench loop --seconds 30 --json
     Loop(BenchLoopArgs),
-    /// One-way and round-trip latency of the state and command channels (vic's Endpoint, real
+    /// One-way and round-trip latency of the state and command channels (vic's typed ports, real
     /// message types) against a bare iceoryx2 publish/subscribe ping-pong with the same payload
     /// sizes, both as two busy-polling threads; then the running vic-board + vic-planner pair:
     /// state age at a reader, command age at the board, pulse-injection-to-effect.

@@ -17,12 +17,25 @@ use crate::core::policy::Feedback;
 use crate::core::policy::{Policy, Seen};
 use crate::core::scalar::{MAX_NU, MAX_NX};
 use crate::rt::board::{Board, Inputs};
+use crate::rt::realtime::Periodic;
 use crate::rt::transport::{
-    CommandSlice, Control, ControlKind, Interpolation, Knot, MAX_KNOTS, Mode, PROTOCOL_VERSION,
-    StateMsg,
+    CentralPorts, CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode,
+    StateMsg, TransportError, monotonic_ns,
 };
 use nalgebra::DVector;
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Why a policy cannot be played on the board.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TrackError {
+    /// The policy is not for a `(q, q')` state and a `(τ, K)` control of this arm.
+    #[error("the real-time board runs the impedance actuator (type 2) only")]
+    NotImpedance,
+    #[error("the reference has {reference} knots, the policy {steps} steps")]
+    ReferenceLength { reference: usize, steps: usize },
+}
 
 /// How the central controller commands the board.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -84,17 +97,16 @@ impl Track {
         x0: &[f64],
         dof: usize,
         dt: f64,
-    ) -> Result<Track, String> {
+    ) -> Result<Track, TrackError> {
         let (nx, nu) = (x0.len(), policy.nu());
         if nx != 2 * dof || nu != 2 * dof || policy.nx() != nx || nx > MAX_NX || nu > MAX_NU {
-            return Err("the real-time board runs the impedance actuator (type 2) only".into());
+            return Err(TrackError::NotImpedance);
         }
         if reference.len() != policy.steps() + 1 {
-            return Err(format!(
-                "the reference has {} knots, the policy {} steps",
-                reference.len(),
-                policy.steps()
-            ));
+            return Err(TrackError::ReferenceLength {
+                reference: reference.len(),
+                steps: policy.steps(),
+            });
         }
         let mut x = [0.0; MAX_NX];
         x[..nx].copy_from_slice(x0);
@@ -203,10 +215,8 @@ impl Central {
         self.control_seq += 1;
         self.reset_seq = self.control_seq;
         let mut c = Control {
-            version: PROTOCOL_VERSION,
+            header: Header::new(self.control_seq, now_ns),
             kind: ControlKind::Reset as u32,
-            seq: self.control_seq,
-            time_ns: now_ns,
             trial,
             seed,
             start_ns,
@@ -227,10 +237,8 @@ impl Central {
     pub fn stop(&mut self, now_ns: u64) -> Control {
         self.control_seq += 1;
         Control {
-            version: PROTOCOL_VERSION,
+            header: Header::new(self.control_seq, now_ns),
             kind: ControlKind::Stop as u32,
-            seq: self.control_seq,
-            time_ns: now_ns,
             trial: self.trial,
             ..Default::default()
         }
@@ -345,9 +353,8 @@ impl Central {
             let last = last.min(first + MAX_KNOTS);
             self.seq += 1;
             let mut c = CommandSlice {
-                version: PROTOCOL_VERSION,
+                header: Header::new(self.seq, 0),
                 joints: dof as u32,
-                seq: self.seq,
                 trial: self.trial,
                 interpolation: Interpolation::Hold as u32,
                 start_ns: first as u64 * dt,
@@ -364,7 +371,7 @@ impl Central {
                 break;
             }
             let (_, mut c) = self.command_line.pop_front().expect("non-empty");
-            c.time_ns = now_ns;
+            c.header.time_ns = now_ns;
             out.push(c);
         }
     }
@@ -461,74 +468,91 @@ pub fn lockstep(
 /// Runs `trials` trials live: waits for a board in the namespace, then for each trial resets it,
 /// streams the slices at the planner period and collects the states until the movement's end.
 pub fn run_live(
-    ep: &crate::rt::transport::Endpoint,
+    ep: &CentralPorts,
     central: &mut Central,
     trials: usize,
     seed: u64,
     planner_period_ns: u64,
-    board_timeout: std::time::Duration,
-    stop: &std::sync::atomic::AtomicBool,
-) -> Result<Vec<TrialRecord>, String> {
-    use crate::rt::realtime::Periodic;
-    use crate::rt::transport::monotonic_ns;
-    use std::sync::atomic::Ordering;
+    board_timeout: Duration,
+    stop: &AtomicBool,
+) -> Result<Vec<TrialRecord>, TransportError> {
     crate::rt::realtime::set_timer_slack_1ns();
     let mut records = Vec::with_capacity(trials);
-    let mut out = Vec::new();
-    let movement_ns = central.track.steps as u64 * central.track.dt_ns;
     let mut last_state_ns = 0;
     for trial in 0..trials as u32 {
-        // A board must be there (again, if it was restarted after a crash): wait for its
-        // telemetry, woken by its events rather than polling.
+        // A board must be there (again, if it was restarted after a crash).
         if ep.latest_state().is_none() && monotonic_ns().saturating_sub(last_state_ns) > 200_000_000
         {
-            let t0 = std::time::Instant::now();
-            loop {
-                if crate::rt::transport::wait_for_telemetry(
-                    ep,
-                    std::time::Duration::from_millis(100),
-                )
-                .is_some()
-                {
-                    break;
-                }
-                if t0.elapsed() > board_timeout || stop.load(Ordering::Relaxed) {
-                    return Err(format!("no board in namespace \"{}\"", ep.namespace()));
-                }
-            }
+            wait_for_board(ep, board_timeout, stop)?;
         }
         let now = monotonic_ns();
         // Start on a whole millisecond, once the first slice has crossed the command line.
         let start =
             (now + central.lead_time_ns(planner_period_ns) + 20_000_000) / 1_000_000 * 1_000_000;
-        let reset = central.begin_trial(trial, seed, start, now);
-        ep.publish_control(&reset).map_err(|e| e.to_string())?;
-        let mut periodic = Periodic::new(planner_period_ns, 0);
-        let limit = start + movement_ns + 2_000_000_000;
-        loop {
-            let wake = periodic.wait();
-            let now = monotonic_ns();
-            if ep.drain_states(|s| central.on_state(s, now)) > 0 {
-                last_state_ns = now;
-            }
-            out.clear();
-            central.poll(wake.deadline_ns.max(now), &mut out);
-            for c in &out {
-                ep.publish_command(c).map_err(|e| e.to_string())?;
-            }
-            if central.trial_done() || now > limit || stop.load(Ordering::Relaxed) {
-                break;
-            }
-        }
-        ep.publish_control(&central.stop(monotonic_ns()))
-            .map_err(|e| e.to_string())?;
-        let rec = central.record();
-        records.push(rec);
+        ep.publish_control(&central.begin_trial(trial, seed, start, now))?;
+        let limit = start + central.track.steps as u64 * central.track.dt_ns + 2_000_000_000;
+        stream_trial(
+            ep,
+            central,
+            planner_period_ns,
+            limit,
+            stop,
+            &mut last_state_ns,
+        )?;
+        ep.publish_control(&central.stop(monotonic_ns()))?;
+        records.push(central.record());
         if stop.load(Ordering::Relaxed) {
             break;
         }
     }
     Ok(records)
+}
+
+/// Waits for a board's telemetry (woken by its events rather than polling), up to `timeout` or
+/// until `stop`.
+fn wait_for_board(
+    ep: &CentralPorts,
+    timeout: Duration,
+    stop: &AtomicBool,
+) -> Result<(), TransportError> {
+    let t0 = Instant::now();
+    while ep.wait_for_telemetry(Duration::from_millis(100)).is_none() {
+        if t0.elapsed() > timeout || stop.load(Ordering::Relaxed) {
+            return Err(TransportError::NoBoard {
+                namespace: ep.session().namespace().to_string(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// One trial's loop at the planner period: feed the states received to `central`, publish the
+/// slices it asks for, until the trial is done, the monotonic time `limit` passes or `stop`.
+fn stream_trial(
+    ep: &CentralPorts,
+    central: &mut Central,
+    planner_period_ns: u64,
+    limit: u64,
+    stop: &AtomicBool,
+    last_state_ns: &mut u64,
+) -> Result<(), TransportError> {
+    let mut periodic = Periodic::new(planner_period_ns, 0);
+    let mut out = Vec::new();
+    loop {
+        let wake = periodic.wait();
+        let now = monotonic_ns();
+        if ep.drain_states(|s| central.on_state(s, now)) > 0 {
+            *last_state_ns = now;
+        }
+        out.clear();
+        central.poll(wake.deadline_ns.max(now), &mut out);
+        for c in &out {
+            ep.publish_command(c)?;
+        }
+        if central.trial_done() || now > limit || stop.load(Ordering::Relaxed) {
+            return Ok(());
+        }
+    }
 }
 
 /// The default split of a feedback latency into the sensor and command delay lines [ms]: what

@@ -1,5 +1,5 @@
-//! The two-rate real-time controller: [`transport`] (wire types and iceoryx2 services per
-//! namespace), [`realtime`] (clock, absolute-deadline loop, histograms), [`sched`] (OS scheduling),
+//! The two-rate real-time controller: [`transport`] (the wire protocol, the shared clock,
+//! namespaces and the iceoryx2 ports of each role), [`realtime`] (clock, absolute-deadline loop, histograms), [`sched`] (OS scheduling),
 //! [`board`] (the 1 kHz impedance law, Eq. 4, against a simulated plant), [`central`] (the 50 Hz
 //! controller that streams a [`crate::core::policy::Policy`]), [`record`] (lossless tick logs) and
 //! [`daemon`] (child processes). Nothing here knows about scenario files: callers hand in a

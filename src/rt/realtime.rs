@@ -2,8 +2,11 @@
 //! slack, an optional spin before each deadline, missed periods skipped and counted (never caught
 //! up in a burst), and fixed-size latency histograms that never allocate while recording.
 
-use crate::rt::transport::{Percentiles, monotonic_ns};
+use crate::rt::board::{Board, Inputs, Outputs, Rejection};
+use crate::rt::record::{RecordProducer, Sample};
+use crate::rt::transport::{BoardEvent, BoardPorts, Header, Percentiles, Telemetry, monotonic_ns};
 use hdrhistogram::Histogram;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Sets this thread's timer slack to 1 ns (`prctl(PR_SET_TIMERSLACK, 1)`; no privilege needed).
 /// The default 50 µs slack is otherwise the median lateness of every wake-up.
@@ -231,27 +234,8 @@ pub struct BoardStats {
     pub dropped: Option<u64>,
 }
 
-/// [`Percentiles`] for JSON reports [µs].
-#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize, Default)]
-pub struct PercentilesJson {
-    pub p50: f64,
-    pub p99: f64,
-    pub p999: f64,
-    pub max: f64,
-    pub count: u64,
-}
-
-impl From<Percentiles> for PercentilesJson {
-    fn from(p: Percentiles) -> Self {
-        PercentilesJson {
-            p50: p.p50,
-            p99: p.p99,
-            p999: p.p999,
-            max: p.max,
-            count: p.count,
-        }
-    }
-}
+/// [`Percentiles`] in JSON reports [µs]: the wire type serialises as it is.
+pub type PercentilesJson = Percentiles;
 
 /// The histograms a board loop fills.
 #[derive(Default)]
@@ -264,26 +248,25 @@ pub struct BoardHistograms {
 /// One tick of the live board: drain the transport into `inputs`, step, publish the state. No
 /// allocation, lock, I/O or logging (the transport's shared-memory calls excepted).
 pub fn board_tick(
-    ep: &crate::rt::transport::Endpoint,
-    board: &mut crate::rt::board::Board,
-    inputs: &mut crate::rt::board::Inputs,
+    ep: &BoardPorts,
+    board: &mut Board,
+    inputs: &mut Inputs,
     wake: &Wake,
     seq: u64,
     hist: &mut BoardHistograms,
-) -> crate::rt::board::Outputs {
+) -> Outputs {
     ep.drain_controls(|c| inputs.push_control(c));
     ep.drain_disturbances(|d| inputs.push_disturbance(d));
     ep.drain_commands(|c| inputs.push_command(c));
     inputs.received_ns = monotonic_ns();
     let out = board.step(wake.deadline_ns, inputs);
     let mut s = out.state;
-    s.seq = seq;
-    s.time_ns = monotonic_ns();
+    s.header = Header::new(seq, monotonic_ns());
     // A failed publish (no subscriber memory) is not a reason to stop the plant.
     let _ = ep.publish_state(&s);
     if board.applied() {
         // The acknowledgement is in the state just published; wake whoever waits for it.
-        ep.notify(crate::rt::transport::BoardEvent::Applied);
+        ep.notify(BoardEvent::Applied);
     }
     hist.jitter.record(wake.lateness_ns);
     if let Some(age) = out.command_age_ns {
@@ -294,22 +277,58 @@ pub fn board_tick(
     out
 }
 
+/// The telemetry of the board after tick `tick` (its step gave `out`).
+fn telemetry(
+    board: &Board,
+    out: &Outputs,
+    hist: &BoardHistograms,
+    periodic: &Periodic,
+    header: Header,
+    tick: u64,
+    tick_rate_hz: f64,
+) -> Telemetry {
+    let (disturbance_seq, disturbance_tick) = board.last_disturbance();
+    Telemetry {
+        header,
+        mode: board.mode() as u32,
+        tick,
+        tick_rate_hz,
+        jitter_us: hist.jitter.percentiles(),
+        work_us: hist.work.percentiles(),
+        command_age_us: hist.command_age.percentiles(),
+        late_ticks: periodic.late_ticks,
+        missed_periods: periodic.skipped_periods,
+        rejected_messages: board.counters.rejected,
+        safe_hold_ticks: board.counters.safe_hold_ticks,
+        tracking_error: out.tracking_error,
+        stiffness: board.stiffness(),
+        tau_ext: out.state.tau_ext,
+        field_beta: board.field_beta(),
+        noise_factor: board.noise_factor(),
+        trial: board.trial(),
+        joints: out.state.joints,
+        rejected_by_reason: board.counters.rejected_by,
+        fault_reason: board.fault() as u32,
+        watchdog_trips: board.counters.watchdog_trips,
+        disturbance_seq,
+        disturbance_tick,
+    }
+}
+
 /// Runs the board at its period until `stop` is set (checked at the end of every tick). With
 /// `record`, every tick is pushed to the recording queue (allocation-free; a full queue drops
 /// the tick and the file marks the gap).
 pub fn run_board(
-    ep: &crate::rt::transport::Endpoint,
-    board: &mut crate::rt::board::Board,
+    ep: &BoardPorts,
+    board: &mut Board,
     period_ns: u64,
     opts: &BoardLoopOptions,
-    stop: &std::sync::atomic::AtomicBool,
-    mut record: Option<&mut crate::rt::record::RecordProducer>,
+    stop: &AtomicBool,
+    mut record: Option<&mut RecordProducer>,
 ) -> BoardStats {
-    use crate::rt::transport::{PROTOCOL_VERSION, Telemetry};
-    use std::sync::atomic::Ordering;
     set_timer_slack_1ns();
     let mut hist = BoardHistograms::default();
-    let mut inputs = crate::rt::board::Inputs::default();
+    let mut inputs = Inputs::default();
     let mut periodic = Periodic::new(period_ns, opts.spin_ns);
     let mut seq = 0u64;
     let mut telemetry_seq = 0u64;
@@ -319,12 +338,7 @@ pub fn run_board(
         seq += 1;
         let out = board_tick(ep, board, &mut inputs, &wake, seq, &mut hist);
         if let Some(r) = record.as_deref_mut() {
-            r.push(&crate::rt::record::Sample::from_step(
-                seq,
-                wake.deadline_ns,
-                board,
-                &out,
-            ));
+            r.push(&Sample::from_step(seq, wake.deadline_ns, board, &out));
         }
         if seq.is_multiple_of(opts.telemetry_every.max(1)) {
             let now = monotonic_ns();
@@ -332,36 +346,10 @@ pub fn run_board(
                 (seq - last_telemetry.1) as f64 * 1e9 / (now - last_telemetry.0).max(1) as f64;
             last_telemetry = (now, seq);
             telemetry_seq += 1;
-            let t = Telemetry {
-                version: PROTOCOL_VERSION,
-                mode: board.mode() as u32,
-                seq: telemetry_seq,
-                time_ns: now,
-                tick: seq,
-                tick_rate_hz: rate,
-                jitter_us: hist.jitter.percentiles(),
-                work_us: hist.work.percentiles(),
-                command_age_us: hist.command_age.percentiles(),
-                late_ticks: periodic.late_ticks,
-                missed_periods: periodic.skipped_periods,
-                rejected_messages: board.counters.rejected,
-                safe_hold_ticks: board.counters.safe_hold_ticks,
-                tracking_error: out.tracking_error,
-                stiffness: board.stiffness(),
-                tau_ext: out.state.tau_ext,
-                field_beta: board.field_beta(),
-                noise_factor: board.noise_factor(),
-                trial: board.trial(),
-                joints: out.state.joints,
-                rejected_by_reason: board.counters.rejected_by,
-                fault_reason: board.fault() as u32,
-                _pad: 0,
-                watchdog_trips: board.counters.watchdog_trips,
-                disturbance_seq: board.last_disturbance().0,
-                disturbance_tick: board.last_disturbance().1,
-            };
+            let header = Header::new(telemetry_seq, now);
+            let t = telemetry(board, &out, &hist, &periodic, header, seq, rate);
             let _ = ep.publish_telemetry(&t);
-            ep.notify(crate::rt::transport::BoardEvent::Telemetry);
+            ep.notify(BoardEvent::Telemetry);
         }
         if opts.max_ticks > 0 && seq >= opts.max_ticks {
             break;
@@ -377,10 +365,10 @@ pub fn run_board(
         watchdog_trips: board.counters.watchdog_trips,
         faults: board.counters.faults,
         lost_periods: board.counters.lost_periods,
-        cleaned_dead_nodes: ep.cleaned_dead_nodes,
-        jitter_us: hist.jitter.percentiles().into(),
-        work_us: hist.work.percentiles().into(),
-        command_age_us: hist.command_age.percentiles().into(),
+        cleaned_dead_nodes: ep.session().cleaned_dead_nodes(),
+        jitter_us: hist.jitter.percentiles(),
+        work_us: hist.work.percentiles(),
+        command_age_us: hist.command_age.percentiles(),
         recorded: record.as_ref().map(|r| r.pushed()),
         dropped: record.as_ref().map(|r| r.dropped()),
     }
@@ -388,9 +376,9 @@ pub fn run_board(
 
 /// Rejection counts by reason name, leaving out reasons that never occurred.
 pub fn rejections_by_name(
-    counts: &[u64; crate::rt::transport::REJECTION_REASONS],
+    counts: &[u64; Rejection::COUNT],
 ) -> std::collections::BTreeMap<String, u64> {
-    crate::rt::board::Rejection::ALL
+    Rejection::ALL
         .iter()
         .filter(|r| counts[**r as usize] > 0)
         .map(|r| (r.name().to_string(), counts[*r as usize]))

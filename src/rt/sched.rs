@@ -6,6 +6,24 @@
 //! throttling (`/proc/sys/kernel/sched_rt_runtime_us`, 95 % by default) pauses such a thread for
 //! about 50 ms per second.
 
+/// Why the OS refused a scheduling request.
+#[derive(Debug, thiserror::Error)]
+pub enum SchedError {
+    /// A `SCHED_FIFO` priority outside 1–99.
+    #[error("SCHED_FIFO priority {0}: use 1 to 99")]
+    Priority(i32),
+    /// A CPU number beyond what a CPU set holds.
+    #[error("CPU {0} is out of range")]
+    CpuOutOfRange(usize),
+    /// The kernel refused to change the policy (`EPERM` without `CAP_SYS_NICE` or with a zero
+    /// real-time budget).
+    #[error("{0}")]
+    Policy(std::io::Error),
+    /// The kernel refused to pin the thread to the CPU.
+    #[error("CPU {cpu}: {source}")]
+    Affinity { cpu: usize, source: std::io::Error },
+}
+
 /// The scheduling policy of a thread.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SchedPolicy {
@@ -15,14 +33,13 @@ pub enum SchedPolicy {
     Fifo(i32),
 }
 
-/// Puts the calling thread under `policy`. Returns the OS error text on failure (`EPERM` without
-/// `CAP_SYS_NICE` or with a zero real-time budget).
-pub fn set_policy(policy: SchedPolicy) -> Result<(), String> {
+/// Puts the calling thread under `policy`.
+pub fn set_policy(policy: SchedPolicy) -> Result<(), SchedError> {
     let (p, prio) = match policy {
         SchedPolicy::Other => (libc::SCHED_OTHER, 0),
         SchedPolicy::Fifo(prio) => {
             if !(1..=99).contains(&prio) {
-                return Err(format!("SCHED_FIFO priority {prio}: use 1 to 99"));
+                return Err(SchedError::Priority(prio));
             }
             (libc::SCHED_FIFO, prio)
         }
@@ -35,7 +52,7 @@ pub fn set_policy(policy: SchedPolicy) -> Result<(), String> {
     if r == 0 {
         Ok(())
     } else {
-        Err(std::io::Error::last_os_error().to_string())
+        Err(SchedError::Policy(std::io::Error::last_os_error()))
     }
 }
 
@@ -67,11 +84,11 @@ pub fn cpu_count() -> usize {
 }
 
 /// Pins the calling thread to CPU `cpu`.
-pub fn pin_to_cpu(cpu: usize) -> Result<(), String> {
+pub fn pin_to_cpu(cpu: usize) -> Result<(), SchedError> {
     // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET writes inside it.
     let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
     if cpu >= 8 * std::mem::size_of::<libc::cpu_set_t>() {
-        return Err(format!("CPU {cpu} is out of range"));
+        return Err(SchedError::CpuOutOfRange(cpu));
     }
     unsafe { libc::CPU_SET(cpu, &mut set) };
     // SAFETY: pid 0 is the calling thread; `set` is a valid cpu_set_t of the size given.
@@ -79,7 +96,10 @@ pub fn pin_to_cpu(cpu: usize) -> Result<(), String> {
     if r == 0 {
         Ok(())
     } else {
-        Err(format!("CPU {cpu}: {}", std::io::Error::last_os_error()))
+        Err(SchedError::Affinity {
+            cpu,
+            source: std::io::Error::last_os_error(),
+        })
     }
 }
 
@@ -91,13 +111,7 @@ pub fn unlock_memory() -> bool {
 
 /// CPU time the calling thread has used [ns] (`CLOCK_THREAD_CPUTIME_ID`).
 pub fn thread_cpu_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, writable timespec.
-    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+    crate::rt::transport::clock::clock_ns(libc::CLOCK_THREAD_CPUTIME_ID)
 }
 
 /// CPU time (user + system) used by the reaped children of this process [ns].

@@ -9,7 +9,7 @@ use crate::planning::scenario::Scenario;
 use crate::rt::board::Board;
 use crate::rt::realtime::{BoardLoopOptions, BoardStats, PercentilesJson, run_board};
 use crate::rt::record::{RecordOptions, Recorder};
-use crate::rt::transport::{Endpoint, Role};
+use crate::rt::transport::BoardPorts;
 use crate::tools::cli::{Classify, input_error, non_negative_seconds, print_json, stop_on_signal};
 use std::path::PathBuf;
 
@@ -52,11 +52,12 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
     let period_ns = 1_000_000_000 / o.rate_hz;
     let mut board = board_of(&scenario, period_ns, o.hold_stiffness)?;
     let stop = stop_on_signal()?;
-    let ep = Endpoint::open(&o.namespace, Role::Board)?;
-    if ep.cleaned_dead_nodes > 0 {
+    let ep = BoardPorts::open(&o.namespace)?;
+    let cleaned_dead_nodes = ep.session().cleaned_dead_nodes();
+    if cleaned_dead_nodes > 0 {
         eprintln!(
             "vic-board: removed the resources of {} dead process(es) in namespace \"{}\"",
-            ep.cleaned_dead_nodes, o.namespace
+            cleaned_dead_nodes, o.namespace
         );
     }
     if !crate::rt::realtime::lock_memory() {

@@ -9,7 +9,7 @@ use crate::planning::scenario::Scenario;
 use crate::rt::central::{
     Central, Strategy, Timing, TrialRecord, lockstep, run_live, split_latency_ms,
 };
-use crate::rt::transport::{Endpoint, Role};
+use crate::rt::transport::CentralPorts;
 use crate::tools::cli::{
     Classify, divergence_or_default, input_error, print_json, stop_on_signal, whole_steps,
 };
@@ -109,7 +109,7 @@ fn run_trials(
         ))
     } else {
         let stop = stop_on_signal()?;
-        let ep = Endpoint::open(&o.namespace, Role::Planner)?;
+        let ep = CentralPorts::open(&o.namespace)?;
         run_live(
             &ep,
             central,

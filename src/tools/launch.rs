@@ -52,6 +52,7 @@ pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, String> {
         setup.dynamics.model.dof(),
         setup.dynamics.dt,
     )
+    .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
@@ -94,7 +95,7 @@ mod tests {
             trial: 0,
             mode: Mode::SafeHold as u32,
             trial_time_ns: 100_000_000,
-            reset_seq: reset.seq - 7,
+            reset_seq: reset.header.seq - 7,
             ..Default::default()
         };
         c.on_state(&stale, 0);
@@ -104,7 +105,7 @@ mod tests {
         // The same state from our reset is recorded.
         c.on_state(
             &StateMsg {
-                reset_seq: reset.seq,
+                reset_seq: reset.header.seq,
                 ..stale
             },
             0,

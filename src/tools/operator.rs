@@ -9,8 +9,8 @@
 use crate::rt::board::{FaultReason, Rejection};
 use crate::rt::realtime::PercentilesJson;
 use crate::rt::transport::{
-    Disturbance, DisturbanceKind, Endpoint, MAX_JOINTS, Mode, PROTOCOL_VERSION, Role, Telemetry,
-    monotonic_ns, session_seq, wait_for_telemetry,
+    Disturbance, DisturbanceKind, Header, MAX_JOINTS, Mode, Telemetry, ToolPorts, monotonic_ns,
+    session_seq,
 };
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -51,7 +51,7 @@ impl Request {
     /// The message (sequence number and time stamp are set when it is sent).
     pub fn message(&self) -> Disturbance {
         let mut d = Disturbance {
-            version: PROTOCOL_VERSION,
+            header: Header::new(0, 0),
             ..Default::default()
         };
         match *self {
@@ -99,12 +99,12 @@ pub struct Ack {
 /// Sends `request` to the board of `namespace` and waits up to `timeout` for the state that
 /// acknowledges it.
 pub fn inject(namespace: &str, request: Request, timeout: Duration) -> Result<Ack, OperatorError> {
-    let ep = Endpoint::open(namespace, Role::Tool)?;
-    let before =
-        wait_for_telemetry(&ep, timeout).ok_or(OperatorError::NoBoard(namespace.into()))?;
+    let ep = ToolPorts::open(namespace)?;
+    let before = ep
+        .wait_for_telemetry(timeout)
+        .ok_or(OperatorError::NoBoard(namespace.into()))?;
     let mut d = request.message();
-    d.seq = session_seq();
-    d.time_ns = monotonic_ns();
+    d.header = Header::new(session_seq(), monotonic_ns());
     ep.latest_state(); // drop what came before
     ep.publish_disturbance(&d)?;
     let t0 = Instant::now();
@@ -119,13 +119,13 @@ pub fn inject(namespace: &str, request: Request, timeout: Duration) -> Result<Ac
                     a.effect_tick = Some(s.tick);
                     a.effect_after_ticks = Some(s.tick.saturating_sub(a.tick));
                 }
-            } else if s.disturbance_seq == d.seq {
+            } else if s.disturbance_seq == d.header.seq {
                 let mut a = Ack {
                     namespace: namespace.into(),
-                    seq: d.seq,
+                    seq: d.header.seq,
                     tick: s.disturbance_tick,
-                    board_time_ns: s.time_ns,
-                    latency_us: s.time_ns.saturating_sub(d.time_ns) as f64 / 1e3,
+                    board_time_ns: s.header.time_ns,
+                    latency_us: s.header.time_ns.saturating_sub(d.header.time_ns) as f64 / 1e3,
                     effect_tick: None,
                     effect_after_ticks: None,
                     tau_ext: s.tau_ext,
@@ -153,7 +153,8 @@ pub fn inject(namespace: &str, request: Request, timeout: Duration) -> Result<Ac
         return Ok(a);
     }
     // No acknowledgement: did the board reject it? Its telemetry counts rejections by reason.
-    let after = wait_for_telemetry(&ep, Duration::from_millis(500))
+    let after = ep
+        .wait_for_telemetry(Duration::from_millis(500))
         .ok_or(OperatorError::NoBoard(namespace.into()))?;
     let reasons: Vec<String> = Rejection::ALL
         .iter()
@@ -210,9 +211,9 @@ impl Status {
             trial: t.trial,
             tick: t.tick,
             tick_rate_hz: t.tick_rate_hz,
-            jitter_us: t.jitter_us.into(),
-            work_us: t.work_us.into(),
-            command_age_us: t.command_age_us.into(),
+            jitter_us: t.jitter_us,
+            work_us: t.work_us,
+            command_age_us: t.command_age_us,
             late_ticks: t.late_ticks,
             missed_periods: t.missed_periods,
             rejected_messages: t.rejected_messages,
@@ -300,8 +301,10 @@ impl Status {
 
 /// One snapshot of the board's telemetry in `namespace`.
 pub fn status(namespace: &str, timeout: Duration) -> Result<Status, OperatorError> {
-    let ep = Endpoint::open(namespace, Role::Tool)?;
-    let t = wait_for_telemetry(&ep, timeout).ok_or(OperatorError::NoBoard(namespace.into()))?;
+    let ep = ToolPorts::open(namespace)?;
+    let t = ep
+        .wait_for_telemetry(timeout)
+        .ok_or(OperatorError::NoBoard(namespace.into()))?;
     Ok(Status::from_telemetry(namespace, &t))
 }
 
@@ -314,10 +317,10 @@ pub fn monitor(
     mut show: impl FnMut(Option<&Status>) -> bool,
 ) -> Result<(), OperatorError> {
     use std::sync::atomic::Ordering;
-    let ep = Endpoint::open(namespace, Role::Tool)?;
+    let ep = ToolPorts::open(namespace)?;
     while !stop.load(Ordering::Relaxed) {
         let start = Instant::now();
-        let t = wait_for_telemetry(&ep, interval);
+        let t = ep.wait_for_telemetry(interval);
         if !show(t.map(|t| Status::from_telemetry(namespace, &t)).as_ref()) {
             break;
         }

@@ -11,8 +11,8 @@
 use super::{Dist, ratio};
 use crate::rt::realtime::{LatencyHistogram, Periodic, set_timer_slack_1ns};
 use crate::rt::transport::{
-    CommandSlice, Disturbance, DisturbanceKind, Endpoint, PROTOCOL_VERSION, Role, StateMsg,
-    monotonic_ns, remove_namespace,
+    BoardPorts, CentralPorts, CommandSlice, Disturbance, DisturbanceKind, Header, StateMsg,
+    ToolPorts, monotonic_ns, remove_namespace,
 };
 use iceoryx2::prelude::*;
 use serde::Serialize;
@@ -52,15 +52,13 @@ trait Side {
     fn poll(&mut self) -> Option<(u64, u64, u64)>;
 }
 
-struct VicBoard(Endpoint);
-struct VicPlanner(Endpoint);
+struct VicBoard(BoardPorts);
+struct VicPlanner(CentralPorts);
 
 impl Side for VicBoard {
     fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
         let s = StateMsg {
-            version: PROTOCOL_VERSION,
-            seq,
-            time_ns,
+            header: Header::new(seq, time_ns),
             ..Default::default()
         };
         self.0.publish_state(&s).map_err(|e| e.to_string())
@@ -68,7 +66,7 @@ impl Side for VicBoard {
     fn poll(&mut self) -> Option<(u64, u64, u64)> {
         let mut last = None;
         self.0
-            .drain_commands(|c| last = Some((c.seq, c.time_ns, monotonic_ns())));
+            .drain_commands(|c| last = Some((c.header.seq, c.header.time_ns, monotonic_ns())));
         last
     }
 }
@@ -76,8 +74,7 @@ impl Side for VicBoard {
 impl Side for VicPlanner {
     fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
         let c = CommandSlice {
-            seq,
-            time_ns,
+            header: Header::new(seq, time_ns),
             ..Default::default()
         };
         self.0.publish_command(&c).map_err(|e| e.to_string())
@@ -85,7 +82,7 @@ impl Side for VicPlanner {
     fn poll(&mut self) -> Option<(u64, u64, u64)> {
         let mut last = None;
         self.0
-            .drain_states(|s| last = Some((s.seq, s.time_ns, monotonic_ns())));
+            .drain_states(|s| last = Some((s.header.seq, s.header.time_ns, monotonic_ns())));
         last
     }
 }
@@ -103,9 +100,7 @@ struct Bare<const OUT: usize, const IN: usize> {
 impl<const OUT: usize, const IN: usize> Bare<OUT, IN> {
     fn open(ns: &str, out: &str, input: &str) -> Result<Self, String> {
         set_log_level(LogLevel::Error);
-        let mut cfg = Config::default();
-        cfg.global.prefix = FileName::new(crate::rt::transport::prefix(ns).as_bytes())
-            .map_err(|e| format!("{e:?}"))?;
+        let cfg = crate::rt::transport::namespace::config(ns).map_err(|e| e.to_string())?;
         let node = NodeBuilder::new()
             .config(&cfg)
             .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -254,19 +249,19 @@ fn ping_pong<P: Side, Q: Side>(
 
 type Result<T, E = String> = std::result::Result<T, E>;
 
-/// vic's channels: [`Endpoint`] in the board and planner roles, the real message types.
+/// vic's channels: [`BoardPorts`] and [`CentralPorts`], the real message types.
 pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
     let ns = super::unique_namespace("bi");
     let (a, b) = (ns.clone(), ns.clone());
     let r = ping_pong(
         iterations,
         move || {
-            Endpoint::open(&a, Role::Board)
+            BoardPorts::open(&a)
                 .map(VicBoard)
                 .map_err(|e| e.to_string())
         },
         move || {
-            Endpoint::open(&b, Role::Planner)
+            CentralPorts::open(&b)
                 .map(VicPlanner)
                 .map_err(|e| e.to_string())
         },
@@ -345,7 +340,7 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
             .spawn()
             .map_err(|e| format!("cannot start {}: {e}", o.board_bin.display()))?,
     );
-    let tool = Endpoint::open(&ns, Role::Tool).map_err(|e| e.to_string())?;
+    let tool = ToolPorts::open(&ns).map_err(|e| e.to_string())?;
     let t0 = std::time::Instant::now();
     while tool.latest_state().is_none() {
         if t0.elapsed() > Duration::from_secs(10) {
@@ -389,7 +384,7 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
                 if let Some((seq, t_inject)) = pending
                     && s.disturbance_seq >= seq
                 {
-                    effect.record(s.time_ns.saturating_sub(t_inject));
+                    effect.record(s.header.time_ns.saturating_sub(t_inject));
                     observed.record(monotonic_ns().saturating_sub(t_inject));
                     pending = None;
                 }
@@ -398,7 +393,7 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
             monotonic_ns()
         };
         if let Some(s) = newest {
-            age.record(now.saturating_sub(s.time_ns));
+            age.record(now.saturating_sub(s.header.time_ns));
         }
         if tick.is_multiple_of(100) && pending.is_none() {
             // At a phase spread over the period (379 µs steps), not on the board's deadlines.
@@ -406,13 +401,12 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
             crate::rt::realtime::sleep_until(wake.deadline_ns + (pulse_seq * 379_000) % 900_000, 0);
             let t = monotonic_ns();
             let d = Disturbance {
-                version: PROTOCOL_VERSION,
+                header: Header::new(pulse_seq, t),
                 kind: DisturbanceKind::Pulse as u32,
-                seq: pulse_seq,
-                time_ns: t,
                 torque: [0.05, 0.0],
                 duration_ns: 1_000_000,
                 value: 0.0,
+                ..Default::default()
             };
             if tool.publish_disturbance(&d).is_ok() {
                 pending = Some((pulse_seq, t));

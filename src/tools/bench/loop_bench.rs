@@ -6,15 +6,16 @@
 
 use super::{Dist, cyclictest, ratio};
 use crate::planning::scenario::Scenario;
-use crate::rt::board::{Board, BoardConfig, Inputs};
+use crate::rt::board::{Board, Inputs};
 use crate::rt::realtime::{
     BoardHistograms, Periodic, board_tick, lock_memory, set_timer_slack_1ns,
 };
 use crate::rt::sched::{self, SchedPolicy};
 use crate::rt::transport::{
-    CommandSlice, Control, ControlKind, Endpoint, MAX_JOINTS, MAX_KNOTS, PROTOCOL_VERSION, Role,
+    BoardPorts, CentralPorts, CommandSlice, Control, ControlKind, Header, MAX_JOINTS, MAX_KNOTS,
     monotonic_ns, remove_namespace,
 };
+pub use crate::tools::launch::board_config;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -206,11 +207,6 @@ pub struct Baselines {
     pub cyclictest_fifo: Option<BaselineResult>,
 }
 
-/// The board configuration `vic-board` derives from a scenario at 1 kHz.
-pub fn board_config(s: &Scenario, period_ns: u64) -> BoardConfig {
-    crate::tools::launch::board_config(s, period_ns)
-}
-
 /// A full command slice (32 knots) holding `q0` with `stiffness`, for `trial` from trial time
 /// `start_ns`.
 pub fn hold_slice(
@@ -222,10 +218,8 @@ pub fn hold_slice(
     stiffness: f64,
 ) -> CommandSlice {
     let mut c = CommandSlice {
-        version: PROTOCOL_VERSION,
+        header: Header::new(seq, monotonic_ns()),
         joints: dof as u32,
-        seq,
-        time_ns: monotonic_ns(),
         trial,
         start_ns,
         knot_dt_ns: 10_000_000,
@@ -255,22 +249,21 @@ fn load(opts: &Options) -> Result<Plant, String> {
         scenario.model.clone(),
         board_config(&scenario, PERIOD_NS),
         &q0,
-    )?;
+    )
+    .map_err(|e| e.to_string())?;
     Ok(Plant { scenario, q0 })
 }
 
 /// The 50 Hz planner stand-in: resets the board into a trial, then streams hold slices over the
 /// command channel and drains the states, as `vic-planner` does.
 fn planner_thread(ns: String, dof: usize, q0: Vec<f64>, stiffness: f64, stop: Arc<AtomicBool>) {
-    let Ok(ep) = Endpoint::open(&ns, Role::Planner) else {
+    let Ok(ep) = CentralPorts::open(&ns) else {
         return;
     };
     let start = monotonic_ns() + 20_000_000;
     let mut reset = Control {
-        version: PROTOCOL_VERSION,
+        header: Header::new(1, monotonic_ns()),
         kind: ControlKind::Reset as u32,
-        seq: 1,
-        time_ns: monotonic_ns(),
         trial: 1,
         seed: 1,
         start_ns: start,
@@ -327,7 +320,7 @@ fn run_variant_in(
                 refused.push(format!("pin: {e}"));
             }
         }
-        let ep = match Endpoint::open(&ns_loop, Role::Board) {
+        let ep = match BoardPorts::open(&ns_loop) {
             Ok(ep) => ep,
             Err(e) => {
                 let _ = ready_tx.send(Err(e.to_string()));
@@ -338,7 +331,8 @@ fn run_variant_in(
             scenario.model.clone(),
             board_config(&scenario, PERIOD_NS),
             &q0,
-        )?;
+        )
+        .map_err(|e| e.to_string())?;
         let _ = ready_tx.send(Ok(()));
         if let Some(prio) = variant.fifo
             && let Err(e) = sched::set_policy(SchedPolicy::Fifo(prio))

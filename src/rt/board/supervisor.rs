@@ -1,0 +1,156 @@
+//! The board's supervision: which knot acts at each period, and what happens when none should.
+//!
+//! When no valid command covers the present, the last one stays in force for the watchdog time
+//! ([`BoardConfig::watchdog_ns`]); then the board ramps to a *safe hold* (the current position,
+//! the hold stiffness, gravity and field compensated) and resumes when valid commands cover the
+//! present again. Leaving the joint or speed limits latches a fault (ramp to the hold, commands
+//! refused) that only a reset clears.
+
+use super::commands::CommandBuffer;
+use super::plant::SimulatedPlant;
+use super::{BoardConfig, Counters};
+use crate::rt::transport::{Knot, Mode};
+
+/// Why the plant guard latched a fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum FaultReason {
+    None = 0,
+    JointLimit = 1,
+    VelocityLimit = 2,
+    /// The state stopped being finite: the plant is frozen rather than held.
+    NotFinite = 3,
+}
+
+impl FaultReason {
+    pub fn from_u32(v: u32) -> FaultReason {
+        match v {
+            0 => FaultReason::None,
+            1 => FaultReason::JointLimit,
+            2 => FaultReason::VelocityLimit,
+            _ => FaultReason::NotFinite,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultReason::None => "none",
+            FaultReason::JointLimit => "joint-limit",
+            FaultReason::VelocityLimit => "velocity-limit",
+            FaultReason::NotFinite => "not-finite",
+        }
+    }
+}
+
+/// The plant guard: `Some(reason)` when the state `x` has left the configured limits.
+pub(super) fn guard(cfg: &BoardConfig, x: &[f64], dof: usize) -> Option<FaultReason> {
+    if !x.iter().all(|v| v.is_finite()) {
+        return Some(FaultReason::NotFinite);
+    }
+    if (0..dof).any(|i| x[i] < cfg.joint_min[i] || x[i] > cfg.joint_max[i]) {
+        return Some(FaultReason::JointLimit);
+    }
+    if x[dof..2 * dof].iter().any(|v| v.abs() > cfg.velocity_max) {
+        return Some(FaultReason::VelocityLimit);
+    }
+    None
+}
+
+/// The mode, the watchdog and the safe-hold ramp.
+#[derive(Debug, Clone)]
+pub(super) struct Supervisor {
+    pub mode: Mode,
+    pub fault: FaultReason,
+    /// Sequence number of the command slice last used.
+    pub used_command_seq: u64,
+    /// The knot last taken from a valid command, and the trial time it covered last.
+    pub last_knot: Knot,
+    pub last_cover_ns: u64,
+    /// The safe hold: ramp from `hold_from` to `hold_to` starting at trial time `hold_start_ns`.
+    hold_from: Knot,
+    hold_to: Knot,
+    hold_start_ns: u64,
+}
+
+impl Supervisor {
+    /// Idle, with the last knot the hold at the plant's present position.
+    pub fn new(last_knot: Knot) -> Self {
+        Supervisor {
+            mode: Mode::Idle,
+            fault: FaultReason::None,
+            used_command_seq: 0,
+            last_knot,
+            last_cover_ns: 0,
+            hold_from: Knot::default(),
+            hold_to: Knot::default(),
+            hold_start_ns: 0,
+        }
+    }
+
+    /// Starts the ramp from the knot `from` to the safe hold at the plant's position, at trial
+    /// time `t`.
+    pub fn begin_hold(&mut self, from: Knot, t: u64, plant: &SimulatedPlant, cfg: &BoardConfig) {
+        self.hold_from = from;
+        self.hold_to = plant.hold_target(cfg);
+        self.hold_start_ns = t;
+    }
+
+    /// The knot of the safe-hold ramp at trial time `t` (linear in every input, so the joint
+    /// torque stays continuous).
+    fn hold_knot(&self, t: u64, cfg: &BoardConfig) -> Knot {
+        let a = if cfg.ramp_ns == 0 {
+            1.0
+        } else {
+            (t.saturating_sub(self.hold_start_ns) as f64 / cfg.ramp_ns as f64).min(1.0)
+        };
+        self.hold_from.lerp(&self.hold_to, a)
+    }
+
+    /// The knot for the plant period at trial time `t` (the period ends at `now_ns`): the valid
+    /// command covering it; else the last one while the watchdog runs; else the safe-hold ramp.
+    /// `command_age_ns` gets the age of the command used, if one was.
+    #[allow(clippy::too_many_arguments)]
+    pub fn knot_for(
+        &mut self,
+        t: u64,
+        now_ns: u64,
+        commands: &CommandBuffer,
+        plant: &SimulatedPlant,
+        cfg: &BoardConfig,
+        counters: &mut Counters,
+        command_age_ns: &mut Option<u64>,
+    ) -> Knot {
+        if self.mode == Mode::Fault {
+            return self.hold_knot(t, cfg);
+        }
+        if let Some(c) = commands.covering(t) {
+            self.mode = Mode::Running;
+            self.used_command_seq = c.seq;
+            self.last_knot = c.knot;
+            self.last_cover_ns = t;
+            *command_age_ns = Some(now_ns.saturating_sub(c.sent_ns));
+            return c.knot;
+        }
+        if self.mode != Mode::SafeHold {
+            if t < self.last_cover_ns + cfg.watchdog_ns {
+                return self.last_knot;
+            }
+            self.mode = Mode::SafeHold;
+            counters.watchdog_trips += 1;
+            self.begin_hold(self.last_knot, t, plant, cfg);
+        }
+        counters.safe_hold_ticks += 1;
+        self.hold_knot(t, cfg)
+    }
+
+    /// Latches a fault: the guard tripped for `reason`.
+    pub fn latch(&mut self, reason: FaultReason, counters: &mut Counters) {
+        self.mode = Mode::Fault;
+        self.fault = reason;
+        counters.faults += 1;
+    }
+
+    /// Trial time at which the watchdog expires unless a valid command covers the present.
+    pub fn watchdog_deadline_ns(&self, cfg: &BoardConfig) -> u64 {
+        self.last_cover_ns + cfg.watchdog_ns
+    }
+}

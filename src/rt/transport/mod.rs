@@ -1,0 +1,24 @@
+//! Messages between the board, the planner and the command-line tools, and the iceoryx2 services
+//! that carry them.
+//!
+//! - [`protocol`]: the wire types, each led by one [`Header`] (version, sequence number, publish
+//!   time), and the reasons the board rejects a message;
+//! - [`clock`]: the monotonic time base every process of the machine shares;
+//! - [`namespace`]: names, files and dead nodes of a namespace (iceoryx2's `global.prefix`, so
+//!   instances and parallel tests never see each other);
+//! - [`ports`]: one type per role ([`BoardPorts`], [`CentralPorts`], [`ToolPorts`]) with plain
+//!   `publish_*`, `latest_*` and `drain_*` methods; no caller touches an iceoryx2 builder.
+
+pub mod clock;
+pub mod error;
+pub mod namespace;
+pub mod ports;
+pub mod protocol;
+
+pub use clock::{monotonic_ns, session_seq};
+pub use error::TransportError;
+pub use namespace::{
+    DEFAULT_NAMESPACE, dead_nodes, namespace_files, prefix, remove_namespace, validate_namespace,
+};
+pub use ports::{BoardObserver, BoardPorts, CentralPorts, STATE_BUFFER, ToolPorts, board_present};
+pub use protocol::*;
