@@ -136,3 +136,38 @@ fn two_link_vsa_divergent() {
 fn two_link_vsa_light_divergent() {
     check("two_link_vsa_light_divergent");
 }
+
+/// A user who wrote a bad file must know which file and which key to fix: a misspelt key and a
+/// value of the wrong type each name both.
+#[test]
+fn a_misspelt_key_and_a_wrong_type_name_the_file_and_the_key() {
+    let path = config_dir().join("icub_elbow.toml");
+    let text = std::fs::read_to_string(&path).expect("scenario file");
+    let cases = [
+        ("dt = 0.01", "dtt = 0.01", "[task] dtt"),
+        ("dt = 0.01", "dt = \"0.01\"", "[task] dt"),
+        (
+            "type = \"impedance\"",
+            "typ = \"impedance\"",
+            "[actuator] type: missing, required",
+        ),
+        ("type = \"impedance\"", "type = 3", "[actuator] type"),
+        ("w_p = 1e6", "w_p = [1e6]", "[cost] w_p"),
+    ];
+    for (from, to, key) in cases {
+        assert!(
+            text.contains(from),
+            "icub_elbow.toml no longer contains {from}"
+        );
+        let bad = std::env::temp_dir().join(format!("vic_bad_key_{}.toml", std::process::id()));
+        std::fs::write(&bad, text.replacen(from, to, 1)).expect("temporary file");
+        let e = Scenario::load(&bad, &[])
+            .expect_err(&format!("{to} must be refused"))
+            .to_string();
+        std::fs::remove_file(&bad).ok();
+        assert!(
+            e.contains(&bad.display().to_string()) && e.contains(key),
+            "{to}: the message must name the file and {key}: {e}"
+        );
+    }
+}

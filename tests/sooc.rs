@@ -820,11 +820,8 @@ fn check_covariance(what: &str, setup: &Setup, acting: &[DVector<f64>], seed: u6
     // Monte Carlo side maps every trial through the nonlinear kinematics.
     let (end_pred, std_pred) = final_position_covariance(model, &pred.mean[steps], predicted);
     let end_mc = final_position_sample_covariance(model, &trials);
-    let (unit, scale) = if dof == 1 {
-        ("deg", 1f64.to_degrees())
-    } else {
-        ("mm", 1000.0)
-    };
+    let unit = vic::planning::unit::Unit::for_model(model);
+    let scale = unit.scale();
     eprintln!(
         "{what}: {COVARIANCE_TRIALS} trials in {:.2} s; final end-point sd {std_pred:.4} {unit} \
          predicted, {:.4} {unit} Monte Carlo",

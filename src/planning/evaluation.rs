@@ -1,21 +1,22 @@
-//! What a Monte Carlo evaluation reports: final spread, 95 % confidence ellipse,
-//! tracking and final errors, divergence, and the Monte Carlo expected cost next to the predicted.
+//! What a Monte Carlo evaluation reports: final spread, 95 % confidence ellipse, tracking and
+//! final errors, divergence, and the Monte Carlo expected cost (the Eq. 14 cost averaged over
+//! trials) next to the predicted one.
 
-use crate::core::model::ArmModel;
 use crate::planning::montecarlo::{Trial, position};
 use crate::planning::plan::Setup;
+use crate::planning::unit::Unit;
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
 /// χ²(2) quantile at 95 %: the 95 % ellipse of a 2-D Gaussian is `dᵀ Σ⁻¹ d ≤ 5.991`.
 const CHI2_2_95: f64 = 5.991_464_547_107_979;
 
-/// The summary of a set of trials. Positions are the hand [mm] for the arm and the joint angle
-/// [deg] for a single joint (`unit` says which).
+/// The summary of a set of trials. Positions are in `unit`: the hand [mm] for the arm, the joint
+/// angle [deg] for a single joint.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Report {
     pub trials: usize,
-    pub unit: String,
+    pub unit: Unit,
     /// Mean final position.
     pub final_mean: Vec<f64>,
     /// Standard deviation of the final position: the largest principal axis for the hand.
@@ -33,26 +34,19 @@ pub struct Report {
     /// Trials that ended further than the divergence threshold from the target (or blew up).
     pub diverged: usize,
     pub diverged_fraction: f64,
-    /// Fraction of trials ending more than 5 cm (arm) or 5° (joint) from the target.
+    /// Fraction of trials ending further than [`Unit::far_threshold`] from the target.
     pub far_fraction: f64,
     /// Monte Carlo expected cost and its standard error.
     pub expected_cost_mc: f64,
     pub expected_cost_se: f64,
 }
 
-fn scale(model: &ArmModel) -> (f64, &'static str) {
-    if model.dof() == 1 {
-        (1.0_f64.to_degrees(), "deg")
-    } else {
-        (1000.0, "mm")
-    }
-}
-
 /// Summarises `trials` run on `setup`; a trial diverged when its final position is further than
 /// `divergence` (in the report's unit) from the target.
 pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
     let model = &setup.dynamics.model;
-    let (k, unit) = scale(model);
+    let unit = Unit::for_model(model);
+    let k = unit.scale();
     let steps = setup.reference.len() - 1;
     let target = |i: usize| -> Vec<f64> {
         let r = &setup.reference[i];
@@ -76,37 +70,13 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         .iter()
         .map(|t| position(model, &t.x[steps]))
         .collect();
-    let dim = goal.len();
     let count = trials.len() as f64;
-    let mut mean = vec![0.0; dim];
-    for f in &finals {
-        for (m, v) in mean.iter_mut().zip(f) {
-            *m += v / count;
-        }
-    }
-    let mut cov = [[0.0; 2]; 2];
-    for f in &finals {
-        for a in 0..dim {
-            for b in 0..dim {
-                cov[a][b] += (f[a] - mean[a]) * (f[b] - mean[b]) / (count - 1.0).max(1.0);
-            }
-        }
-    }
-    let (ellipse_95, angle, final_std) = if dim == 1 {
-        let sd = cov[0][0].sqrt() * k;
-        (vec![1.959_963_984_540_054 * sd], 0.0, sd)
-    } else {
-        let (a, b, c) = (cov[0][0], cov[0][1], cov[1][1]);
-        let tr = a + c;
-        let disc = ((a - c) * (a - c) / 4.0 + b * b).sqrt();
-        let (l1, l2) = (tr / 2.0 + disc, (tr / 2.0 - disc).max(0.0));
-        let angle = 0.5 * (2.0 * b).atan2(a - c);
-        (
-            vec![(CHI2_2_95 * l1).sqrt() * k, (CHI2_2_95 * l2).sqrt() * k],
-            angle.to_degrees(),
-            l1.sqrt() * k,
-        )
-    };
+    let Spread {
+        mean,
+        ellipse_95,
+        angle,
+        final_std,
+    } = spread(&finals, goal.len(), k);
     let mut sq = 0.0;
     let mut n = 0.0;
     let targets: Vec<Vec<f64>> = (0..=steps).map(target).collect();
@@ -128,7 +98,7 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         costs.iter().map(|c| (c - cost_mean).powi(2)).sum::<f64>() / (count - 1.0).max(1.0);
     Report {
         trials: trials.len(),
-        unit: unit.into(),
+        unit,
         final_mean: mean.iter().map(|m| m * k).collect(),
         final_std,
         ellipse_95,
@@ -140,12 +110,61 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         diverged_fraction: diverged as f64 / count,
         far_fraction: final_errors
             .iter()
-            .filter(|e| {
-                !e.is_finite() || **e > 50.0_f64.min(if model.dof() == 1 { 5.0 } else { 50.0 })
-            })
+            .filter(|e| !e.is_finite() || **e > unit.far_threshold())
             .count() as f64
             / count,
         expected_cost_mc: cost_mean,
         expected_cost_se: (cost_var / count).sqrt(),
+    }
+}
+
+/// The spread of final positions (`dim` coordinates in SI units, `k` the report unit's scale).
+struct Spread {
+    /// Mean final position (SI units).
+    mean: Vec<f64>,
+    ellipse_95: Vec<f64>,
+    /// Orientation of the major axis [deg].
+    angle: f64,
+    final_std: f64,
+}
+
+/// Sample mean and covariance of the final positions, and from them the 95 % confidence ellipse
+/// (χ²(2) for the hand, the normal 95 % half-width for a joint).
+fn spread(finals: &[Vec<f64>], dim: usize, k: f64) -> Spread {
+    let count = finals.len() as f64;
+    let mut mean = vec![0.0; dim];
+    for f in finals {
+        for (m, v) in mean.iter_mut().zip(f) {
+            *m += v / count;
+        }
+    }
+    let mut cov = [[0.0_f64; 2]; 2];
+    for f in finals {
+        for a in 0..dim {
+            for b in 0..dim {
+                cov[a][b] += (f[a] - mean[a]) * (f[b] - mean[b]) / (count - 1.0).max(1.0);
+            }
+        }
+    }
+    let (ellipse_95, angle, final_std) = if dim == 1 {
+        let sd = cov[0][0].sqrt() * k;
+        (vec![1.959_963_984_540_054 * sd], 0.0, sd)
+    } else {
+        let (a, b, c) = (cov[0][0], cov[0][1], cov[1][1]);
+        let tr = a + c;
+        let disc = ((a - c) * (a - c) / 4.0 + b * b).sqrt();
+        let (l1, l2) = (tr / 2.0 + disc, (tr / 2.0 - disc).max(0.0));
+        let angle = 0.5 * (2.0 * b).atan2(a - c);
+        (
+            vec![(CHI2_2_95 * l1).sqrt() * k, (CHI2_2_95 * l2).sqrt() * k],
+            angle.to_degrees(),
+            l1.sqrt() * k,
+        )
+    };
+    Spread {
+        mean,
+        ellipse_95,
+        angle,
+        final_std,
     }
 }

@@ -1,10 +1,15 @@
 //! From a scenario file to a plan and its offline evaluation: [`scenario`] (the TOML files,
-//! validated), [`reference`] (the desired movement), [`plan`] (set-up, solving, the plan file),
-//! [`montecarlo`] (seeded trials on the stochastic plant) and [`evaluation`] (statistics in the
-//! units a reader expects).
+//! validated), [`reference`] (the desired movement), [`setup`] (the Eq. 10 model, the Eq. 14 cost
+//! and the warm start), [`plan`] (solving with a [`method`]), [`plan_file`] (what `vic plan`
+//! writes and the other commands read), [`montecarlo`] (seeded trials on the stochastic plant) and
+//! [`evaluation`] (statistics in the [`unit`] a reader expects).
 
 pub mod evaluation;
+pub mod method;
 pub mod montecarlo;
 pub mod plan;
+pub mod plan_file;
 pub mod reference;
 pub mod scenario;
+pub mod setup;
+pub mod unit;

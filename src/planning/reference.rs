@@ -37,6 +37,15 @@ pub fn joint_minimum_jerk(
         .collect()
 }
 
+/// Why a straight hand path cannot be followed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PathError {
+    #[error("hand position ({x:.3}, {y:.3}) m is out of reach")]
+    OutOfReach { x: f64, y: f64 },
+    #[error("the path passes a singular arm posture at ({x:.3}, {y:.3}) m")]
+    Singular { x: f64, y: f64 },
+}
+
 /// Reference at knots `k = 0..=steps` for a straight hand path `p0 → p1` with a minimum-jerk speed
 /// profile, through inverse kinematics (`q_d' = J⁻¹ p'`). Fails if a point is out of reach or the
 /// arm passes a singularity.
@@ -47,22 +56,19 @@ pub fn hand_straight_line(
     duration: f64,
     dt: f64,
     steps: usize,
-) -> Result<Vec<Exogenous>, String> {
+) -> Result<Vec<Exogenous>, PathError> {
     (0..=steps)
         .map(|k| {
             let (s, ds) = minimum_jerk(k as f64 * dt, duration);
             let p = [p0[0] + (p1[0] - p0[0]) * s, p0[1] + (p1[1] - p0[1]) * s];
             let v = [(p1[0] - p0[0]) * ds, (p1[1] - p0[1]) * ds];
-            let q = plant.inverse_kinematics(p).ok_or_else(|| {
-                format!("hand position ({:.3}, {:.3}) m is out of reach", p[0], p[1])
-            })?;
+            let q = plant
+                .inverse_kinematics(p)
+                .ok_or(PathError::OutOfReach { x: p[0], y: p[1] })?;
             let j = plant.jacobian(&q);
             let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
             if det.abs() < 1e-9 {
-                return Err(format!(
-                    "the path passes a singular arm posture at ({:.3}, {:.3}) m",
-                    p[0], p[1]
-                ));
+                return Err(PathError::Singular { x: p[0], y: p[1] });
             }
             let qd = [
                 (j[1][1] * v[0] - j[0][1] * v[1]) / det,

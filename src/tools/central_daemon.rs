@@ -82,7 +82,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     };
     let mut central = Central::new(track, o.strategy, timing);
     let records = run_trials(o, &mut central, &setup.x0, period_ns)?;
-    let divergence = divergence_or_default(o.divergence, setup.dynamics.model.dof());
+    let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
     let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
     if o.json {
         print_json(&result)

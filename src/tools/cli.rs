@@ -179,10 +179,10 @@ pub fn non_negative_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::tim
     Ok(std::time::Duration::from_secs_f64(seconds))
 }
 
-/// The distance beyond which a trial counts as diverged: 10° for a single joint, 50 mm for the
-/// arm, unless the user chose one.
-pub fn divergence_or_default(chosen: Option<f64>, dof: usize) -> f64 {
-    chosen.unwrap_or(if dof == 1 { 10.0 } else { 50.0 })
+/// The distance beyond which a trial counts as diverged: the user's, else the default of the
+/// model's unit (10° for a single joint, 50 mm for the arm).
+pub fn divergence_or_default(chosen: Option<f64>, model: &crate::core::model::ArmModel) -> f64 {
+    chosen.unwrap_or_else(|| crate::planning::unit::Unit::for_model(model).default_divergence())
 }
 
 /// A stop flag set by SIGINT or SIGTERM.

@@ -304,7 +304,9 @@ fn document(
 }
 
 fn print_table(results: &[StrategyResult], stats: &Value) {
-    let unit = results.first().map_or("mm".to_string(), |r| r.unit.clone());
+    let unit = results
+        .first()
+        .map_or(crate::planning::unit::Unit::Millimetre, |r| r.unit);
     println!(
         "{:<17} {:>8} {:>10} {:>12} {:>10} {:>9} {:>26} {:>6}",
         "strategy",

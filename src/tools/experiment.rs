@@ -12,6 +12,7 @@ use crate::planning::evaluation::{Report, summarize};
 use crate::planning::montecarlo::{Trial, run_trials};
 use crate::planning::plan::{Method, PlanFile, ProgressFn, plan, setup};
 use crate::planning::scenario::Scenario;
+use crate::planning::unit::Unit;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -196,8 +197,11 @@ pub struct ColumnData {
 pub enum ExperimentError {
     #[error(transparent)]
     Config(#[from] crate::planning::scenario::ConfigError),
-    #[error("{0}")]
-    Plan(String),
+    #[error("{}: {source}", path.display())]
+    Plan {
+        path: PathBuf,
+        source: crate::planning::plan::PlanError,
+    },
 }
 
 /// Runs every column of `figure` with scenarios from `config_dir`.
@@ -217,11 +221,13 @@ pub fn run(
         let path: PathBuf = config_dir.join(spec.file);
         let overrides: Vec<String> = spec.overrides.iter().map(|s| s.to_string()).collect();
         let scenario = Scenario::load(&path, &overrides)?;
-        let plan_file = plan(&scenario, spec.method, progress.clone())
-            .map_err(|e| ExperimentError::Plan(format!("{}: {e}", path.display())))?;
-        let set = setup(&scenario)
-            .map_err(|e| ExperimentError::Plan(format!("{}: {e}", path.display())))?;
-        let exe = plan_file.policy(&set).map_err(ExperimentError::Plan)?;
+        let plan_error = |source| ExperimentError::Plan {
+            path: path.clone(),
+            source,
+        };
+        let plan_file = plan(&scenario, spec.method, progress.clone()).map_err(plan_error)?;
+        let set = setup(&scenario).map_err(plan_error)?;
+        let exe = plan_file.policy(&set).map_err(plan_error)?;
         let (policy, predicted) = match spec.execution {
             Execution::OpenLoop => (
                 Feedback::OpenLoop,
@@ -274,8 +280,8 @@ fn column_result(
     predicted: f64,
     trials: &[Trial],
 ) -> ColumnResult {
-    let arm = set.dynamics.model.dof() == 2;
-    let report = summarize(set, trials, if arm { 50.0 } else { 10.0 });
+    let unit = Unit::for_model(&set.dynamics.model);
+    let report = summarize(set, trials, unit.default_divergence());
     let s = &plan_file.summary;
     ColumnResult {
         name: name.into(),
@@ -290,8 +296,8 @@ fn column_result(
             }
             Feedback::Predicted { latency_steps } => format!("predictor ({latency_steps} steps)"),
         },
-        final_std_mm: arm.then_some(report.final_std),
-        final_std_deg: (!arm).then_some(report.final_std),
+        final_std_mm: (unit == Unit::Millimetre).then_some(report.final_std),
+        final_std_deg: (unit == Unit::Degree).then_some(report.final_std),
         rms_error: report.rms_error,
         diverged_fraction: report.diverged_fraction,
         expected_cost_mc: report.expected_cost_mc,
@@ -310,8 +316,12 @@ pub fn resimulate(run: &ExperimentRun, seed: u64) -> Result<ExperimentRun, Exper
     let mut columns = Vec::new();
     let mut data = Vec::new();
     for (c, d) in run.columns.iter().zip(&run.data) {
-        let set = setup(&d.scenario).map_err(ExperimentError::Plan)?;
-        let exe = d.plan.policy(&set).map_err(ExperimentError::Plan)?;
+        let plan_error = |source| ExperimentError::Plan {
+            path: d.scenario.source.clone(),
+            source,
+        };
+        let set = setup(&d.scenario).map_err(plan_error)?;
+        let exe = d.plan.policy(&set).map_err(plan_error)?;
         let trials = run_trials(&set, &exe, d.policy, run.trials, seed);
         let method = if c.method == "sooc" {
             Method::Sooc

@@ -46,7 +46,7 @@ pub fn board_config(s: &Scenario, period_ns: u64) -> BoardConfig {
 /// The track the central controller plays back for `plan` on the scenario set up as `setup`.
 pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, String> {
     Track::new(
-        plan.policy(setup)?,
+        plan.policy(setup).map_err(|e| e.to_string())?,
         setup.reference.clone(),
         &setup.x0,
         setup.dynamics.model.dof(),

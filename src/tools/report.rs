@@ -37,7 +37,7 @@ pub struct StrategyResult {
     pub command_latency_ms: f64,
     pub trials: usize,
     /// Unit of the errors: "mm" (hand) or "deg" (joint).
-    pub unit: String,
+    pub unit: crate::planning::unit::Unit,
     pub rms_error: f64,
     pub final_error_mean: f64,
     pub final_error_max: f64,
@@ -64,11 +64,7 @@ pub fn summarize(
     let trials = to_trials(setup, records);
     let report = crate::planning::evaluation::summarize(setup, &trials, divergence);
     let model = &setup.dynamics.model;
-    let scale = if model.dof() == 1 {
-        1.0_f64.to_degrees()
-    } else {
-        1000.0
-    };
+    let scale = report.unit.scale();
     let steps = setup.reference.len() - 1;
     let target = |k: usize| {
         let mut x = DVector::zeros(model.nx());
@@ -114,7 +110,7 @@ pub fn summarize(
         sensor_latency_ms: t.sensor_latency_ns as f64 * 1e-6,
         command_latency_ms: t.command_latency_ns as f64 * 1e-6,
         trials: records.len(),
-        unit: report.unit.clone(),
+        unit: report.unit,
         rms_error: if report.rms_error.is_finite() {
             report.rms_error
         } else {

@@ -53,7 +53,7 @@ pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
         .map_err(|e| format!("{}: {e}", o.plan.display()))
         .input()?;
     let feedback = feedback(o.execution, &plan, scenario.task.dt)?;
-    let divergence = divergence_or_default(o.divergence, setup.dynamics.model.dof());
+    let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
     let trials = run_trials(&setup, &policy, feedback, o.trials, o.seed);
     let report = summarize(&setup, &trials, divergence);
     if let Some(path) = &o.csv {

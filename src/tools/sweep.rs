@@ -12,6 +12,7 @@ use crate::planning::evaluation::summarize;
 use crate::planning::montecarlo::run_trials;
 use crate::planning::plan::{Method, PlanFile, plan, setup};
 use crate::planning::scenario::Scenario;
+use crate::planning::unit::Unit;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -117,7 +118,7 @@ pub struct SweepPoint {
     /// where the plan predicts another policy than the one executed.
     pub expected_cost_predicted: Option<f64>,
     pub mean_stiffness: f64,
-    pub unit: String,
+    pub unit: Unit,
 }
 
 /// The whole curve.
@@ -147,17 +148,23 @@ pub fn sweep_latency(
             progress(&format!("{} at {latency_ms} ms", strategy.name()));
             if cached.is_none() || strategy.plan_per_latency() {
                 let s = load(strategy.overrides(latency_ms))?;
-                let p = plan(&s, strategy.method(), None)?;
+                let p = plan(&s, strategy.method(), None).map_err(|e| e.to_string())?;
                 cached = Some((s, p));
             }
             let (s, p) = cached.as_ref().expect("planned above");
-            let set = setup(s)?;
+            let set = setup(s).map_err(|e| e.to_string())?;
             let steps = latency_steps(latency_ms, s.task.dt)?;
             let feedback = strategy.feedback(steps);
-            let trials = run_trials(&set, &p.policy(&set)?, feedback, opts.trials, opts.seed);
-            let divergence =
-                opts.divergence
-                    .unwrap_or(if s.model.dof() == 1 { 10.0 } else { 50.0 });
+            let trials = run_trials(
+                &set,
+                &p.policy(&set).map_err(|e| e.to_string())?,
+                feedback,
+                opts.trials,
+                opts.seed,
+            );
+            let divergence = opts
+                .divergence
+                .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
             let r = summarize(&set, &trials, divergence);
             let kept = r.diverged < r.trials;
             let finite = |v: f64| (kept && v.is_finite()).then_some(v);
@@ -175,7 +182,7 @@ pub fn sweep_latency(
                     _ => None,
                 },
                 mean_stiffness: p.summary.mean_stiffness,
-                unit: r.unit.clone(),
+                unit: r.unit,
             });
         }
     }
@@ -223,7 +230,7 @@ pub fn write_figure(
             .points
             .push((p.latency_ms, p.final_error_mean, p.final_error_max));
     }
-    let unit = sweep.points.first().map_or("", |p| p.unit.as_str());
+    let unit = sweep.points.first().map_or("", |p| p.unit.name());
     crate::tools::plot::curve_figure(
         &curves,
         &format!("Delay versus stiffness ({} trials)", sweep.trials),

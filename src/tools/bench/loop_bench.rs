@@ -241,7 +241,7 @@ struct Plant {
 
 fn load(opts: &Options) -> Result<Plant, String> {
     let scenario = Scenario::load(&opts.config, &opts.overrides).map_err(|e| e.to_string())?;
-    let setup = crate::planning::plan::setup(&scenario)?;
+    let setup = crate::planning::plan::setup(&scenario).map_err(|e| e.to_string())?;
     let dof = scenario.model.dof();
     let q0 = setup.x0[..dof].to_vec();
     // Fail early (bad actuator) rather than inside a thread.

@@ -1,0 +1,68 @@
+//! The `[solver]` section: the planning method and the solver's options.
+
+use super::error::{ConfigError, FileCheck};
+use super::raw::RawSolver;
+use crate::core::solver::IlqgOptions;
+use crate::planning::method::Method;
+
+/// The `[solver]` section: the method and the solver's options (every key optional).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IlqgSection {
+    /// The planning method.
+    pub method: Method,
+    pub options: IlqgOptions,
+    /// SOOC: fractions of the noise solved in turn, ending at 1 (default [0.1, 0.3, 1.0]).
+    pub noise_continuation: Vec<f64>,
+}
+
+impl Default for IlqgSection {
+    fn default() -> Self {
+        let raw = RawSolver::default();
+        IlqgSection {
+            method: raw.method,
+            options: raw.options(),
+            noise_continuation: raw.noise_continuation,
+        }
+    }
+}
+
+impl RawSolver {
+    fn options(&self) -> IlqgOptions {
+        IlqgOptions {
+            max_iterations: self.max_iterations,
+            tolerance: self.tolerance,
+            gradient_tolerance: self.gradient_tolerance,
+            mu_init: self.mu_init,
+            mu_min: self.mu_min,
+            mu_max: self.mu_max,
+            stochastic: self.stochastic,
+            damp_short_steps: self.damp_short_steps,
+            shrink_below_step: IlqgOptions::default().shrink_below_step,
+        }
+    }
+
+    /// Checks the options: the continuation must end at the full noise, the iteration limit and
+    /// the regularisation must leave the solver room to work.
+    pub(super) fn resolve(self, check: &FileCheck) -> Result<IlqgSection, ConfigError> {
+        let fractions = &self.noise_continuation;
+        if fractions.last() != Some(&1.0) || fractions.iter().any(|f| !(f.is_finite() && *f > 0.0))
+        {
+            return Err(check.invalid(
+                "solver",
+                "noise_continuation",
+                format!("must be positive fractions ending with 1.0, got {fractions:?}"),
+            ));
+        }
+        if self.max_iterations == 0 {
+            return Err(check.invalid("solver", "max_iterations", "must be at least 1"));
+        }
+        check.non_negative(self.tolerance, "solver", "tolerance")?;
+        check.non_negative(self.mu_init, "solver", "mu_init")?;
+        check.positive(self.mu_max, "solver", "mu_max")?;
+        Ok(IlqgSection {
+            method: self.method,
+            options: self.options(),
+            noise_continuation: self.noise_continuation,
+        })
+    }
+}

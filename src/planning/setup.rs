@@ -1,0 +1,180 @@
+//! Everything needed to solve a scenario with any method: the Eq. 10 discrete model, the Eq. 14
+//! cost, the start state and a warm start from inverse dynamics.
+
+use crate::core::cost::TrackingCost;
+use crate::core::dynamics::EulerModel;
+use crate::core::model::{Actuator, ArmModel, Exogenous};
+use crate::core::solver::Bounds;
+use crate::planning::reference::{self, PathError};
+use crate::planning::scenario::{Scenario, Task, TaskPath};
+use nalgebra::DVector;
+
+/// Why a scenario cannot be planned, or a plan not executed on it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// The hand path of the task cannot be followed.
+    #[error("{0}")]
+    Path(#[from] PathError),
+    /// A VSA's warm start puts the spring at the motor angle that delivers the torque: it needs a
+    /// spring.
+    #[error("a VSA plan needs [actuator] initial_stiffness > 0")]
+    VsaWithoutStiffness,
+    /// A plan file read back for a scenario it was not made from.
+    #[error("the plan has {plan} steps, the scenario {scenario}: plan and scenario do not match")]
+    StepsMismatch { plan: usize, scenario: usize },
+    #[error("the plan's controls/states are not {nu}/{nx}-dimensional like the scenario's")]
+    DimensionMismatch { nu: usize, nx: usize },
+    /// The solver could not start or failed (its message, with the phase that failed).
+    #[error("{0}")]
+    Solver(String),
+}
+
+/// The solver's failures arrive as messages naming the phase that failed.
+impl From<String> for PlanError {
+    fn from(message: String) -> Self {
+        PlanError::Solver(message)
+    }
+}
+
+/// Everything needed to solve a scenario with any method.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    pub dynamics: EulerModel,
+    pub cost: TrackingCost,
+    /// Initial state x₀ (start posture at rest).
+    pub x0: Vec<f64>,
+    /// Initial guess: inverse dynamics along the reference with the configured initial stiffness.
+    pub u_init: Vec<DVector<f64>>,
+    pub bounds: Bounds,
+    pub reference: Vec<Exogenous>,
+}
+
+/// Builds the discrete model, the cost, the start state and the warm start of a scenario.
+pub fn setup(s: &Scenario) -> Result<Setup, PlanError> {
+    let model = &s.model;
+    let (dof, nx, nu) = (model.dof(), model.nx(), model.nu());
+    let task = &s.task;
+    let reference = reference_of(task, model)?;
+    let tau = inverse_dynamics(model, task, &reference);
+    let mut x0 = vec![0.0; nx];
+    x0[..dof].copy_from_slice(&reference[0].q_d[..dof]);
+    let u_init = warm_start(s, &reference, &tau, &mut x0)?;
+    let mut control_weights = vec![s.weights.w_torque; dof];
+    control_weights.extend(std::iter::repeat_n(s.weights.w_stiffness, nu - dof));
+    let cost = TrackingCost {
+        dof,
+        nx,
+        control_weights,
+        w_p: s.weights.w_p,
+        w_v: s.weights.w_v,
+        dt: task.dt,
+        reference: reference.clone(),
+    };
+    let dynamics = EulerModel {
+        model: model.clone(),
+        dt: task.dt,
+        substeps: task.substeps,
+        integrator: task.integrator,
+        exogenous: reference.clone(),
+    };
+    Ok(Setup {
+        dynamics,
+        cost,
+        x0,
+        u_init,
+        bounds: s.bounds.clone(),
+        reference,
+    })
+}
+
+/// The reference `q_d`, `q_d'` at the knots `0..=N`.
+fn reference_of(task: &Task, model: &ArmModel) -> Result<Vec<Exogenous>, PathError> {
+    let steps = task.steps;
+    Ok(match &task.path {
+        TaskPath::Joint { start, target } => {
+            reference::joint_minimum_jerk(start, target, task.duration, task.dt, steps)
+        }
+        TaskPath::Hand { start, target } => reference::hand_straight_line(
+            &model.plant,
+            *start,
+            *target,
+            task.duration,
+            task.dt,
+            steps,
+        )?,
+    })
+}
+
+/// Joint torques along the reference by inverse dynamics (`q''` by central differences of `q_d'`).
+fn inverse_dynamics(model: &ArmModel, task: &Task, reference: &[Exogenous]) -> Vec<[f64; 2]> {
+    let (dof, steps) = (model.dof(), task.steps);
+    let qdd = |k: usize, i: usize| {
+        let (a, b) = (k.saturating_sub(1), (k + 1).min(steps));
+        (reference[b].qd_d[i] - reference[a].qd_d[i]) / ((b - a) as f64 * task.dt)
+    };
+    (0..=steps)
+        .map(|k| {
+            let r = &reference[k];
+            let acc = [qdd(k, 0), if dof > 1 { qdd(k, 1) } else { 0.0 }];
+            model.inverse_dynamics(&r.q_d[..dof], &r.qd_d[..dof], &acc[..dof])
+        })
+        .collect()
+}
+
+/// The solver's initial guess: the torques `tau` with the configured initial stiffness; for a VSA
+/// the motor torques that move the motors to where the springs deliver `tau` (which also sets the
+/// motor angles of `x0`).
+fn warm_start(
+    s: &Scenario,
+    reference: &[Exogenous],
+    tau: &[[f64; 2]],
+    x0: &mut [f64],
+) -> Result<Vec<DVector<f64>>, PlanError> {
+    let model = &s.model;
+    let (dof, nu, steps, dt) = (model.dof(), model.nu(), s.task.steps, s.task.dt);
+    let k0 = s.initial_stiffness;
+    Ok(match &model.actuator {
+        Actuator::Torque => (0..steps)
+            .map(|k| DVector::from_column_slice(&tau[k][..dof]))
+            .collect(),
+        Actuator::Impedance { .. } => (0..steps)
+            .map(|k| {
+                let mut u = DVector::from_element(nu, k0);
+                u.rows_mut(0, dof).copy_from_slice(&tau[k][..dof]);
+                u
+            })
+            .collect(),
+        Actuator::Vsa { motor_inertia } => {
+            if k0 <= 0.0 {
+                return Err(PlanError::VsaWithoutStiffness);
+            }
+            let theta: Vec<[f64; 2]> = (0..=steps)
+                .map(|k| {
+                    let mut t = [0.0; 2];
+                    for i in 0..dof {
+                        t[i] = reference[k].q_d[i] + tau[k][i] / k0;
+                    }
+                    t
+                })
+                .collect();
+            for i in 0..dof {
+                x0[2 * dof + i] = theta[0][i];
+            }
+            (0..steps)
+                .map(|k| {
+                    let mut u = DVector::from_element(nu, k0);
+                    for i in 0..dof {
+                        let (a, b) = (k.saturating_sub(1), (k + 1).min(steps));
+                        let acc = if b - a == 2 {
+                            (theta[b][i] - 2.0 * theta[k][i] + theta[a][i]) / (dt * dt)
+                        } else {
+                            0.0
+                        };
+                        u[i] = motor_inertia[i] * acc + tau[k][i];
+                    }
+                    u
+                })
+                .collect()
+        }
+    })
+}
