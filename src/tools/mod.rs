@@ -1,12 +1,32 @@
-//! What the binaries call: [`operator`] (inject, status, monitor), [`experiment`] (the paper's
-//! figures), [`identify`] (noise identification), [`plot`], [`bench`] and [`launch`] (turning a
-//! scenario into the board's and the central controller's configuration).
+//! What the binaries call. The binaries only parse their flags; each command is one call here:
+//!
+//! - [`cli`]: what the three binaries share: the error convention (exit 2 for the user's input,
+//!   1 for a failure) and the argument groups (`--namespace`, `--config` with `--set`, `--seed`,
+//!   `--json`).
+//! - One module per command: [`plan_command`] (`vic plan`), [`simulate`], [`reproduce`]
+//!   (`vic experiment`, `vic results`), [`identify_command`], [`demo`], [`operator_command`]
+//!   (`vic inject`, `status`, `monitor`), [`bench_command`], [`board_daemon`] (`vic-board`) and
+//!   [`central_daemon`] (`vic-planner`).
+//! - The work they share: [`operator`] (inject, status, monitor), [`experiment`] (the paper's
+//!   figures), [`sweep`] (delay versus stiffness over latencies), [`identify`] (noise
+//!   identification), [`plot`], [`bench`], [`report`] (a live run's results) and [`launch`]
+//!   (turning a scenario into the board's and the central controller's configuration).
 
 pub mod bench;
+pub mod bench_command;
+pub mod board_daemon;
+pub mod central_daemon;
+pub mod cli;
+pub mod demo;
 pub mod experiment;
 pub mod identify;
+pub mod identify_command;
 pub mod launch;
 pub mod operator;
+pub mod operator_command;
+pub mod plan_command;
 pub mod plot;
 pub mod report;
+pub mod reproduce;
+pub mod simulate;
 pub mod sweep;

@@ -1,0 +1,122 @@
+//! `vic bench loop` and `vic bench ipc`: flags, then [`vic::tools::bench_command`].
+
+use clap::Subcommand;
+use std::path::PathBuf;
+use vic::tools::bench::loop_bench;
+use vic::tools::bench_command::{PairRequest, run_ipc, run_loop};
+use vic::tools::cli::{DefaultScenarioArgs, JsonArg};
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    which: BenchCommand,
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// The board's periodic loop at 1 kHz with its real work (the scenario's plant, a 50 Hz
+    /// planner thread streaming hold commands over the transport), under each option real-time
+    /// loops use: default vs 1 ns timer slack, a 100 µs spin before the deadline, mlockall, CPU
+    /// pinning, SCHED_FIFO 80 (when permitted). Then cyclictest -i1000 for the same duration
+    /// (default scheduler, and -p80 when a FIFO variant ran). Runs are sequential; the whole
+    /// bench takes about (variants + 2) × --seconds.
+    ///
+    /// Reports wake-up lateness (p50/p99/p99.9/max), tick work and CPU use per variant, and the
+    /// ratio to cyclictest's p99. Without cyclictest (`apt-get install rt-tests`) it runs vic
+    /// only and the JSON's "baseline" is null.
+    ///
+    /// Example: vic bench loop --seconds 30 --json
+    Loop(BenchLoopArgs),
+    /// One-way and round-trip latency of the state and command channels (vic's typed ports, real
+    /// message types) against a bare iceoryx2 publish/subscribe ping-pong with the same payload
+    /// sizes, both as two busy-polling threads; then the running vic-board + vic-planner pair:
+    /// state age at a reader, command age at the board, pulse-injection-to-effect.
+    ///
+    /// Example: vic bench ipc --iterations 100000 --json
+    Ipc(BenchIpcArgs),
+}
+
+#[derive(clap::Args)]
+#[command(
+    mut_arg("config", |a| a.help("Scenario whose plant the board integrates (impedance actuator)")),
+    mut_arg("json", |a| a.help(
+        "Print one JSON object: {\"vic\": {p50_us, p99_us, p999_us, max_us, cpu_percent, …}, \
+         \"baseline\": {…} or null, \"ratio_p99\": …, \"variants\": […], …}"
+    )),
+)]
+struct BenchLoopArgs {
+    /// Seconds per variant and per cyclictest run.
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..=3600))]
+    seconds: u64,
+    /// Run only these variants (repeatable or comma-separated): sleep-slack50, sleep, spin,
+    /// spin-mlock, spin-mlock-pin, fifo, fifo-spin.
+    #[arg(long = "variant", value_name = "NAME", value_delimiter = ',')]
+    variants: Vec<String>,
+    /// Skip cyclictest (the JSON's "baseline" is null).
+    #[arg(long)]
+    no_baseline: bool,
+    /// Fail (exit 1) when cyclictest is not installed, instead of running vic only.
+    #[arg(long, conflicts_with = "no_baseline")]
+    require_baseline: bool,
+    #[command(flatten)]
+    scenario: DefaultScenarioArgs,
+    #[command(flatten)]
+    json: JsonArg,
+}
+
+#[derive(clap::Args)]
+#[command(
+    mut_arg("config", |a| a.help("Scenario of the pair")),
+    mut_arg("overrides", |a| a
+        .help("Overrides for the pair's board and planner")
+        .default_value("noise.sigma=0.02")),
+    mut_arg("json", |a| a.help(
+        "Print one JSON object: {\"vic\": {p50_us, p99_us, …}, \"baseline\": {…}, \"ratio_p50\": …, \
+         \"pair\": {…}, …} (one-way latency of the state channel in the summary)"
+    )),
+)]
+struct BenchIpcArgs {
+    /// Ping-pongs per transport (after 1000 not recorded).
+    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    iterations: u64,
+    /// Trials of the running pair (about 1.5 s each; 0 skips the pair).
+    #[arg(long, default_value_t = 5)]
+    pair_trials: u64,
+    #[command(flatten)]
+    scenario: DefaultScenarioArgs,
+    /// SOOC plan the pair's planner plays (stiffness strategy).
+    #[arg(
+        long,
+        value_name = "FILE",
+        default_value = "tests/data/realtime/two_link_divergent_sigma002_sooc.json"
+    )]
+    plan: PathBuf,
+    #[command(flatten)]
+    json: JsonArg,
+}
+
+impl BenchArgs {
+    pub fn run(self) -> anyhow::Result<()> {
+        match self.which {
+            BenchCommand::Loop(a) => {
+                let opts = loop_bench::Options {
+                    seconds: a.seconds,
+                    config: a.scenario.config,
+                    overrides: a.scenario.set.overrides,
+                    variants: a.variants,
+                    baseline: !a.no_baseline,
+                };
+                run_loop(&opts, a.require_baseline, a.json.json)
+            }
+            BenchCommand::Ipc(a) => {
+                let pair = PairRequest {
+                    config: a.scenario.config,
+                    overrides: a.scenario.set.overrides,
+                    plan: a.plan,
+                    trials: a.pair_trials,
+                };
+                run_ipc(a.iterations, pair, a.json.json)
+            }
+        }
+    }
+}

@@ -1,0 +1,124 @@
+//! `vic`: the command-line front end. Each subcommand's file parses its flags and makes one call
+//! into `vic::tools`; errors end the process with exit code 2 (bad input) or 1 (a failure).
+
+mod bench;
+mod demo;
+mod experiment;
+mod identify;
+mod inject;
+mod monitor;
+mod plan;
+mod results;
+mod simulate;
+mod status;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Plan and run variable-impedance control under noise, unstable force fields and feedback
+/// delays.
+///
+/// Scenarios are TOML files (see config/); every command that reads one takes
+/// `--set section.key=value` to override any key, e.g. `--set noise.sigma=0.1`.
+#[derive(Parser)]
+#[command(name = "vic", version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Plan a movement: solve the scenario's stochastic optimal control problem and print (or
+    /// write) the plan.
+    ///
+    /// Example: vic plan --config config/icub_elbow.toml --out plan.json
+    Plan(plan::PlanArgs),
+    /// Monte Carlo of a plan on the stochastic plant: spread, 95 % ellipse, tracking error,
+    /// divergence and the expected cost, next to the plan's prediction.
+    ///
+    /// Example: vic simulate --config config/two_link_divergent.toml --plan plan.json --policy open-loop
+    Simulate(simulate::SimulateArgs),
+    /// Reproduce a figure of the paper: plan and simulate every column, write the plots (PNG and
+    /// SVG) and a JSON of the numbers into --out-dir, print a table.
+    ///
+    /// Example: vic experiment fig1 --trials 20 --out-dir results
+    Experiment(experiment::ExperimentArgs),
+    /// Regenerate docs/RESULTS.md: run fig1, fig2 and icub, write their figures and numbers into
+    /// --out-dir/figures and the document that sets the paper's claims beside our numbers.
+    ///
+    /// Example: vic results --out-dir docs
+    Results(results::ResultsArgs),
+    /// Run the real-time pair: start a board and a planner in a fresh namespace, run the
+    /// `stiffness` and `delayed-feedback` strategies at --latency-ms with the same noise seeds,
+    /// and delayed feedback at 0 ms latency as the reference (the planner at 250 Hz); print the
+    /// comparison and the board's timing, and shut everything down.
+    ///
+    /// Example: vic demo --latency-ms 200 --trials 3
+    Demo(demo::DemoArgs),
+    /// Send a disturbance to a running board and report the tick that applied it (read from its
+    /// state stream), or fail (exit 1) when no board answers or it rejects the disturbance.
+    ///
+    /// Examples: vic inject pulse --torque 2,0 --duration-ms 50;  vic inject field --beta 0;
+    /// vic inject load --torque 0,0.5;  vic inject noise --factor 2
+    Inject(inject::InjectArgs),
+    /// One snapshot of a running board's telemetry: mode (running / safe-hold / fault), tick
+    /// rate, jitter, work time, command age, tracking error, stiffness, disturbances, rejected
+    /// messages by reason.
+    ///
+    /// Example: vic status --namespace lab1 --json
+    Status(status::StatusArgs),
+    /// Watch a running board live: a refreshing view on a terminal, one line per interval when
+    /// piped. Stops on Ctrl-C (or after --count snapshots).
+    ///
+    /// Example: vic monitor --namespace lab1
+    Monitor(monitor::MonitorArgs),
+    /// Identify the joint's torque noise from a log, the paper's procedure (Sec. III-B): bin the
+    /// torque error by velocity, fit its mean and standard deviation with polynomials, estimate
+    /// (a, b) of e = (a + b q') η by maximum likelihood and test the residual η for normality
+    /// (Jarque–Bera).
+    ///
+    /// The log is CSV with the columns t,q,qd,qdd,tau_ff,stiffness,damping,q_d,qd_d (any order;
+    /// extra columns must start with x_). The joint's parameters come from --config (a single-joint
+    /// scenario), else the iCub forearm's.
+    ///
+    /// Example: vic identify --log elbow.csv --config config/icub_experiment.toml
+    Identify(identify::IdentifyArgs),
+    /// Benchmark against the machine's own limits: the board's 1 kHz loop against cyclictest,
+    /// the transport against a bare iceoryx2 ping-pong (same run, both distributions, ratios).
+    ///
+    /// Example: vic bench loop --seconds 30 --json
+    Bench(bench::BenchArgs),
+}
+
+impl Command {
+    fn run(self) -> anyhow::Result<()> {
+        match self {
+            Command::Plan(a) => a.run(),
+            Command::Simulate(a) => a.run(),
+            Command::Experiment(a) => a.run(),
+            Command::Results(a) => a.run(),
+            Command::Demo(a) => a.run(),
+            Command::Inject(a) => a.run(),
+            Command::Status(a) => a.run(),
+            Command::Monitor(a) => a.run(),
+            Command::Identify(a) => a.run(),
+            Command::Bench(a) => a.run(),
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    vic::tools::cli::finish("vic", Cli::parse().command.run())
+}
+
+#[cfg(test)]
+mod tests {
+    /// clap's own consistency checks (every `mut_arg` names an argument that exists, no two
+    /// flags clash), which it otherwise runs only when a command is parsed.
+    #[test]
+    fn flags_are_consistent() {
+        use clap::CommandFactory;
+        super::Cli::command().debug_assert();
+    }
+}

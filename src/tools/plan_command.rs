@@ -1,0 +1,117 @@
+//! `vic plan`: solve a scenario's stochastic optimal control problem (ILQG for the scenario's
+//! feedback delay, or SOOC for open-loop execution), write the plan file and report its summary.
+
+use crate::planning::plan::{Method, PlanFile, ProgressFn, plan};
+use crate::planning::scenario::Scenario;
+use crate::tools::cli::{Classify, print_json};
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+/// What `vic plan` was asked for.
+#[derive(Debug, Clone)]
+pub struct PlanOptions {
+    pub config: PathBuf,
+    pub overrides: Vec<String>,
+    /// The planning method (default: the scenario's `[solver] method`).
+    pub method: Option<Method>,
+    /// The central feedback delay [ms], overriding `task.delay_ms`.
+    pub delay_ms: Option<f64>,
+    /// Where to write the plan file.
+    pub out: Option<PathBuf>,
+    pub json: bool,
+}
+
+/// Plans the scenario, writes the plan file if asked and prints the summary (JSON or text).
+pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
+    let mut overrides = o.overrides.clone();
+    if let Some(d) = o.delay_ms {
+        overrides.push(format!("task.delay_ms={d}"));
+    }
+    let scenario = Scenario::load(&o.config, &overrides).input()?;
+    let method = o.method.unwrap_or(scenario.solver.method);
+    let plan = plan(&scenario, method, progress_printer())
+        .map_err(|e| format!("{}: {e}", o.config.display()))
+        .input()?;
+    clear_progress_line();
+    if let Some(out) = &o.out {
+        write_plan(&plan, out)?;
+    }
+    if o.json {
+        print_json(&plan.summary)
+    } else {
+        print_summary(&plan, o.out.as_ref());
+        Ok(())
+    }
+}
+
+/// Writes `plan` as JSON to `path`.
+pub fn write_plan(plan: &PlanFile, path: &std::path::Path) -> anyhow::Result<()> {
+    let text = serde_json::to_string(plan)?;
+    std::fs::write(path, text)
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        .runtime()
+}
+
+/// Reads a plan file written by `vic plan --out`; an unreadable or malformed file is the user's.
+pub fn read_plan(path: &std::path::Path) -> anyhow::Result<PlanFile> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read: {e}", path.display()))
+        .input()?;
+    serde_json::from_str(&text)
+        .map_err(|e| format!("{}: not a plan file: {e}", path.display()))
+        .input()
+}
+
+/// Progress on stderr when it is a terminal: one line, rewritten in place; nothing when piped.
+pub fn progress_printer() -> Option<ProgressFn> {
+    if !std::io::stderr().is_terminal() {
+        return None;
+    }
+    Some(std::sync::Arc::new(
+        |phase: &str, p: &crate::core::solver::ilqg::Progress| {
+            eprint!(
+                "\r\x1b[2K{phase}: iteration {} merit {:.6e} (μ {:.1e}, step {})",
+                p.iteration, p.merit, p.mu, p.alpha
+            );
+        },
+    ))
+}
+
+/// Erases the progress line on a terminal.
+pub fn clear_progress_line() {
+    if std::io::stderr().is_terminal() {
+        eprint!("\r\x1b[2K");
+    }
+}
+
+fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
+    let s = &p.summary;
+    println!("plan       {} ({})", p.scenario, s.method);
+    println!(
+        "solver     {} after {} iterations in {:.1} ms ({})",
+        if s.converged {
+            "converged"
+        } else {
+            "did NOT converge"
+        },
+        s.iterations,
+        s.solve_ms,
+        s.stop
+    );
+    println!(
+        "cost       {:.6e} nominal, {:.6e} expected (predicted)",
+        s.cost, s.expected_cost
+    );
+    println!(
+        "stiffness  max {:.2} N m/rad, mean {:.2} N m/rad",
+        s.max_stiffness, s.mean_stiffness
+    );
+    println!("delay      {} steps ({:.0} ms)", s.delay_steps, s.delay_ms);
+    println!(
+        "accuracy   final nominal error {:.3} {}",
+        s.final_error, s.final_error_unit
+    );
+    if let Some(out) = out {
+        println!("written    {}", out.display());
+    }
+}

@@ -1,0 +1,181 @@
+//! `vic simulate`: a Monte Carlo of a plan on the stochastic plant (Euler–Maruyama, Eq. 10),
+//! executed open loop, with the plan's feedback gains (Eq. 9) or with them on a delayed state
+//! (Eq. 13); the spread, the tracking errors, the divergence and the expected cost (Eq. 14) next
+//! to the plan's prediction, optionally every trial as CSV and a plot.
+
+use crate::core::policy::Feedback;
+use crate::planning::evaluation::{Report, summarize};
+use crate::planning::montecarlo::{Trial, run_trials};
+use crate::planning::plan::{PlanFile, setup};
+use crate::planning::scenario::Scenario;
+use crate::tools::cli::{Classify, divergence_or_default, whole_steps};
+use crate::tools::plan_command::read_plan;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// How the plan is executed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Execution {
+    /// The planned commands, no feedback.
+    OpenLoop,
+    /// The plan's gains on the current state.
+    Feedback,
+    /// The plan's gains on the state seen `delay_ms` late (default: the plan's delay).
+    DelayedFeedback { delay_ms: Option<f64> },
+}
+
+/// What `vic simulate` was asked for.
+#[derive(Debug, Clone)]
+pub struct SimulateOptions {
+    /// The scenario the plan runs on (it may differ from the plan's, e.g. in noise).
+    pub config: PathBuf,
+    pub overrides: Vec<String>,
+    pub plan: PathBuf,
+    pub execution: Execution,
+    pub trials: usize,
+    pub seed: u64,
+    /// Divergence distance [mm for the arm, degrees for a joint] (default 50 mm / 10°).
+    pub divergence: Option<f64>,
+    /// Write every trial's states and commands here.
+    pub csv: Option<PathBuf>,
+    /// Plot the trials to this PNG (and an SVG beside it).
+    pub plot: Option<PathBuf>,
+    pub json: bool,
+}
+
+/// Runs the trials, writes the CSV and the plot if asked, prints the report.
+pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
+    let scenario = Scenario::load(&o.config, &o.overrides).input()?;
+    let plan = read_plan(&o.plan)?;
+    let setup = setup(&scenario).input()?;
+    let policy = plan
+        .policy(&setup)
+        .map_err(|e| format!("{}: {e}", o.plan.display()))
+        .input()?;
+    let feedback = feedback(o.execution, &plan, scenario.task.dt)?;
+    let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
+    let trials = run_trials(&setup, &policy, feedback, o.trials, o.seed);
+    let report = summarize(&setup, &trials, divergence);
+    if let Some(path) = &o.csv {
+        write_trials_csv(path, &plan, &trials)?;
+    }
+    if let Some(png) = &o.plot {
+        plot_trials(png, feedback, &plan, &scenario, &trials)?;
+    }
+    let predicted = match feedback {
+        Feedback::OpenLoop => plan.summary.open_loop_expected_cost,
+        _ => plan.summary.expected_cost,
+    };
+    if o.json {
+        let mut v = serde_json::to_value(&report)?;
+        v["policy"] = serde_json::to_value(feedback)?;
+        v["expected_cost_predicted"] = predicted.into();
+        v["seed"] = o.seed.into();
+        println!("{v}");
+    } else {
+        print_report(o, &plan, feedback, &report, divergence, predicted);
+    }
+    Ok(())
+}
+
+/// The feedback of an execution; a delay must be a whole number of the scenario's steps.
+fn feedback(execution: Execution, plan: &PlanFile, dt: f64) -> anyhow::Result<Feedback> {
+    Ok(match execution {
+        Execution::OpenLoop => Feedback::OpenLoop,
+        Execution::Feedback => Feedback::Full,
+        Execution::DelayedFeedback { delay_ms } => Feedback::Delayed {
+            latency_steps: match delay_ms {
+                Some(ms) => whole_steps("--delay-ms", ms, dt * 1000.0)?,
+                None => plan.summary.delay_steps,
+            },
+        },
+    })
+}
+
+fn plot_trials(
+    png: &Path,
+    feedback: Feedback,
+    plan: &PlanFile,
+    scenario: &Scenario,
+    trials: &[Trial],
+) -> anyhow::Result<()> {
+    // The figure names the execution in words ("delayed feedback (20 steps)").
+    let title = feedback.to_string();
+    let column = crate::tools::experiment::column_plot(&title, plan, scenario, trials);
+    let svg = png.with_extension("svg");
+    if scenario.model.dof() == 2 {
+        crate::tools::plot::arm_figure(&[column], png, &svg).runtime()
+    } else {
+        crate::tools::plot::joint_figure(&[column], png, &svg).runtime()
+    }
+}
+
+fn print_report(
+    o: &SimulateOptions,
+    plan: &PlanFile,
+    feedback: Feedback,
+    report: &Report,
+    divergence: f64,
+    predicted: f64,
+) {
+    let u = &report.unit;
+    println!(
+        "simulate   {} with {} ({:?}), {} trials, seed {}",
+        plan.scenario,
+        o.config.display(),
+        feedback,
+        report.trials,
+        o.seed
+    );
+    println!(
+        "final      std {:.3} {u}, 95 % ellipse semi-axes {:?} {u}",
+        report.final_std,
+        report
+            .ellipse_95
+            .iter()
+            .map(|v| format!("{v:.3}"))
+            .collect::<Vec<_>>()
+    );
+    println!(
+        "errors     RMS {:.3} {u}, final mean {:.3} / max {:.3} {u}",
+        report.rms_error, report.final_error_mean, report.final_error_max
+    );
+    println!(
+        "diverged   {} of {} (ending > {divergence} {u} from the target)",
+        report.diverged, report.trials
+    );
+    println!(
+        "cost       Monte Carlo {:.6e} ± {:.2e}, predicted {:.6e}",
+        report.expected_cost_mc, report.expected_cost_se, predicted
+    );
+}
+
+/// Every trial's states and commands, one row per knot: `trial,k,t,<states>,<controls>` (the last
+/// knot has no command: its control columns are empty).
+pub fn write_trials_csv(path: &Path, plan: &PlanFile, trials: &[Trial]) -> anyhow::Result<()> {
+    write_csv(path, plan, trials)
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        .runtime()
+}
+
+fn write_csv(path: &Path, plan: &PlanFile, trials: &[Trial]) -> std::io::Result<()> {
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut header = vec!["trial".to_string(), "k".into(), "t".into()];
+    header.extend(plan.state_names.iter().cloned());
+    header.extend(plan.control_names.iter().cloned());
+    writeln!(w, "{}", header.join(","))?;
+    for (i, t) in trials.iter().enumerate() {
+        for (k, x) in t.x.iter().enumerate() {
+            write!(w, "{i},{k},{}", plan.dt * k as f64)?;
+            for v in x.iter() {
+                write!(w, ",{v}")?;
+            }
+            match t.u.get(k) {
+                Some(u) => u.iter().try_for_each(|v| write!(w, ",{v}"))?,
+                None => (0..plan.control_names.len()).try_for_each(|_| write!(w, ","))?,
+            }
+            writeln!(w)?;
+        }
+    }
+    w.flush()
+}

@@ -1,0 +1,113 @@
+//! The three binaries' error convention, on the real executables: bad input (a file, a key, a
+//! flag) exits 2 with `PROGRAM: error:` and a message that names what is wrong; a failure of the
+//! run (no board to talk to) exits 1.
+
+use std::process::{Command, Output};
+
+fn run(bin: &str, args: &[&str]) -> Output {
+    Command::new(bin)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Asserts the exit code and that stderr starts with `PROGRAM: error:` and names `what`.
+fn assert_error(out: &Output, code: i32, program: &str, what: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(code), "{stderr}");
+    assert!(
+        stderr.starts_with(&format!("{program}: error: ")),
+        "no '{program}: error:' prefix: {stderr}"
+    );
+    assert!(stderr.contains(what), "'{what}' not in: {stderr}");
+}
+
+const VIC: &str = env!("CARGO_BIN_EXE_vic");
+const BOARD: &str = env!("CARGO_BIN_EXE_vic-board");
+const PLANNER: &str = env!("CARGO_BIN_EXE_vic-planner");
+
+#[test]
+fn a_missing_scenario_file_is_named_by_every_binary() {
+    let missing = "/nonexistent/scenario.toml";
+    for (bin, program, args) in [
+        (VIC, "vic", &["plan", "--config", missing][..]),
+        (VIC, "vic", &["demo", "--config", missing]),
+        (BOARD, "vic-board", &["--config", missing]),
+        (PLANNER, "vic-planner", &["--config", missing]),
+    ] {
+        assert_error(&run(bin, args), 2, program, missing);
+    }
+}
+
+#[test]
+fn a_bad_override_names_its_key() {
+    let out = run(
+        VIC,
+        &[
+            "plan",
+            "--config",
+            "config/two_link_reach.toml",
+            "--set",
+            "task.dt=abc",
+        ],
+    );
+    assert_error(&out, 2, "vic", "dt");
+    let out = run(BOARD, &["--set", "nosuchkey"]);
+    assert_error(&out, 2, "vic-board", "--set nosuchkey");
+}
+
+#[test]
+fn bad_flags_are_the_users_input() {
+    assert_error(
+        &run(BOARD, &["--rate-hz", "0"]),
+        2,
+        "vic-board",
+        "--rate-hz",
+    );
+    assert_error(
+        &run(BOARD, &["--namespace", "no/slash"]),
+        2,
+        "vic-board",
+        "no/slash",
+    );
+    assert_error(
+        &run(PLANNER, &["--trials", "0"]),
+        2,
+        "vic-planner",
+        "--trials",
+    );
+    assert_error(
+        &run(VIC, &["demo", "--latency-ms", "3"]),
+        2,
+        "vic",
+        "--latency-ms 3",
+    );
+    assert_error(
+        &run(VIC, &["inject", "pulse", "--torque", "1,2,3"]),
+        2,
+        "vic",
+        "--torque",
+    );
+    assert_error(
+        &run(VIC, &["monitor", "--interval-s", "0.01"]),
+        2,
+        "vic",
+        "--interval-s",
+    );
+}
+
+#[test]
+fn no_board_to_talk_to_is_a_failure_not_bad_input() {
+    let out = run(
+        VIC,
+        &[
+            "status",
+            "--namespace",
+            "exitcodes_nobody",
+            "--timeout-s",
+            "0.2",
+        ],
+    );
+    assert_error(&out, 1, "vic", "no board in namespace \"exitcodes_nobody\"");
+}
