@@ -11,6 +11,7 @@ mod plan;
 mod results;
 mod simulate;
 mod status;
+mod sweep;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -49,6 +50,12 @@ enum Command {
     ///
     /// Example: vic results --out-dir docs
     Results(results::ResultsArgs),
+    /// Delay versus stiffness as a curve: for each feedback latency and strategy (naive delayed
+    /// feedback, a predictor, the stiffness plan), plan, run the Monte Carlo and report the final
+    /// error, divergence and cost; --out-dir receives the figure.
+    ///
+    /// Example: vic sweep latency --config config/single_joint_delay.toml --out-dir sweep
+    Sweep(sweep::SweepArgs),
     /// Run the real-time pair: start a board and a planner in a fresh namespace, run the
     /// `stiffness` and `delayed-feedback` strategies at --latency-ms with the same noise seeds,
     /// and delayed feedback at 0 ms latency as the reference (the planner at 250 Hz); print the
@@ -104,6 +111,7 @@ impl Command {
             Command::Monitor(a) => a.run(),
             Command::Identify(a) => a.run(),
             Command::Bench(a) => a.run(),
+            Command::Sweep(a) => a.run(),
         }
     }
 }

@@ -13,6 +13,9 @@ enum PolicyArg {
     Feedback,
     /// The plan's gains on the state seen --delay-ms late (default: the plan's delay).
     DelayedFeedback,
+    /// The gains of an undelayed plan on the present state predicted from the one seen
+    /// --delay-ms late, over the commands applied since (a Smith predictor).
+    Predictor,
 }
 
 #[derive(clap::Args)]
@@ -33,7 +36,8 @@ pub struct SimulateArgs {
     trials: u64,
     #[command(flatten)]
     seed: SeedArgs,
-    /// Feedback latency for --policy delayed-feedback [ms] (default: the plan's delay).
+    /// Feedback latency for --policy delayed-feedback [ms] (default: the plan's delay) and for
+    /// --policy predictor (default 0).
     #[arg(long, value_name = "D")]
     delay_ms: Option<f64>,
     /// A trial has diverged when it ends further than this from the target [mm for the arm,
@@ -57,6 +61,9 @@ impl SimulateArgs {
             PolicyArg::Feedback => Execution::Feedback,
             PolicyArg::DelayedFeedback => Execution::DelayedFeedback {
                 delay_ms: self.delay_ms,
+            },
+            PolicyArg::Predictor => Execution::Predictor {
+                delay_ms: self.delay_ms.unwrap_or(0.0),
             },
         };
         run(&SimulateOptions {

@@ -22,6 +22,9 @@ pub enum Execution {
     Feedback,
     /// The plan's gains on the state seen `delay_ms` late (default: the plan's delay).
     DelayedFeedback { delay_ms: Option<f64> },
+    /// The plan's gains on the present state predicted from the one seen `delay_ms` late (a
+    /// Smith predictor; execute an undelayed plan with it).
+    Predictor { delay_ms: f64 },
 }
 
 /// What `vic simulate` was asked for.
@@ -88,6 +91,9 @@ fn feedback(execution: Execution, plan: &PlanFile, dt: f64) -> anyhow::Result<Fe
                 Some(ms) => whole_steps("--delay-ms", ms, dt * 1000.0)?,
                 None => plan.summary.delay_steps,
             },
+        },
+        Execution::Predictor { delay_ms } => Feedback::Predicted {
+            latency_steps: whole_steps("--delay-ms", delay_ms, dt * 1000.0)?,
         },
     })
 }

@@ -1,0 +1,118 @@
+//! `vic sweep latency`: flags, then [`vic::tools::sweep`].
+
+use anyhow::Context;
+use std::path::PathBuf;
+use vic::tools::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
+use vic::tools::sweep::{Strategy, SweepOptions, sweep_latency, write_figure};
+
+#[derive(clap::Args)]
+pub struct SweepArgs {
+    #[command(subcommand)]
+    what: SweepWhat,
+}
+
+#[derive(clap::Subcommand)]
+enum SweepWhat {
+    /// Final error against the feedback latency, per strategy (Monte Carlo, offline).
+    ///
+    /// Example: vic sweep latency --config config/single_joint_delay.toml --latencies 0,50,200
+    /// --out-dir sweep
+    Latency(LatencyArgs),
+}
+
+#[derive(clap::Args)]
+struct LatencyArgs {
+    #[command(flatten)]
+    scenario: ScenarioArgs,
+    /// Feedback latencies [ms], each a whole number of the scenario's plan steps.
+    #[arg(long, value_delimiter = ',', default_value = "0,20,50,100,150,200,300")]
+    latencies: Vec<f64>,
+    /// Strategies: naive-delayed (Eq. 13, planned for the latency, no stiffness), predictor
+    /// (a Smith predictor across the latency, no stiffness), stiffness (the open-loop SOOC plan).
+    #[arg(long, value_delimiter = ',', value_parser = parse_strategy,
+          default_value = "naive-delayed,predictor,stiffness")]
+    strategies: Vec<Strategy>,
+    /// Monte Carlo trials per point.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
+    trials: u64,
+    #[command(flatten)]
+    seed: SeedArgs,
+    /// A trial has diverged when it ends further than this from the target [mm for the arm,
+    /// degrees for a single joint] (default 50 mm / 10°).
+    #[arg(long, value_name = "DIST")]
+    divergence: Option<f64>,
+    /// Write the figure (sweep.png, sweep.svg) and the numbers (sweep.json) into this folder.
+    #[arg(long, value_name = "DIR")]
+    out_dir: Option<PathBuf>,
+    #[command(flatten)]
+    json: JsonArg,
+}
+
+fn parse_strategy(s: &str) -> Result<Strategy, String> {
+    Strategy::ALL
+        .into_iter()
+        .find(|x| x.name() == s)
+        .ok_or_else(|| {
+            let names: Vec<&str> = Strategy::ALL.iter().map(|x| x.name()).collect();
+            format!("unknown strategy \"{s}\" (one of {})", names.join(", "))
+        })
+}
+
+impl SweepArgs {
+    pub fn run(self) -> anyhow::Result<()> {
+        let SweepWhat::Latency(a) = self.what;
+        let opts = SweepOptions {
+            latencies_ms: a.latencies,
+            strategies: a.strategies,
+            trials: a.trials as usize,
+            seed: a.seed.seed,
+            divergence: a.divergence,
+        };
+        let quiet = a.json.json;
+        let sweep = sweep_latency(&a.scenario.config, &a.scenario.set.overrides, &opts, &|p| {
+            if !quiet {
+                eprintln!("sweep: {p}");
+            }
+        })
+        .map_err(anyhow::Error::msg)
+        .input()?;
+        if let Some(dir) = &a.out_dir {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("{}: cannot create", dir.display()))?;
+            write_figure(&sweep, &dir.join("sweep.png"), &dir.join("sweep.svg"))?;
+            let text = serde_json::to_string_pretty(&sweep)?;
+            std::fs::write(dir.join("sweep.json"), text)
+                .with_context(|| format!("{}: cannot write sweep.json", dir.display()))?;
+        }
+        if a.json.json {
+            println!("{}", serde_json::to_string(&sweep)?);
+            return Ok(());
+        }
+        let unit = sweep.points.first().map_or("", |p| p.unit.name());
+        let show = |v: Option<f64>| v.map_or("diverged".to_string(), |v| format!("{v:.3}"));
+        println!(
+            "{:<14} {:>8} {:>14} {:>14} {:>10} {:>12} {:>9}",
+            "strategy",
+            "latency",
+            format!("final [{unit}]"),
+            "final max",
+            "diverged",
+            "E[C] MC",
+            "mean K"
+        );
+        for p in &sweep.points {
+            println!(
+                "{:<14} {:>5} ms {:>14} {:>14} {:>9.0}% {:>12} {:>9.1}",
+                p.strategy.name(),
+                p.latency_ms,
+                show(p.final_error_mean),
+                show(p.final_error_max),
+                100.0 * p.diverged_fraction,
+                p.expected_cost_mc
+                    .map_or("-".into(), |c| format!("{c:.4e}")),
+                p.mean_stiffness
+            );
+        }
+        Ok(())
+    }
+}
