@@ -79,10 +79,7 @@ fn iterations_do_not_allocate() {
 
 #[test]
 fn delayed_iterations_do_not_allocate() {
-    let (s, setup) = load(
-        "single_joint_delay.toml",
-        &["noise.kind=none"],
-    );
+    let (s, setup) = load("single_joint_delay.toml", &["noise.kind=none"]);
     let delayed = Delayed::new(setup.dynamics.clone(), s.task.delay_steps());
     let cost = DelayedCost::new(&setup.cost, setup.x0.len());
     let problem = Problem {
@@ -179,10 +176,7 @@ fn shifted_warm_start_reconverges_to_the_cold_cost() {
 /// lead to: the first guess from the undelayed plant is already the delayed optimum.
 #[test]
 fn undelayed_guess_is_the_deterministic_delayed_optimum() {
-    let (s, setup) = load(
-        "single_joint_delay.toml",
-        &["noise.kind=none"],
-    );
+    let (s, setup) = load("single_joint_delay.toml", &["noise.kind=none"]);
     let d = s.task.delay_steps();
     let steps = s.task.steps;
     let delayed = Delayed::new(setup.dynamics.clone(), d);
