@@ -676,13 +676,19 @@ pub fn results_markdown(runs: &[ExperimentRun], figure_dir: &str, command: &str)
         ));
         md.push_str("| column | plan | execution | final spread | RMS error | diverged | E[C] Monte Carlo | E[C] predicted | mean / max stiffness [N m/rad] |\n");
         md.push_str("|---|---|---|---|---|---|---|---|---|\n");
+        // A plan that did not meet its solver's criterion is flagged, never passed off as optimal.
         for c in &run.columns {
             let u = &c.report.unit;
             md.push_str(&format!(
-                "| {} ({}) | {} | {} | {:.3} {u} | {:.3} {u} | {:.0} % | {:.4e} ± {:.1e} | {:.4e} | {:.1} / {:.1} |\n",
+                "| {} ({}) | {}{} | {} | {:.3} {u} | {:.3} {u} | {:.0} % | {:.4e} ± {:.1e} | {:.4e} | {:.1} / {:.1} |\n",
                 c.name,
                 c.description,
                 c.method,
+                if c.plan_converged {
+                    String::new()
+                } else {
+                    format!(" (**not converged**, {} iterations)", c.plan_iterations)
+                },
                 c.policy,
                 c.report.final_std,
                 c.rms_error,
