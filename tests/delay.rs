@@ -13,7 +13,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 use vic::core::delay::Delayed;
-use vic::core::dynamics::{Dynamics, EulerModel, Linearization};
+use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
 use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 
 const DT: f64 = 0.01;
@@ -105,9 +105,9 @@ fn random_exogenous(rng: &mut StdRng) -> Exogenous {
 }
 
 /// A discrete model with a different reference at every knot.
-fn discrete(model: &ArmModel, rng: &mut StdRng) -> EulerModel {
+fn discrete(model: &ArmModel, rng: &mut StdRng) -> DiscreteDynamics {
     let exogenous = (0..=HORIZON).map(|_| random_exogenous(rng)).collect();
-    EulerModel::euler(model.clone(), DT, exogenous)
+    DiscreteDynamics::euler(model.clone(), DT, exogenous)
 }
 
 fn random_state(model: &ArmModel, rng: &mut StdRng) -> Vec<f64> {

@@ -4,15 +4,15 @@
 //!   equations of motion in DESIGN §2 (written here with nalgebra, not with the crate's code).
 //! * [`ArmModel::jacobians`] (`f_x`, `f_u`, `∂F/∂x`, `∂F/∂u`) against central finite differences
 //!   of `f` and `diffusion`.
-//! * [`EulerModel::linearize`] (`A = I + Δ f_x`, `B = Δ f_u`, `c = √Δ F`, `Cx`, `Cu`) against
-//!   central finite differences of [`EulerModel::step`] and [`EulerModel::noise_gain`].
+//! * [`DiscreteDynamics::linearize`] (`A = I + Δ f_x`, `B = Δ f_u`, `c = √Δ F`, `Cx`, `Cu`) against
+//!   central finite differences of [`DiscreteDynamics::step`] and [`DiscreteDynamics::noise_gain`].
 
 mod common;
 
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::core::dynamics::{Dynamics, EulerModel, Integrator, Linearization, NoiseKind};
+use vic::core::dynamics::{DiscreteDynamics, Dynamics, Integrator, Linearization, NoiseKind};
 use vic::core::model::{
     Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
 };
@@ -447,13 +447,13 @@ fn arm_model_jacobians_match_finite_differences() {
     }
 }
 
-fn noise_gain(model: &EulerModel, k: usize, x: &[f64], u: &[f64]) -> DMatrix<f64> {
+fn noise_gain(model: &DiscreteDynamics, k: usize, x: &[f64], u: &[f64]) -> DMatrix<f64> {
     let mut g = DMatrix::from_element(model.nx(), model.nw(), f64::NAN);
     model.noise_gain(k, x, u, &mut g);
     g
 }
 
-fn euler_step(model: &EulerModel, k: usize, x: &[f64], u: &[f64]) -> Vec<f64> {
+fn euler_step(model: &DiscreteDynamics, k: usize, x: &[f64], u: &[f64]) -> Vec<f64> {
     let mut next = vec![f64::NAN; model.nx()];
     model.step(k, x, u, &mut next);
     next
@@ -513,7 +513,7 @@ fn discrete_step_matches_the_integrator_applied_to_the_drift() {
         let name = describe(&model);
         let exogenous: Vec<Exogenous> = (0..4).map(|_| random_exogenous(&mut rng)).collect();
         for (integrator, substeps) in DISCRETISATIONS {
-            let mut euler = EulerModel::euler(model.clone(), dt, exogenous.clone());
+            let mut euler = DiscreteDynamics::euler(model.clone(), dt, exogenous.clone());
             euler.integrator = integrator;
             euler.substeps = substeps;
             for k in [0, 3, 9] {
@@ -542,7 +542,7 @@ fn euler_linearization_matches_finite_differences() {
         let name = describe(&model);
         let exogenous: Vec<Exogenous> = (0..4).map(|_| random_exogenous(&mut rng)).collect();
         for (integrator, substeps) in DISCRETISATIONS {
-            let mut euler = EulerModel::euler(model.clone(), dt, exogenous.clone());
+            let mut euler = DiscreteDynamics::euler(model.clone(), dt, exogenous.clone());
             euler.integrator = integrator;
             euler.substeps = substeps;
             let (nx, nu, nw) = (euler.nx(), euler.nu(), euler.nw());

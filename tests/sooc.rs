@@ -21,7 +21,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
 use vic::core::cost::{Cost, CostDerivatives, TrackingCost};
-use vic::core::dynamics::{Dynamics, EulerModel, Integrator, Linearization};
+use vic::core::dynamics::{DiscreteDynamics, Dynamics, Integrator, Linearization};
 use vic::core::model::{
     Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
 };
@@ -302,7 +302,7 @@ fn linear_setup(case: &LinearCase) -> Setup {
     let model = linear_joint(case.actuator.clone());
     let nu = model.nu();
     let reference = linear_reference();
-    let dynamics = EulerModel {
+    let dynamics = DiscreteDynamics {
         model,
         dt: LINEAR_DT,
         substeps: case.substeps,
@@ -647,7 +647,7 @@ fn moment_linearization_matches_finite_differences() {
                 tau_ext: [rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)],
             })
             .collect();
-        let base = EulerModel {
+        let base = DiscreteDynamics {
             model: case.model.clone(),
             dt: 0.01,
             substeps: case.substeps,

@@ -7,7 +7,7 @@ mod common;
 use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::core::dynamics::{EulerModel, Integrator};
+use vic::core::dynamics::{DiscreteDynamics, Integrator};
 use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 use vic::core::solver::sooc::{MomentDynamics, MomentExpansion, pack, vech_len};
 
@@ -156,7 +156,7 @@ fn moment_curvature_matches_finite_differences() {
             };
             4
         ];
-        let base = EulerModel {
+        let base = DiscreteDynamics {
             model: case.model.clone(),
             dt: 0.01,
             substeps: case.substeps,

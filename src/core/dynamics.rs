@@ -92,7 +92,7 @@ pub enum Integrator {
 /// The noise enters once per control step as in Eq. 10; sub-steps only keep a stiff impedance
 /// (large `K_D / J`) numerically stable, which explicit Euler at Δ = 10 ms is not.
 #[derive(Debug, Clone)]
-pub struct EulerModel {
+pub struct DiscreteDynamics {
     pub model: ArmModel,
     /// Time step Δ [s].
     pub dt: f64,
@@ -103,10 +103,10 @@ pub struct EulerModel {
     pub exogenous: Vec<Exogenous>,
 }
 
-impl EulerModel {
+impl DiscreteDynamics {
     /// The paper's discretisation: one explicit Euler step per control step.
     pub fn euler(model: ArmModel, dt: f64, exogenous: Vec<Exogenous>) -> Self {
-        EulerModel {
+        DiscreteDynamics {
             model,
             dt,
             substeps: 1,
@@ -175,7 +175,7 @@ pub fn flow<S: Scalar>(
     next[..nx].copy_from_slice(&cur[..nx]);
 }
 
-impl Dynamics for EulerModel {
+impl Dynamics for DiscreteDynamics {
     fn nx(&self) -> usize {
         self.model.nx()
     }
@@ -226,7 +226,7 @@ impl Dynamics for EulerModel {
     }
 }
 
-impl EulerModel {
+impl DiscreteDynamics {
     /// The noise part of the linearisation: `c_i`, `Cx_i` and (if `with_cu`) `Cu_i`, and whether
     /// the noise depends on the state or controls at all. SOOC's covariance step, which needs no
     /// `Cu`, calls it with `with_cu = false`.
@@ -277,7 +277,7 @@ impl EulerModel {
     }
 }
 
-impl EulerModel {
+impl DiscreteDynamics {
     /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` of the step (column-major n×n and n×m) by forward-mode AD
     /// through every sub-step, in any scalar type: with dual numbers in, the result carries the
     /// second derivatives of the flow (what the moment dynamics of SOOC need).
@@ -307,7 +307,7 @@ impl EulerModel {
         }
     }
 
-    /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` in `f64` (layout of [`EulerModel::flow_jacobian`]) by one flow
+    /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` in `f64` (layout of [`DiscreteDynamics::flow_jacobian`]) by one flow
     /// with a vector dual number carrying all `nx + nu` directions at once: the model's
     /// trigonometry and mass-matrix solve run once instead of once per direction. The same
     /// derivative arithmetic per direction, so the same numbers.

@@ -4,7 +4,7 @@
 //! Every trial has its own random stream derived from `(seed, trial)`, so the results do not
 //! depend on how many threads run the trials or in which order.
 
-use crate::core::dynamics::{Dynamics, EulerModel};
+use crate::core::dynamics::{DiscreteDynamics, Dynamics};
 use crate::core::policy::{Feedback, Policy, Seen, predict_present};
 use crate::core::rng::{add_diffusion, trial_rng};
 use crate::planning::plan::Setup;
@@ -23,7 +23,7 @@ pub struct Trial {
 /// Simulates one trial of `policy` with `feedback` on the stochastic plant (Euler–Maruyama,
 /// Eq. 10).
 pub fn run_trial(
-    dynamics: &EulerModel,
+    dynamics: &DiscreteDynamics,
     cost: &dyn crate::core::cost::Cost,
     x0: &[f64],
     policy: &Policy,

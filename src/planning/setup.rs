@@ -2,7 +2,7 @@
 //! cost, the start state and a warm start from inverse dynamics.
 
 use crate::core::cost::TrackingCost;
-use crate::core::dynamics::EulerModel;
+use crate::core::dynamics::DiscreteDynamics;
 use crate::core::model::{Actuator, ArmModel, Exogenous};
 use crate::core::solver::Bounds;
 use crate::planning::reference::{self, PathError};
@@ -39,7 +39,7 @@ impl From<String> for PlanError {
 /// Everything needed to solve a scenario with any method.
 #[derive(Debug, Clone)]
 pub struct Setup {
-    pub dynamics: EulerModel,
+    pub dynamics: DiscreteDynamics,
     pub cost: TrackingCost,
     /// Initial state x₀ (start posture at rest).
     pub x0: Vec<f64>,
@@ -70,7 +70,7 @@ pub fn setup(s: &Scenario) -> Result<Setup, PlanError> {
         dt: task.dt,
         reference: reference.clone(),
     };
-    let dynamics = EulerModel {
+    let dynamics = DiscreteDynamics {
         model: model.clone(),
         dt: task.dt,
         substeps: task.substeps,

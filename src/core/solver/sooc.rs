@@ -11,10 +11,10 @@
 //! raises it where the plant is unstable or noisy — what plain ILQG cannot see (DESIGN §4).
 //!
 //! The derivatives of `z[k+1]` need the second derivatives of the flow (`∂A/∂m`, `∂A/∂u`): they come
-//! from nested dual numbers through [`EulerModel::flow_jacobian`].
+//! from nested dual numbers through [`DiscreteDynamics::flow_jacobian`].
 
 use crate::core::cost::{Cost, CostDerivatives, TrackingCost};
-use crate::core::dynamics::{Dynamics, EulerModel, Linearization, NoiseKind};
+use crate::core::dynamics::{DiscreteDynamics, Dynamics, Linearization, NoiseKind};
 use crate::core::model::Noise;
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
 use nalgebra::DMatrix;
@@ -74,15 +74,15 @@ impl Scratch {
     }
 }
 
-/// The mean-and-covariance dynamics of an [`EulerModel`] executed open loop: a deterministic
+/// The mean-and-covariance dynamics of an [`DiscreteDynamics`] executed open loop: a deterministic
 /// [`Dynamics`] on `z = (m, vech P)` of dimension `n + n(n+1)/2`.
 pub struct MomentDynamics<'a> {
-    base: &'a EulerModel,
+    base: &'a DiscreteDynamics,
     scratch: Mutex<Scratch>,
 }
 
 impl<'a> MomentDynamics<'a> {
-    pub fn new(base: &'a EulerModel) -> Self {
+    pub fn new(base: &'a DiscreteDynamics) -> Self {
         let (n, m, p) = (base.nx(), base.nu(), base.nw());
         MomentDynamics {
             base,
@@ -91,7 +91,7 @@ impl<'a> MomentDynamics<'a> {
     }
 
     /// The plant model whose moments these are.
-    pub fn base(&self) -> &EulerModel {
+    pub fn base(&self) -> &DiscreteDynamics {
         self.base
     }
 
@@ -133,8 +133,14 @@ fn add_sandwich(
 
 /// The parts of the plant's linearisation that the covariance step needs: `A`, `c_i`, `Cx_i`
 /// (not `B`: m fewer dual flow evaluations per step of every line-search rollout). Computed as
-/// [`EulerModel`]'s `linearize` computes them, so the values are the same.
-fn state_linearization(base: &EulerModel, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+/// [`DiscreteDynamics`]'s `linearize` computes them, so the values are the same.
+fn state_linearization(
+    base: &DiscreteDynamics,
+    k: usize,
+    x: &[f64],
+    u: &[f64],
+    lin: &mut Linearization,
+) {
     let (n, m) = (base.nx(), base.nu());
     let mut xd = [Dual64::from(0.0); MAX_NX];
     let mut ud = [Dual64::from(0.0); MAX_NU];
