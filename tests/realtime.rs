@@ -19,10 +19,10 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
     let board = d.board(&ns, &[]);
     let trials = 3;
     let stiff = run_planner(&ns, &sooc, "stiffness", trials, false);
-    let fb = run_planner(&ns, &ilqg, "delayed-feedback", trials, false);
+    let fb = run_planner(&ns, &ilqg, "naive-delayed", trials, false);
     // Without latency central feedback works: a plan for no delay, the planner at 250 Hz so
     // that its own loop adds only a few milliseconds.
-    let out = planner_command_at(&ns, &ilqg0_plan(), "delayed-feedback", trials, "0")
+    let out = planner_command_at(&ns, &ilqg0_plan(), "naive-delayed", trials, "0")
         .args(["--rate-hz", "250"])
         .stderr(std::process::Stdio::inherit())
         .output()

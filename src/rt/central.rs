@@ -5,16 +5,18 @@
 //! polled with the time, and says which command slices to publish now. The live planner
 //! (`vic-planner`) and the lockstep mode ([`lockstep`]) drive the same code.
 //!
-//! Latency: the feedback of knot `k` uses the state of knot `k − D` (paper Eq. 13, `D` =
-//! `latency_steps`), as the offline [`Feedback::Delayed`] does. Live, the state must also have
+//! Latency: the feedback of knot `k` uses the state of knot `k − D` (`D` = `latency_steps`), as
+//! the offline Monte Carlo does: on it directly (paper Eq. 13, [`Feedback::Delayed`]) or through
+//! the prediction of the present over the commands sent since ([`Feedback::Predicted`]), one
+//! code path ([`Policy::command_into`]) for both. Live, the state must also have
 //! passed the sensor delay line before knot `k` is computed, and the slice must pass the command
 //! delay line and reach the board before knot `k` acts; when the state of `k − D` is not there
 //! yet, the freshest released state is used and the knot is counted in `stale_feedback`.
 
+use crate::core::dynamics::DiscreteDynamics;
 use crate::core::model::Exogenous;
-#[cfg(doc)]
-use crate::core::policy::Feedback;
-use crate::core::policy::{Policy, Seen};
+pub use crate::core::policy::Strategy;
+use crate::core::policy::{Feedback, Policy};
 use crate::core::scalar::{MAX_NU, MAX_NX};
 use crate::rt::board::{Board, Inputs};
 use crate::rt::realtime::Periodic;
@@ -35,31 +37,6 @@ pub enum TrackError {
     NotImpedance,
     #[error("the reference has {reference} knots, the policy {steps} steps")]
     ReferenceLength { reference: usize, steps: usize },
-}
-
-/// How the central controller commands the board.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Strategy {
-    /// The (SOOC) plan's torque and stiffness, no central feedback.
-    Stiffness,
-    /// Zero stiffness; the (ILQG) plan plus its gains on the state of `latency` ago (Eq. 13).
-    DelayedFeedback,
-    /// The plan's torque and stiffness plus the delayed feedback.
-    Both,
-}
-
-impl Strategy {
-    pub fn name(self) -> &'static str {
-        match self {
-            Strategy::Stiffness => "stiffness",
-            Strategy::DelayedFeedback => "delayed-feedback",
-            Strategy::Both => "both",
-        }
-    }
-    fn feedback(self) -> bool {
-        !matches!(self, Strategy::Stiffness)
-    }
 }
 
 /// Timing of the central controller.
@@ -84,6 +61,8 @@ pub struct Track {
     pub dt_ns: u64,
     pub steps: usize,
     pub policy: Policy,
+    /// The plan's discrete model: the predictor runs it over the commands in flight.
+    pub dynamics: DiscreteDynamics,
     pub reference: Vec<Exogenous>,
     pub x0: [f64; MAX_NX],
 }
@@ -93,11 +72,11 @@ impl Track {
     /// a grid of `dt` [s], tracking `reference` (one entry per knot `0..=N`) from `x0`.
     pub fn new(
         policy: Policy,
-        reference: Vec<Exogenous>,
+        dynamics: DiscreteDynamics,
         x0: &[f64],
-        dof: usize,
-        dt: f64,
     ) -> Result<Track, TrackError> {
+        let (dof, dt) = (dynamics.model.dof(), dynamics.dt);
+        let reference = dynamics.exogenous.clone();
         let (nx, nu) = (x0.len(), policy.nu());
         if nx != 2 * dof || nu != 2 * dof || policy.nx() != nx || nx > MAX_NX || nu > MAX_NU {
             return Err(TrackError::NotImpedance);
@@ -117,6 +96,7 @@ impl Track {
             dt_ns: (dt * 1e9).round() as u64,
             steps: policy.steps(),
             policy,
+            dynamics,
             reference,
             x0: x,
         })
@@ -282,34 +262,47 @@ impl Central {
         now_ns.saturating_sub(self.start_ns)
     }
 
+    /// The state the controller feeds back at knot `k`: that of `k − D` once it has passed the
+    /// sensor line, else the freshest older one (counted in `stale_feedback`); none before `D`.
+    fn seen_for(&mut self, k: usize) -> Option<(usize, [f64; MAX_NX])> {
+        let j = self.feedback().seen_knot(k)?;
+        match (self.seen[j], self.latest_seen) {
+            (Some(x), _) => Some((j, x)),
+            (None, Some(l)) if l < j => {
+                self.stale_feedback += 1;
+                self.seen[l].map(|x| (l, x))
+            }
+            _ => {
+                self.stale_feedback += 1;
+                None
+            }
+        }
+    }
+
+    /// How the policy is executed: the strategy's feedback at the configured latency.
+    pub fn feedback(&self) -> Feedback {
+        self.strategy.feedback(self.timing.latency_steps)
+    }
+
     fn compute_knot(&mut self, k: usize) -> Knot {
+        let seen = self.seen_for(k);
+        let feedback = self.feedback();
         let t = &self.track;
         let (dof, nx, nu) = (t.dof, t.nx, t.nu);
-        let mut seen = None;
-        let d = self.timing.latency_steps;
-        if self.strategy.feedback() && k >= d {
-            let j = k - d;
-            let (x, stale) = match (self.seen[j], self.latest_seen) {
-                (Some(x), _) => (Some((j, x)), false),
-                (None, Some(l)) if l < j => (self.seen[l].map(|x| (l, x)), true),
-                _ => (None, true),
-            };
-            if stale {
-                self.stale_feedback += 1;
-            }
-            seen = x.map(|(l, x)| (j, l, x));
-        }
         let mut u = [0.0; MAX_NU];
-        t.policy.control_into(
+        let mut predicted = [0.0; MAX_NX];
+        let from = seen.map_or(k, |(l, _)| l);
+        // The commands in flight: the controller sent them, so it knows them exactly.
+        t.policy.command_into(
+            &t.dynamics,
             k,
-            seen.as_ref().map(|(j, l, x)| Seen {
-                gain: *j,
-                knot: *l,
-                x: &x[..nx],
-            }),
+            feedback,
+            seen.as_ref().map(|(l, x)| (*l, &x[..nx])),
+            self.sent_u[from..k].iter().map(|u| &u[..nu]),
+            &mut predicted,
             &mut u,
         );
-        if self.strategy == Strategy::DelayedFeedback {
+        if !self.strategy.uses_stiffness() {
             // No stiffness: the feedback alone must hold the arm (clamped again, should the
             // bounds exclude zero stiffness).
             u[dof..2 * dof].iter_mut().for_each(|v| *v = 0.0);

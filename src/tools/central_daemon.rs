@@ -1,5 +1,6 @@
 //! `vic-planner`: the central controller as a process. It plays a plan back to the board as
-//! command slices at 50 Hz with a strategy (stiffness, delayed feedback by Eq. 13, or both), puts
+//! command slices at 50 Hz with a strategy (`naive-delayed`: Eq. 13; `predictor`: a Smith
+//! predictor over the commands in flight; `stiffness`: the open-loop plan; `stiffness+predictor`), puts
 //! delay lines on the state and command paths so that the feedback sees the state the configured
 //! latency late, runs the trials live against a `vic-board` (or in lockstep with a board in this
 //! process on a simulated clock) and reports their errors.
@@ -59,7 +60,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     }
     crate::rt::transport::validate_namespace(&o.namespace).input()?;
     let mut overrides = o.overrides.clone();
-    if o.strategy == Strategy::DelayedFeedback {
+    if !o.strategy.uses_stiffness() {
         overrides.push("actuator.stiffness_max=0".into());
     }
     let base = Scenario::load(&o.config, &overrides).input()?;
@@ -123,15 +124,21 @@ fn run_trials(
     }
 }
 
-/// Without a plan file: SOOC for `stiffness`, else ILQG for the latency (zero stiffness for
-/// `delayed-feedback`, set in `overrides`).
+/// Without a plan file: SOOC for `stiffness`, ILQG for the latency for `naive-delayed` (Eq. 13
+/// needs the augmented plan's gains), an undelayed ILQG plan for the predictor strategies (zero
+/// stiffness for the feedback-only ones, set in `overrides`).
 fn plan_at_start(o: &CentralOptions, overrides: &[String]) -> anyhow::Result<PlanFile> {
     let mut overrides = overrides.to_vec();
-    let method = if o.strategy == Strategy::Stiffness {
-        Method::Sooc
-    } else {
-        overrides.push(format!("task.delay_ms={}", o.latency_ms.unwrap_or(0.0)));
-        Method::Ilqg
+    let method = match o.strategy {
+        Strategy::Stiffness => Method::Sooc,
+        Strategy::NaiveDelayed => {
+            overrides.push(format!("task.delay_ms={}", o.latency_ms.unwrap_or(0.0)));
+            Method::Ilqg
+        }
+        Strategy::Predictor | Strategy::StiffnessPredictor => {
+            overrides.push("task.delay_ms=0".into());
+            Method::Ilqg
+        }
     };
     let s = Scenario::load(&o.config, &overrides).input()?;
     eprintln!("vic-planner: planning ({}) ...", method.name());

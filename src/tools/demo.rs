@@ -194,7 +194,7 @@ fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'
             rate_hz: 50,
         },
         StrategyRun {
-            name: "delayed-feedback",
+            name: "naive-delayed",
             plan: &plans.feedback,
             latency_ms: o.latency_ms,
             rate_hz: 50,
@@ -202,7 +202,7 @@ fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'
     ];
     if let Some(p) = &plans.feedback_at_zero {
         runs.push(StrategyRun {
-            name: "delayed-feedback",
+            name: "naive-delayed",
             plan: p,
             latency_ms: 0.0,
             rate_hz: 250,
@@ -390,8 +390,8 @@ mod tests {
             rows,
             [
                 ("stiffness", 200.0, 50),
-                ("delayed-feedback", 200.0, 50),
-                ("delayed-feedback", 0.0, 250)
+                ("naive-delayed", 200.0, 50),
+                ("naive-delayed", 0.0, 250)
             ]
         );
         let plans = DemoPlans {
