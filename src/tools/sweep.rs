@@ -7,9 +7,8 @@
 //! a Smith predictor across the latency, [`Feedback::Predicted`]) and `stiffness` (the open-loop
 //! SOOC plan of torque and stiffness, which no latency affects).
 
-use crate::core::policy::Feedback;
 pub use crate::core::policy::Strategy;
-use crate::planning::evaluation::summarize;
+use crate::planning::evaluation::{predicted_cost, summarize};
 use crate::planning::montecarlo::run_trials;
 use crate::planning::plan::{Method, PlanFile, plan, setup};
 use crate::planning::scenario::Scenario;
@@ -72,9 +71,8 @@ pub struct SweepPoint {
     pub rms_error: Option<f64>,
     pub diverged_fraction: f64,
     pub expected_cost_mc: Option<f64>,
-    /// The plan's own prediction of the executed policy's expected cost, where one exists: the
-    /// open-loop prediction for `stiffness`, the plan's for `predictor` at 0 latency; `None`
-    /// where the plan predicts another policy than the one executed.
+    /// The executed policy's expected cost predicted by closed-loop covariance propagation
+    /// ([`predicted_cost`]); `None` for `naive-delayed`, whose law it does not model.
     pub expected_cost_predicted: Option<f64>,
     pub mean_stiffness: f64,
     pub unit: Unit,
@@ -114,13 +112,8 @@ pub fn sweep_latency(
             let set = setup(s).map_err(|e| e.to_string())?;
             let steps = latency_steps(latency_ms, s.task.dt)?;
             let feedback = strategy.feedback(steps);
-            let trials = run_trials(
-                &set,
-                &p.policy(&set).map_err(|e| e.to_string())?,
-                feedback,
-                opts.trials,
-                opts.seed,
-            );
+            let policy = p.policy(&set).map_err(|e| e.to_string())?;
+            let trials = run_trials(&set, &policy, feedback, opts.trials, opts.seed);
             let divergence = opts
                 .divergence
                 .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
@@ -135,11 +128,7 @@ pub fn sweep_latency(
                 rms_error: finite(r.rms_error),
                 diverged_fraction: r.diverged_fraction,
                 expected_cost_mc: r.expected_cost_mc.is_finite().then_some(r.expected_cost_mc),
-                expected_cost_predicted: match feedback {
-                    Feedback::OpenLoop => Some(p.summary.open_loop_expected_cost),
-                    Feedback::Predicted { latency_steps: 0 } => Some(p.summary.expected_cost),
-                    _ => None,
-                },
+                expected_cost_predicted: predicted_cost(&set, &policy, feedback),
                 mean_stiffness: p.summary.mean_stiffness,
                 unit: r.unit,
             });
