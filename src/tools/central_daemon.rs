@@ -8,7 +8,7 @@
 use crate::planning::plan::{Method, PlanFile, plan, setup};
 use crate::planning::scenario::Scenario;
 use crate::rt::central::{
-    Central, Strategy, Timing, TrialRecord, lockstep, run_live, split_latency_ms,
+    Central, LiveError, Strategy, Timing, TrialRecord, lockstep, run_live, split_latency_ms,
 };
 use crate::rt::transport::CentralPorts;
 use crate::tools::cli::{
@@ -82,14 +82,26 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         lookahead_ns: (lookahead_ms * 1e6) as u64,
     };
     let mut central = Central::new(track, o.strategy, timing);
-    let records = run_trials(o, &mut central, &setup.x0, period_ns)?;
+    let (records, lost) = match run_trials(o, &mut central, &setup.x0, period_ns)? {
+        Ok(records) => (records, None),
+        // The trials before the board was lost are results: print them, then fail.
+        Err(e) => (e.records().to_vec(), Some(e)),
+    };
     let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
-    let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
-    if o.json {
-        print_json(&result)
-    } else {
-        print_result(&result, &delays);
-        Ok(())
+    if !records.is_empty() || lost.is_none() {
+        let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
+        if o.json {
+            print_json(&result)?;
+        } else {
+            print_result(&result, &delays);
+        }
+    }
+    match lost {
+        None => Ok(()),
+        Some(e) => Err(anyhow::anyhow!(
+            "{e} ({} trials finished before, reported above)",
+            e.records().len()
+        )),
     }
 }
 
@@ -100,18 +112,18 @@ fn run_trials(
     central: &mut Central,
     x0: &[f64],
     period_ns: u64,
-) -> anyhow::Result<Vec<TrialRecord>> {
+) -> anyhow::Result<Result<Vec<TrialRecord>, LiveError>> {
     if o.lockstep {
         let s = Scenario::load(&o.config, &o.overrides).input()?;
         let cfg = crate::tools::launch::board_config(&s, 1_000_000);
         let mut board = crate::rt::board::Board::new(s.model.clone(), cfg, x0).input()?;
-        Ok(lockstep(
+        Ok(Ok(lockstep(
             &mut board, central, 1_000_000, period_ns, o.trials, o.seed,
-        ))
+        )))
     } else {
         let stop = stop_on_signal()?;
         let ep = CentralPorts::open(&o.namespace)?;
-        run_live(
+        match run_live(
             &ep,
             central,
             o.trials,
@@ -119,8 +131,10 @@ fn run_trials(
             period_ns,
             o.board_timeout,
             &stop,
-        )
-        .runtime()
+        ) {
+            Err(LiveError::Transport(e)) => Err(e).runtime(),
+            other => Ok(other),
+        }
     }
 }
 
@@ -168,31 +182,32 @@ fn delay_lines(o: &CentralOptions, latency_ms: f64, lookahead_ms: f64) -> anyhow
     Ok(Delays { sensor, command })
 }
 
-/// A distance as printed in the tables: "diverged" for a trial that left the workspace.
-fn distance_text(v: f64) -> String {
-    if v >= 1e9 {
-        "diverged".to_string()
-    } else {
-        format!("{v:.2}")
-    }
+/// A distance as printed in the tables: "diverged" when no trial completed.
+pub fn distance_text(v: Option<f64>) -> String {
+    v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.2}"))
 }
 
 fn print_result(result: &StrategyResult, delays: &Delays) {
     let u = &result.unit;
-    let f = |v: f64| distance_text(v);
+    let f = distance_text;
     println!(
         "{} ({} trials, latency {} ms = sensor {} + command {} + lookahead)",
         result.name, result.trials, result.latency_ms, delays.sensor, delays.command
     );
     println!(
-        "errors   RMS {} {u}, final mean {} / max {} {u}, max {} {u}",
+        "errors   RMS {} {u}, final mean {} / max {} {u}, max {} {u} (trials that completed)",
         f(result.rms_error),
         f(result.final_error_mean),
         f(result.final_error_max),
         f(result.max_error)
     );
     println!(
-        "diverged {} of {}; safe hold in {} trials; {} stale feedback knots",
-        result.diverged, result.trials, result.safe_hold_trials, result.stale_feedback
+        "diverged {} of {}; safe hold in {}, fault in {}, stalled {} trials; {} stale feedback knots",
+        result.diverged,
+        result.trials,
+        result.safe_hold_trials,
+        result.fault_trials,
+        result.stalled_trials,
+        result.stale_feedback
     );
 }

@@ -320,13 +320,7 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
     );
     let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let j = &stats["jitter_us"];
-    let f = |v: f64| {
-        if v >= 1e9 {
-            "diverged".to_string()
-        } else {
-            format!("{v:.2} {unit}")
-        }
-    };
+    let f = |v: Option<f64>| v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.2} {unit}"));
     for r in results {
         println!(
             "{:<17} {:>5} ms {:>10} {:>12} {:>10} {:>5} / {:<2} {:>8.1} /{:>7.1} /{:>8.1} {:>6}",

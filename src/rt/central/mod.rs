@@ -18,16 +18,15 @@ use crate::core::model::Exogenous;
 pub use crate::core::policy::Strategy;
 use crate::core::policy::{Feedback, Policy};
 use crate::core::scalar::{MAX_NU, MAX_NX};
+mod live;
+pub use live::{LiveError, run_live};
+
 use crate::rt::board::{Board, Inputs};
-use crate::rt::realtime::Periodic;
 use crate::rt::transport::{
-    CentralPorts, CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode,
-    StateMsg, TransportError, monotonic_ns,
+    CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, StateMsg,
 };
 use nalgebra::DVector;
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
 
 /// Why a policy cannot be played on the board.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -124,6 +123,8 @@ pub struct TrialRecord {
     /// The board went to safe hold or fault during the movement.
     pub safe_hold: bool,
     pub fault: bool,
+    /// The trial ended (time limit, stop request, board silent) before its final state arrived.
+    pub stalled: bool,
 }
 
 /// The central controller.
@@ -150,6 +151,10 @@ pub struct Central {
     stale_feedback: usize,
     safe_hold: bool,
     fault: bool,
+    /// A state acknowledging this trial's reset arrived.
+    acknowledged: bool,
+    /// The live loop gave up on this trial before its end (see [`TrialRecord::stalled`]).
+    pub stalled: bool,
 }
 
 impl Central {
@@ -173,6 +178,8 @@ impl Central {
             stale_feedback: 0,
             safe_hold: false,
             fault: false,
+            acknowledged: false,
+            stalled: false,
             track,
         }
     }
@@ -191,6 +198,8 @@ impl Central {
         self.stale_feedback = 0;
         self.safe_hold = false;
         self.fault = false;
+        self.acknowledged = false;
+        self.stalled = false;
         let dof = self.track.dof;
         self.control_seq += 1;
         self.reset_seq = self.control_seq;
@@ -230,6 +239,7 @@ impl Central {
         if s.trial != self.trial || s.reset_seq != self.reset_seq {
             return;
         }
+        self.acknowledged = true;
         let mode = Mode::from_u32(s.mode);
         if mode == Mode::Idle {
             return;
@@ -369,6 +379,11 @@ impl Central {
         }
     }
 
+    /// Whether a state acknowledging the present trial's reset has arrived.
+    pub fn acknowledged(&self) -> bool {
+        self.acknowledged
+    }
+
     /// Whether the final state of the trial has arrived (or the board faulted).
     pub fn trial_done(&self) -> bool {
         self.recorded[self.track.steps].is_some() || self.fault
@@ -409,6 +424,7 @@ impl Central {
             missing_states: missing,
             safe_hold: self.safe_hold,
             fault: self.fault,
+            stalled: self.stalled || !self.trial_done(),
         }
     }
 }
@@ -456,96 +472,6 @@ pub fn lockstep(
         records.push(central.record());
     }
     records
-}
-
-/// Runs `trials` trials live: waits for a board in the namespace, then for each trial resets it,
-/// streams the slices at the planner period and collects the states until the movement's end.
-pub fn run_live(
-    ep: &CentralPorts,
-    central: &mut Central,
-    trials: usize,
-    seed: u64,
-    planner_period_ns: u64,
-    board_timeout: Duration,
-    stop: &AtomicBool,
-) -> Result<Vec<TrialRecord>, TransportError> {
-    crate::rt::realtime::set_timer_slack_1ns();
-    let mut records = Vec::with_capacity(trials);
-    let mut last_state_ns = 0;
-    for trial in 0..trials as u32 {
-        // A board must be there (again, if it was restarted after a crash).
-        if ep.latest_state().is_none() && monotonic_ns().saturating_sub(last_state_ns) > 200_000_000
-        {
-            wait_for_board(ep, board_timeout, stop)?;
-        }
-        let now = monotonic_ns();
-        // Start on a whole millisecond, once the first slice has crossed the command line.
-        let start =
-            (now + central.lead_time_ns(planner_period_ns) + 20_000_000) / 1_000_000 * 1_000_000;
-        ep.publish_control(&central.begin_trial(trial, seed, start, now))?;
-        let limit = start + central.track.steps as u64 * central.track.dt_ns + 2_000_000_000;
-        stream_trial(
-            ep,
-            central,
-            planner_period_ns,
-            limit,
-            stop,
-            &mut last_state_ns,
-        )?;
-        ep.publish_control(&central.stop(monotonic_ns()))?;
-        records.push(central.record());
-        if stop.load(Ordering::Relaxed) {
-            break;
-        }
-    }
-    Ok(records)
-}
-
-/// Waits for a board's telemetry (woken by its events rather than polling), up to `timeout` or
-/// until `stop`.
-fn wait_for_board(
-    ep: &CentralPorts,
-    timeout: Duration,
-    stop: &AtomicBool,
-) -> Result<(), TransportError> {
-    let t0 = Instant::now();
-    while ep.wait_for_telemetry(Duration::from_millis(100)).is_none() {
-        if t0.elapsed() > timeout || stop.load(Ordering::Relaxed) {
-            return Err(TransportError::NoBoard {
-                namespace: ep.session().namespace().to_string(),
-            });
-        }
-    }
-    Ok(())
-}
-
-/// One trial's loop at the planner period: feed the states received to `central`, publish the
-/// slices it asks for, until the trial is done, the monotonic time `limit` passes or `stop`.
-fn stream_trial(
-    ep: &CentralPorts,
-    central: &mut Central,
-    planner_period_ns: u64,
-    limit: u64,
-    stop: &AtomicBool,
-    last_state_ns: &mut u64,
-) -> Result<(), TransportError> {
-    let mut periodic = Periodic::new(planner_period_ns, 0);
-    let mut out = Vec::new();
-    loop {
-        let wake = periodic.wait();
-        let now = monotonic_ns();
-        if ep.drain_states(|s| central.on_state(s, now)) > 0 {
-            *last_state_ns = now;
-        }
-        out.clear();
-        central.poll(wake.deadline_ns.max(now), &mut out);
-        for c in &out {
-            ep.publish_command(c)?;
-        }
-        if central.trial_done() || now > limit || stop.load(Ordering::Relaxed) {
-            return Ok(());
-        }
-    }
 }
 
 /// The default split of a feedback latency into the sensor and command delay lines [ms]: what
