@@ -67,7 +67,7 @@ pub fn solve_sooc(
     solver: &crate::planning::scenario::IlqgSection,
     warm: &[DVector<f64>],
     progress: &Option<ProgressFn>,
-) -> Result<SoocResult, String> {
+) -> Result<SoocResult, PlanError> {
     let start = std::time::Instant::now();
     let mut u = warm.to_vec();
     let mut iterations = 0;
@@ -94,7 +94,7 @@ pub fn solve_sooc(
         };
         let sol = workspace
             .solve(&problem, &u)
-            .map_err(|e| format!("SOOC at noise fraction {fraction}: {e}"))?;
+            .map_err(|source| PlanError::Sooc { fraction, source })?;
         iterations += sol.iterations;
         history.extend_from_slice(&sol.history);
         if let Some(p) = progress {
@@ -111,7 +111,7 @@ pub fn solve_sooc(
         u = sol.u.clone();
         last = Some(sol);
     }
-    let sol = last.ok_or("SOOC needs at least one noise continuation stage")?;
+    let sol = last.ok_or(PlanError::NoContinuationStage)?;
     let n = setup.x0.len();
     let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
     let solution = Solution {
@@ -228,7 +228,10 @@ pub fn plan(
                 &s.solver.options,
                 &setup.u_init,
             )
-            .map_err(|e| format!("planning the undelayed first guess: {e}"))?;
+            .map_err(|source| PlanError::Ilqg {
+                phase: "undelayed first guess",
+                source,
+            })?;
             let guess_time = guess_time.elapsed();
             let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init, &progress)?;
             sol.solve_time += guess_time;
@@ -270,18 +273,22 @@ pub fn solve_in_phases(
     options: &IlqgOptions,
     u_init: &[DVector<f64>],
     progress: &Option<ProgressFn>,
-) -> Result<Solution, String> {
-    let start = |e: crate::core::solver::IlqgError| format!("ILQG: {e}");
+) -> Result<Solution, PlanError> {
+    let failed = |phase| move |source| PlanError::Ilqg { phase, source };
     if !options.stochastic || problem.dynamics.nw() == 0 {
         return solver_for(problem, options, "ilqg", progress)
             .try_solve(problem, u_init)
-            .map_err(start);
+            .map_err(failed("ilqg"));
     }
     let mut solver = solver_for(problem, options, "deterministic", progress);
     solver.options.stochastic = false;
-    let first = solver.try_solve(problem, u_init).map_err(start)?;
+    let first = solver
+        .try_solve(problem, u_init)
+        .map_err(failed("deterministic"))?;
     let mut solver = solver_for(problem, options, "stochastic", progress);
-    let mut second = solver.try_solve(problem, &first.u).map_err(start)?;
+    let mut second = solver
+        .try_solve(problem, &first.u)
+        .map_err(failed("stochastic"))?;
     second.iterations += first.iterations;
     second.solve_time += first.solve_time;
     Ok(second)

@@ -223,25 +223,31 @@ impl Figure for ArmFigure<'_> {
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
         let heights = self.heights();
-        draw_columns(root, &heights, self.columns.len(), [0, 1, 3], |c, panels| {
-            self.draw_hand(&panels[0], c)?;
-            let rows: [(&str, (f64, f64)); 2] = [
-                ("angle [deg]", self.angle),
-                ("velocity [deg/s]", self.velocity),
-            ];
-            for (r, (desc, range)) in rows.into_iter().enumerate() {
-                let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
-                self.draw_joint_stats(&mut chart, c, r == 0)?;
-            }
-            draw_command_rows(
-                &panels[3..],
-                self.time,
-                self.torque,
-                self.stiffness,
-                &self.columns[c],
-                c == 0,
-            )
-        })
+        draw_columns(
+            root,
+            &heights,
+            self.columns.len(),
+            [0, 1, 3],
+            |c, panels| {
+                self.draw_hand(&panels[0], c)?;
+                let rows: [(&str, (f64, f64)); 2] = [
+                    ("angle [deg]", self.angle),
+                    ("velocity [deg/s]", self.velocity),
+                ];
+                for (r, (desc, range)) in rows.into_iter().enumerate() {
+                    let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
+                    self.draw_joint_stats(&mut chart, c, r == 0)?;
+                }
+                draw_command_rows(
+                    &panels[3..],
+                    self.time,
+                    self.torque,
+                    self.stiffness,
+                    &self.columns[c],
+                    c == 0,
+                )
+            },
+        )
     }
 }
 

@@ -121,26 +121,32 @@ impl Figure for JointFigure<'_> {
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
         let heights = self.heights();
-        draw_columns(root, &heights, self.columns.len(), [0, 1, 2], |c, panels| {
-            let top = titled(&panels[0], &self.columns[c].title)?;
-            let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
-            self.draw_trials(&mut chart, c, true)?;
-            let mut chart = time_chart(
-                &panels[1],
-                self.time,
-                self.velocity,
-                "velocity [deg/s]",
-                false,
-            )?;
-            self.draw_trials(&mut chart, c, false)?;
-            draw_command_rows(
-                &panels[2..],
-                self.time,
-                self.torque,
-                self.stiffness,
-                &self.columns[c],
-                c == 0,
-            )
-        })
+        draw_columns(
+            root,
+            &heights,
+            self.columns.len(),
+            [0, 1, 2],
+            |c, panels| {
+                let top = titled(&panels[0], &self.columns[c].title)?;
+                let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
+                self.draw_trials(&mut chart, c, true)?;
+                let mut chart = time_chart(
+                    &panels[1],
+                    self.time,
+                    self.velocity,
+                    "velocity [deg/s]",
+                    false,
+                )?;
+                self.draw_trials(&mut chart, c, false)?;
+                draw_command_rows(
+                    &panels[2..],
+                    self.time,
+                    self.torque,
+                    self.stiffness,
+                    &self.columns[c],
+                    c == 0,
+                )
+            },
+        )
     }
 }
