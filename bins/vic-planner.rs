@@ -64,6 +64,10 @@ struct Args {
     /// Seconds to wait for a board before giving up.
     #[arg(long, default_value_t = 5.0)]
     board_timeout_s: f64,
+    /// Also write the trials' recorded states and commands here (JSON: `x` per trial per knot,
+    /// `u` per trial per step), e.g. for a figure.
+    #[arg(long, value_name = "FILE")]
+    trajectories: Option<PathBuf>,
     #[command(flatten)]
     json: JsonArg,
 }
@@ -86,6 +90,7 @@ fn run_args(a: Args) -> anyhow::Result<()> {
         divergence: a.divergence,
         lockstep: a.lockstep,
         board_timeout,
+        trajectories: a.trajectories,
         json: a.json.json,
     })
 }

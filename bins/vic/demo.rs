@@ -32,10 +32,14 @@ pub struct DemoArgs {
     /// Use this plan for the `stiffness` strategy instead of planning (SOOC, `vic plan --out`).
     #[arg(long, value_name = "FILE")]
     stiffness_plan: Option<PathBuf>,
-    /// Use this plan for `delayed-feedback` instead of planning (ILQG for the latency, zero
+    /// Use this plan for `naive-delayed` instead of planning (ILQG for the latency, zero
     /// stiffness).
     #[arg(long, value_name = "FILE")]
     feedback_plan: Option<PathBuf>,
+    /// Folder for the trajectories figure (trajectories.png and .svg: hand paths per strategy,
+    /// like the paper's Fig. 1), the table as JSON (demo.json) and each strategy's trials.
+    #[arg(long, value_name = "DIR", default_value = "vic-demo")]
+    out_dir: PathBuf,
     /// Board spin before each deadline [µs] (0: sleep only).
     #[arg(long, default_value_t = 0)]
     spin_us: u64,
@@ -55,6 +59,7 @@ impl DemoArgs {
             stiffness_plan: self.stiffness_plan,
             feedback_plan: self.feedback_plan,
             spin_us: self.spin_us,
+            out_dir: self.out_dir,
             json: self.json.json,
         })
     }

@@ -15,7 +15,7 @@ use crate::tools::cli::{
     Classify, divergence_or_default, input_error, print_json, stop_on_signal, whole_steps,
 };
 use crate::tools::plan_command::read_plan;
-use crate::tools::report::StrategyResult;
+use crate::tools::report::{StrategyResult, Trajectories};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -44,6 +44,8 @@ pub struct CentralOptions {
     pub lockstep: bool,
     /// How long to wait for a board.
     pub board_timeout: Duration,
+    /// Write the trials' recorded states and commands here.
+    pub trajectories: Option<PathBuf>,
     pub json: bool,
 }
 
@@ -87,6 +89,11 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         // The trials before the board was lost are results: print them, then fail.
         Err(e) => (e.records().to_vec(), Some(e)),
     };
+    if let Some(path) = &o.trajectories {
+        let text = serde_json::to_string(&Trajectories::from_records(&records))?;
+        std::fs::write(path, text)
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+    }
     let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
     if !records.is_empty() || lost.is_none() {
         let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
@@ -209,5 +216,16 @@ fn print_result(result: &StrategyResult, delays: &Delays) {
         result.fault_trials,
         result.stalled_trials,
         result.stale_feedback
+    );
+    let c = &result.central;
+    println!(
+        "central  compute per period p50 {:.1} / p99 {:.1} / max {:.1} µs ({} periods), {} overruns \
+         of the {:.0} µs budget (the previous slice sent again)",
+        c.compute_us.p50,
+        c.compute_us.p99,
+        c.compute_us.max,
+        c.compute_us.count,
+        c.overruns,
+        c.budget_us
     );
 }

@@ -1,16 +1,21 @@
-//! `vic demo`: the real-time pair end to end. It plans the two strategies of the paper's delay
-//! experiment (SOOC torque and stiffness for `stiffness`; ILQG for the latency with zero stiffness
-//! for `delayed-feedback`, Eq. 13; and delayed feedback planned for 0 ms as the reference), starts
-//! a `vic-board` and one `vic-planner` per strategy in a fresh namespace with the same noise seeds,
-//! stops the board so that it prints its timing, and merges everything into one table or JSON
-//! document. The processes and the namespace's files do not outlive the run, however it ends.
+//! `vic demo`: the real-time pair end to end. It plans the strategies of the delay experiment
+//! (SOOC torque and stiffness for `stiffness`; ILQG for the latency with zero stiffness for
+//! `naive-delayed`, Eq. 13; undelayed ILQG with zero stiffness for `predictor`, which predicts
+//! across the latency, and for the reference row: naive-delayed at 0 ms), starts a `vic-board`
+//! and one `vic-planner` per strategy in a fresh namespace with the same noise seeds, stops the
+//! board so that it prints its timing, and merges everything into one table or JSON document.
+//! The trials' hand paths (joint angles for a single joint) per strategy go into a figure beside
+//! the table's JSON in `--out-dir`. The processes and the namespace's files do not outlive the
+//! run, however it ends.
 
 use crate::planning::plan::{Method, PLAN_VERSION, plan};
 use crate::planning::scenario::Scenario;
+use crate::rt::central::Strategy;
 use crate::rt::daemon::Children;
 use crate::tools::cli::{Classify, sibling_binary, whole_steps};
-use crate::tools::plan_command::write_plan;
-use crate::tools::report::StrategyResult;
+use crate::tools::experiment::column_plot;
+use crate::tools::plan_command::{read_plan, write_plan};
+use crate::tools::report::{StrategyResult, Trajectories};
 use anyhow::{Context, anyhow, bail};
 use serde_json::Value;
 use std::io::IsTerminal;
@@ -37,6 +42,8 @@ pub struct DemoOptions {
     pub feedback_plan: Option<PathBuf>,
     /// Board spin before each deadline [µs].
     pub spin_us: u64,
+    /// The figure, the JSON document and the trajectories go here.
+    pub out_dir: PathBuf,
     pub json: bool,
 }
 
@@ -50,43 +57,87 @@ struct DemoPlans {
 
 /// One planner run: a strategy, its plan, its latency and the planner's rate.
 struct StrategyRun<'a> {
-    name: &'static str,
+    strategy: Strategy,
     plan: &'a Path,
     latency_ms: f64,
     rate_hz: u64,
 }
 
-/// Plans, runs every strategy against one board, prints the comparison and the board's timing.
+/// Plans, runs every strategy against one board, draws the trajectories, prints the comparison
+/// and the board's timing.
 pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
     let scenario = Scenario::load(&o.config, &o.overrides).input()?;
     whole_steps("--latency-ms", o.latency_ms, scenario.task.dt * 1000.0)?;
     let board_bin = sibling_binary("vic-board")?;
     let planner_bin = sibling_binary("vic-planner")?;
+    std::fs::create_dir_all(&o.out_dir)
+        .map_err(|e| format!("--out-dir {}: cannot create: {e}", o.out_dir.display()))
+        .input()?;
     let namespace = format!("demo{}", std::process::id());
     let store = PlanStore::new(o.plans_dir.as_deref(), &namespace)?;
     let plans = plan_strategies(o, &store)?;
+    let runs = strategy_runs(o, &plans);
     let mut children = Children::new(&namespace);
     children
         .children
         .push(start_board(o, &board_bin, &namespace)?);
-    let results = strategy_runs(o, &plans)
+    let results = runs
         .iter()
         .map(|r| run_planner(o, &planner_bin, &namespace, r))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut board = children.children.pop().expect("the board was started");
     let stats = stop_board(&mut board)?;
     drop(children);
+    let figure = trajectories_figure(o, &scenario, &runs)?;
     drop(store);
     let leftover = crate::rt::transport::namespace_files(&namespace);
+    let doc = document(o, &results, &stats, &leftover, &figure);
+    let json_path = o.out_dir.join("demo.json");
+    std::fs::write(&json_path, format!("{doc:#}"))
+        .map_err(|e| anyhow!("cannot write {}: {e}", json_path.display()))?;
     if o.json {
-        println!("{}", document(o, &results, &stats, &leftover));
+        println!("{doc}");
         return Ok(());
     }
     print_table(&results, &stats);
+    println!(
+        "trajectories: {} (and .svg); table as JSON: {}",
+        figure[0].display(),
+        json_path.display()
+    );
     if !leftover.is_empty() {
         eprintln!("vic: warning: files left in /dev/shm: {leftover:?}");
     }
     Ok(())
+}
+
+/// The trials of every run side by side, like the paper's Fig. 1 (hand paths on top) for the
+/// arm, Fig. 2 for a single joint; returns the PNG and SVG paths.
+fn trajectories_figure(
+    o: &DemoOptions,
+    scenario: &Scenario,
+    runs: &[StrategyRun],
+) -> anyhow::Result<[PathBuf; 2]> {
+    let columns = runs
+        .iter()
+        .map(|r| {
+            let path = o.out_dir.join(format!("{}.json", r.stem()));
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| anyhow!("{}: cannot read: {e}", path.display()))?;
+            let traj: Trajectories = serde_json::from_str(&text)
+                .map_err(|e| anyhow!("{}: not trajectories: {e}", path.display()))?;
+            let plan = read_plan(r.plan)?;
+            Ok(column_plot(&r.label(), &plan, scenario, &traj.to_trials()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let png = o.out_dir.join("trajectories.png");
+    let svg = o.out_dir.join("trajectories.svg");
+    if scenario.model.dof() == 2 {
+        crate::tools::plot::arm_figure(&columns, &png, &svg)?;
+    } else {
+        crate::tools::plot::joint_figure(&columns, &png, &svg)?;
+    }
+    Ok([png, svg])
 }
 
 /// Where the demo's plans go: the user's folder (reused across runs) or a temporary one (removed
@@ -185,30 +236,45 @@ fn plan_strategies(o: &DemoOptions, store: &PlanStore) -> anyhow::Result<DemoPla
     })
 }
 
+/// The rows: naive-delayed at 0 ms (the reference, planner at 250 Hz so that its own loop adds
+/// only a few ms), then naive-delayed, predictor and stiffness at the latency (50 Hz).
 fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'a>> {
-    let mut runs = vec![
-        StrategyRun {
-            name: "stiffness",
-            plan: &plans.stiffness,
-            latency_ms: o.latency_ms,
-            rate_hz: 50,
-        },
-        StrategyRun {
-            name: "naive-delayed",
-            plan: &plans.feedback,
-            latency_ms: o.latency_ms,
-            rate_hz: 50,
-        },
-    ];
+    let at = |strategy, plan, latency_ms, rate_hz| StrategyRun {
+        strategy,
+        plan,
+        latency_ms,
+        rate_hz,
+    };
+    let mut runs = Vec::new();
     if let Some(p) = &plans.feedback_at_zero {
-        runs.push(StrategyRun {
-            name: "naive-delayed",
-            plan: p,
-            latency_ms: 0.0,
-            rate_hz: 250,
-        });
+        runs.push(at(Strategy::NaiveDelayed, p, 0.0, 250));
     }
+    // The predictor runs the undelayed plan's gains on the predicted present (at 0 ms latency
+    // the feedback plan is that plan).
+    let undelayed = plans.feedback_at_zero.as_ref().unwrap_or(&plans.feedback);
+    runs.push(at(
+        Strategy::NaiveDelayed,
+        &plans.feedback,
+        o.latency_ms,
+        50,
+    ));
+    runs.push(at(Strategy::Predictor, undelayed, o.latency_ms, 50));
+    runs.push(at(Strategy::Stiffness, &plans.stiffness, o.latency_ms, 50));
     runs
+}
+
+impl StrategyRun<'_> {
+    /// The column title and the file stem of this run.
+    fn label(&self) -> String {
+        format!("{} {} ms", self.strategy.name(), self.latency_ms)
+    }
+    fn stem(&self) -> String {
+        format!(
+            "{}-{}ms",
+            self.strategy.name().replace('+', "-"),
+            self.latency_ms
+        )
+    }
 }
 
 /// `--config FILE --set ...` for a child process.
@@ -242,7 +308,15 @@ fn run_planner(
     scenario_args(&mut cmd, o);
     cmd.arg("--plan")
         .arg(run.plan)
-        .args(["--strategy", run.name, "--namespace", namespace, "--json"])
+        .args([
+            "--strategy",
+            run.strategy.name(),
+            "--namespace",
+            namespace,
+            "--json",
+        ])
+        .arg("--trajectories")
+        .arg(o.out_dir.join(format!("{}.json", run.stem())))
         .args(["--trials", &o.trials.to_string()])
         .args(["--seed", &o.seed.to_string()])
         .args(["--latency-ms", &run.latency_ms.to_string()])
@@ -255,7 +329,7 @@ fn run_planner(
     if !out.status.success() {
         bail!(
             "vic-planner --strategy {} failed ({})",
-            run.name,
+            run.strategy.name(),
             out.status
         );
     }
@@ -280,6 +354,7 @@ fn document(
     results: &[StrategyResult],
     stats: &Value,
     leftover: &[String],
+    figure: &[PathBuf; 2],
 ) -> Value {
     let strategies: Vec<Value> = results
         .iter()
@@ -300,6 +375,7 @@ fn document(
         "strategies": strategies,
         "board": stats,
         "leftover_shm_files": leftover,
+        "figure": figure.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
     })
 }
 
@@ -308,22 +384,22 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
         .first()
         .map_or(crate::planning::unit::Unit::Millimetre, |r| r.unit);
     println!(
-        "{:<17} {:>8} {:>10} {:>12} {:>10} {:>9} {:>26} {:>6}",
+        "{:<17} {:>8} {:>11} {:>12} {:>11} {:>9} {:>26} {:>8}",
         "strategy",
         "latency",
         "RMS error",
         "final error",
         "max error",
         "diverged",
-        "jitter p50/p99/max [µs]",
-        "late"
+        "compute p50/p99/max [µs]",
+        "overruns"
     );
     let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
-    let j = &stats["jitter_us"];
     let f = |v: Option<f64>| v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.2} {unit}"));
     for r in results {
+        let c = &r.central.compute_us;
         println!(
-            "{:<17} {:>5} ms {:>10} {:>12} {:>10} {:>5} / {:<2} {:>8.1} /{:>7.1} /{:>8.1} {:>6}",
+            "{:<17} {:>5} ms {:>11} {:>12} {:>11} {:>5} / {:<2} {:>8.1} /{:>7.1} /{:>8.1} {:>8}",
             r.name,
             r.latency_ms,
             f(r.rms_error),
@@ -331,17 +407,29 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
             f(r.max_error),
             r.diverged,
             r.trials,
-            num(&j["p50"]),
-            num(&j["p99"]),
-            num(&j["max"]),
-            stats["late_ticks"]
+            c.p50,
+            c.p99,
+            c.max,
+            r.central.overruns
         );
     }
-    let w = &stats["work_us"];
-    let a = &stats["command_age_us"];
+    let (w, a, j) = (
+        &stats["work_us"],
+        &stats["command_age_us"],
+        &stats["jitter_us"],
+    );
     println!(
-        "board: {} ticks, work p50 {:.1} / p99 {:.1} µs, command age p50 {:.0} / p99 {:.0} µs; final error = max over trials",
+        "final error = max over trials; compute = the central loop's work per period (overrun: \
+         over its period, the previous slice sent again)"
+    );
+    println!(
+        "board: {} ticks, {} late; jitter p50 {:.1} / p99 {:.1} / max {:.1} µs, work p50 {:.1} / \
+         p99 {:.1} µs, command age p50 {:.0} / p99 {:.0} µs",
         stats["ticks"],
+        stats["late_ticks"],
+        num(&j["p50"]),
+        num(&j["p99"]),
+        num(&j["max"]),
         num(&w["p50"]),
         num(&w["p99"]),
         num(&a["p50"]),
@@ -364,6 +452,7 @@ mod tests {
             stiffness_plan: None,
             feedback_plan: None,
             spin_us: 0,
+            out_dir: "vic-demo".into(),
             json: true,
         }
     }
@@ -375,24 +464,38 @@ mod tests {
             feedback: "f.json".into(),
             feedback_at_zero: Some("f0.json".into()),
         };
-        let runs = strategy_runs(&options(200.0), &plans);
-        let rows: Vec<_> = runs
-            .iter()
-            .map(|r| (r.name, r.latency_ms, r.rate_hz))
-            .collect();
+        let rows = |o: &DemoOptions, plans: &DemoPlans| -> Vec<(&'static str, String, f64, u64)> {
+            strategy_runs(o, plans)
+                .iter()
+                .map(|r| {
+                    let plan = r.plan.display().to_string();
+                    (r.strategy.name(), plan, r.latency_ms, r.rate_hz)
+                })
+                .collect()
+        };
+        let row = |n, p: &str, l, r| (n, p.to_string(), l, r);
         assert_eq!(
-            rows,
+            rows(&options(200.0), &plans),
             [
-                ("stiffness", 200.0, 50),
-                ("naive-delayed", 200.0, 50),
-                ("naive-delayed", 0.0, 250)
+                row("naive-delayed", "f0.json", 0.0, 250),
+                row("naive-delayed", "f.json", 200.0, 50),
+                // The predictor plays the undelayed plan's gains.
+                row("predictor", "f0.json", 200.0, 50),
+                row("stiffness", "s.json", 200.0, 50),
             ]
         );
         let plans = DemoPlans {
             feedback_at_zero: None,
             ..plans
         };
-        assert_eq!(strategy_runs(&options(0.0), &plans).len(), 2);
+        assert_eq!(
+            rows(&options(0.0), &plans),
+            [
+                row("naive-delayed", "f.json", 0.0, 50),
+                row("predictor", "f.json", 0.0, 50),
+                row("stiffness", "s.json", 0.0, 50),
+            ]
+        );
     }
 
     #[test]
@@ -423,7 +526,8 @@ mod tests {
             "stale_feedback": 0, "missing_states": 0, "expected_cost": 0.5
         }))
         .unwrap();
-        let doc = document(&options(200.0), &[result], &stats, &[]);
+        let figure = ["t.png".into(), "t.svg".into()];
+        let doc = document(&options(200.0), &[result], &stats, &[], &figure);
         let s = &doc["strategies"][0];
         assert_eq!(s["late_ticks"], 4);
         assert_eq!(s["work_us"]["p50"], 2.0);

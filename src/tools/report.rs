@@ -28,6 +28,47 @@ pub fn to_trials(setup: &Setup, records: &[TrialRecord]) -> Vec<Trial> {
         .collect()
 }
 
+/// The trials' recorded states (per trial, per knot) and commands (per trial, per step): what
+/// `vic-planner --trajectories` writes and `vic demo` draws. A value that is not finite (a
+/// diverged or faulted trial) is `null`.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+pub struct Trajectories {
+    pub x: Vec<Vec<Vec<Option<f64>>>>,
+    pub u: Vec<Vec<Vec<Option<f64>>>>,
+}
+
+impl Trajectories {
+    pub fn from_records(records: &[TrialRecord]) -> Self {
+        let rows = |v: &[DVector<f64>]| {
+            v.iter()
+                .map(|r| r.iter().map(|e| e.is_finite().then_some(*e)).collect())
+                .collect()
+        };
+        Trajectories {
+            x: records.iter().map(|r| rows(&r.x)).collect(),
+            u: records.iter().map(|r| rows(&r.u)).collect(),
+        }
+    }
+
+    /// As the Monte Carlo's trials (`null` as NaN; the cost is not recorded: NaN).
+    pub fn to_trials(&self) -> Vec<Trial> {
+        let vecs = |v: &[Vec<Option<f64>>]| {
+            v.iter()
+                .map(|r| DVector::from_iterator(r.len(), r.iter().map(|e| e.unwrap_or(f64::NAN))))
+                .collect()
+        };
+        self.x
+            .iter()
+            .zip(&self.u)
+            .map(|(x, u)| Trial {
+                x: vecs(x),
+                u: vecs(u),
+                cost: f64::NAN,
+            })
+            .collect()
+    }
+}
+
 /// The results of a strategy's trials (the JSON `vic-planner` prints and `vic demo` reads).
 /// Errors are over the trials that completed and did not diverge, `None` (`null`) when none did:
 /// a diverged trial is counted in `diverged`, never averaged in as a huge number.
@@ -60,6 +101,9 @@ pub struct StrategyResult {
     pub missing_states: usize,
     /// Monte Carlo expected cost over the trials that did not diverge.
     pub expected_cost: Option<f64>,
+    /// The central loop's compute time per period and its overruns (all trials).
+    #[serde(default)]
+    pub central: crate::rt::central::ComputeTiming,
 }
 
 /// How one trial ended, as the report counts it.
@@ -159,5 +203,6 @@ pub fn summarize(
         stale_feedback: records.iter().map(|r| r.stale_feedback).sum(),
         missing_states: records.iter().map(|r| r.missing_states).sum(),
         expected_cost: some(kept.iter().map(|t| t.cost).sum::<f64>() / count),
+        central: central.compute_timing(),
     }
 }

@@ -22,8 +22,10 @@ mod live;
 pub use live::{LiveError, run_live};
 
 use crate::rt::board::{Board, Inputs};
+use crate::rt::realtime::LatencyHistogram;
 use crate::rt::transport::{
-    CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, StateMsg,
+    CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, Percentiles,
+    StateMsg, monotonic_ns,
 };
 use nalgebra::DVector;
 use std::collections::VecDeque;
@@ -155,6 +157,24 @@ pub struct Central {
     acknowledged: bool,
     /// The live loop gave up on this trial before its end (see [`TrialRecord::stalled`]).
     pub stalled: bool,
+    /// The last slice published in this trial: what an overrunning period sends again.
+    last_slice: Option<CommandSlice>,
+    /// The compute time of every period (all trials), on the real clock [ns].
+    compute: LatencyHistogram,
+    compute_budget_ns: u64,
+    overruns: u64,
+    clock: fn() -> u64,
+}
+
+/// How long the central controller's periods took to compute, over all its trials.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ComputeTiming {
+    /// Compute time per period [µs] (real clock, also in lockstep).
+    pub compute_us: Percentiles,
+    /// The budget a period's work must fit in [µs] (one planner period by default).
+    pub budget_us: f64,
+    /// Periods whose work took longer than the budget: they sent the previous slice again.
+    pub overruns: u64,
 }
 
 impl Central {
@@ -180,7 +200,33 @@ impl Central {
             fault: false,
             acknowledged: false,
             stalled: false,
+            last_slice: None,
+            compute: LatencyHistogram::new(),
+            // The lookahead is two planner periods by default: the budget is one period.
+            compute_budget_ns: (timing.lookahead_ns / 2).max(1),
+            overruns: 0,
+            clock: monotonic_ns,
             track,
+        }
+    }
+
+    /// Sets the compute budget of a period [ns] (default: half the lookahead, one planner period).
+    pub fn set_compute_budget_ns(&mut self, ns: u64) {
+        self.compute_budget_ns = ns.max(1);
+    }
+
+    /// Replaces the clock the compute time is measured with (monotonic ns); tests inject slow
+    /// periods with it.
+    pub fn set_clock(&mut self, clock: fn() -> u64) {
+        self.clock = clock;
+    }
+
+    /// The compute time per period and the overruns, over every trial so far.
+    pub fn compute_timing(&self) -> ComputeTiming {
+        ComputeTiming {
+            compute_us: self.compute.percentiles(),
+            budget_us: self.compute_budget_ns as f64 * 1e-3,
+            overruns: self.overruns,
         }
     }
 
@@ -200,6 +246,7 @@ impl Central {
         self.fault = false;
         self.acknowledged = false;
         self.stalled = false;
+        self.last_slice = None;
         let dof = self.track.dof;
         self.control_seq += 1;
         self.reset_seq = self.control_seq;
@@ -330,7 +377,13 @@ impl Central {
 
     /// Called at each planner tick: releases states from the sensor line, computes the knots due,
     /// and returns the slices that leave the command delay line now (oldest first).
+    ///
+    /// The work of the period (releasing states, computing the knots due) is timed on the real
+    /// clock. A period whose work took longer than the budget sends the previous slice again
+    /// (the lookahead of two periods covers the one missed), never nothing: the knots it
+    /// computed, late, go out with the next period's slice.
     pub fn poll(&mut self, now_ns: u64, out: &mut Vec<CommandSlice>) {
+        let t0 = (self.clock)();
         while let Some(&(release, k, x)) = self.sensor_line.front() {
             if release > now_ns {
                 break;
@@ -350,9 +403,19 @@ impl Central {
             let knot = self.compute_knot(k);
             self.knots.push(knot);
         }
+        let work = (self.clock)().saturating_sub(t0);
+        self.compute.record(work);
         let first = ((arrival / dt) as usize).saturating_sub(1);
         let last = self.knots.len();
-        if first < last {
+        if work > self.compute_budget_ns
+            && let Some(mut c) = self.last_slice
+        {
+            self.overruns += 1;
+            self.seq += 1;
+            c.header = Header::new(self.seq, 0);
+            self.command_line
+                .push_back((now_ns + self.timing.command_latency_ns, c));
+        } else if first < last {
             let last = last.min(first + MAX_KNOTS);
             self.seq += 1;
             let mut c = CommandSlice {
@@ -366,6 +429,7 @@ impl Central {
                 ..Default::default()
             };
             c.knots[..last - first].copy_from_slice(&self.knots[first..last]);
+            self.last_slice = Some(c);
             self.command_line
                 .push_back((now_ns + self.timing.command_latency_ns, c));
         }
