@@ -4,7 +4,8 @@
 
 use crate::tools::cli::{Classify, input_error, print_json};
 use crate::tools::experiment::{
-    ExperimentError, ExperimentRun, Figure, results_markdown, run, to_json, write_outputs,
+    ExperimentError, ExperimentRun, Figure, delay_markdown, results_markdown, run,
+    run_delay_sweeps, to_json, write_delay_outputs, write_outputs,
 };
 use crate::tools::plan_command::{clear_progress_line, progress_printer};
 use std::io::IsTerminal;
@@ -102,6 +103,19 @@ pub fn results(o: &FigureRunOptions, out_dir: &Path) -> anyhow::Result<()> {
         }
         runs.push(r);
     }
+    // Delay versus stiffness: the latency sweeps, after the paper's figures.
+    let tty = std::io::stderr().is_terminal();
+    let progress = |s: &str| {
+        if tty {
+            eprint!("\r\x1b[2Kdelay: {s}");
+        }
+    };
+    let sweeps = run_delay_sweeps(&o.config_dir, o.trials, o.seed, &progress).runtime()?;
+    for s in &sweeps {
+        for f in write_delay_outputs(s, &out_dir.join("figures")).runtime()? {
+            println!("wrote {}", f.display());
+        }
+    }
     clear_progress_line();
     let command = format!(
         "cargo run --release -- results --trials {} --seed {} --out-dir {}",
@@ -109,7 +123,7 @@ pub fn results(o: &FigureRunOptions, out_dir: &Path) -> anyhow::Result<()> {
         o.seed,
         out_dir.display()
     );
-    let md = results_markdown(&runs, "figures", &command);
+    let md = results_markdown(&runs, "figures", &command) + &delay_markdown(&sweeps, "figures");
     let path = out_dir.join("RESULTS.md");
     std::fs::write(&path, md)
         .map_err(|e| format!("cannot write {}: {e}", path.display()))

@@ -181,7 +181,13 @@ pub fn write_figure(
     let unit = sweep.points.first().map_or("", |p| p.unit.name());
     crate::tools::plot::curve_figure(
         &curves,
-        &format!("Delay versus stiffness ({} trials)", sweep.trials),
+        &format!(
+            "Delay versus stiffness: {} ({} trials)",
+            Path::new(&sweep.scenario)
+                .file_stem()
+                .map_or_else(|| sweep.scenario.clone(), |s| s.to_string_lossy().into()),
+            sweep.trials
+        ),
         &format!("final error [{unit}]"),
         png,
         svg,

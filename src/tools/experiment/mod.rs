@@ -18,6 +18,8 @@ use std::path::{Path, PathBuf};
 
 mod claims;
 pub use claims::*;
+mod delay;
+pub use delay::*;
 
 /// Which experiment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
