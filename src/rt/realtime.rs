@@ -87,6 +87,11 @@ impl Periodic {
         }
     }
 
+    /// The deadline the next [`Periodic::wait`] waits for [ns, monotonic].
+    pub fn next_deadline(&self) -> u64 {
+        self.next_ns
+    }
+
     /// Waits for the next deadline. A wake-up later than a whole period skips the missed
     /// deadlines: the next one is the first still in the future.
     pub fn wait(&mut self) -> Wake {
