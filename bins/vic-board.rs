@@ -48,10 +48,11 @@ struct Args {
     duration_s: f64,
     #[command(flatten)]
     json: JsonArg,
-    /// Record every tick (state, command in use, disturbances) to this CSV file, in the log
-    /// format `vic identify --log` reads, from a thread outside the loop. Gaps (queue full) are
-    /// marked in the file and counted in the statistics.
-    #[arg(long, value_name = "FILE.csv")]
+    /// Record every tick (state, command in use, disturbances) from a thread outside the loop:
+    /// FILE.csv is the log `vic identify --log` reads, FILE.mcap opens in Foxglove and
+    /// PlotJuggler (and `vic convert` turns it into the CSV). Gaps (queue full) are marked in
+    /// the file and counted in the statistics.
+    #[arg(long, value_name = "FILE.csv|FILE.mcap")]
     record: Option<PathBuf>,
     /// Capacity of the recording queue [ticks].
     #[arg(long, value_name = "TICKS", default_value_t = vic::rt::record::DEFAULT_CAPACITY)]

@@ -32,7 +32,7 @@ pub struct BoardOptions {
     /// Run this long [s] (0: until SIGINT/SIGTERM).
     pub duration_s: f64,
     pub json: bool,
-    /// Record every tick to this CSV file.
+    /// Record every tick to this file (CSV or MCAP, by its extension).
     pub record: Option<PathBuf>,
     /// Capacity of the recording queue [ticks].
     pub record_queue: usize,
@@ -129,6 +129,20 @@ fn start_recorder(
             o.namespace
         ),
         start_paused: false,
+        metadata: [
+            ("scenario", o.config.display().to_string()),
+            ("overrides", o.overrides.join(" ")),
+            ("rate_hz", o.rate_hz.to_string()),
+            ("namespace", o.namespace.clone()),
+            (
+                "command_line",
+                std::env::args().collect::<Vec<_>>().join(" "),
+            ),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect(),
+        period_ns: 1_000_000_000 / o.rate_hz,
     };
     Recorder::start(path, &options)
         .map_err(|e| format!("--record: {e}"))

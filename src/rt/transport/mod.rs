@@ -20,5 +20,7 @@ pub use error::TransportError;
 pub use namespace::{
     DEFAULT_NAMESPACE, dead_nodes, namespace_files, prefix, remove_namespace, validate_namespace,
 };
-pub use ports::{BoardObserver, BoardPorts, CentralPorts, STATE_BUFFER, ToolPorts, board_present};
+pub use ports::{
+    BoardObserver, BoardPorts, CentralPorts, RecorderPorts, STATE_BUFFER, ToolPorts, board_present,
+};
 pub use protocol::*;
