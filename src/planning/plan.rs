@@ -67,7 +67,7 @@ pub fn solve_sooc(
     solver: &crate::planning::scenario::IlqgSection,
     warm: &[DVector<f64>],
     progress: &Option<ProgressFn>,
-) -> Result<SoocResult, String> {
+) -> Result<SoocResult, PlanError> {
     let start = std::time::Instant::now();
     let mut u = warm.to_vec();
     let mut iterations = 0;
@@ -94,7 +94,7 @@ pub fn solve_sooc(
         };
         let sol = workspace
             .solve(&problem, &u)
-            .map_err(|e| format!("SOOC at noise fraction {fraction}: {e}"))?;
+            .map_err(|source| PlanError::Sooc { fraction, source })?;
         iterations += sol.iterations;
         history.extend_from_slice(&sol.history);
         if let Some(p) = progress {
@@ -111,7 +111,7 @@ pub fn solve_sooc(
         u = sol.u.clone();
         last = Some(sol);
     }
-    let sol = last.ok_or("SOOC needs at least one noise continuation stage")?;
+    let sol = last.ok_or(PlanError::NoContinuationStage)?;
     let n = setup.x0.len();
     let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
     let solution = Solution {
@@ -160,7 +160,7 @@ pub fn plan(
     progress: Option<ProgressFn>,
 ) -> Result<PlanFile, PlanError> {
     let setup = setup(s)?;
-    let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
+    let nu = setup.dynamics.nu();
     let steps = s.task.steps;
     let plain = Problem {
         dynamics: &setup.dynamics,
@@ -172,74 +172,18 @@ pub fn plan(
     let mut verdict = None;
     let (solution, d) = match method {
         Method::Sooc => {
-            // Warm start from the deterministic optimum, then optimise the open-loop moments.
-            let mut det = solver_for(&plain, &s.solver.options, "deterministic", &progress);
-            det.options.stochastic = false;
-            let first = det.solve(&plain, &setup.u_init);
-            // The deterministic optimum has almost no stiffness (it buys nothing without noise),
-            // and from there the open-loop problem starts in an unstable field with a huge
-            // variance. Start the stiffness from the configured initial value instead.
-            let mut warm = first.u.clone();
-            if let Some(off) = s.model.actuator.stiffness_offset(s.model.dof())
-                && s.initial_stiffness > 0.0
-            {
-                for u in &mut warm {
-                    for i in 0..s.model.dof() {
-                        u[off + i] = s.initial_stiffness;
-                    }
-                    setup.bounds.clamp(u.as_mut_slice());
-                }
-            }
-            let result = solve_sooc(&setup, &s.solver, &warm, &progress)?;
-            verdict = Some((result.stop, result.optimality));
-            let mut sol = result.solution;
-            sol.iterations += first.iterations;
-            sol.solve_time += first.solve_time;
-            // `cost` is the noise-free cost of the plan; `expected_cost` the moment problem's.
-            sol.cost = plain.rollout(&sol.u).1;
+            let (sol, stop) = plan_sooc(s, &setup, &plain, &progress)?;
+            verdict = Some(stop);
             (sol, 0)
         }
         Method::Ilqg if s.task.delay_steps() == 0 => (
             solve_in_phases(&plain, &s.solver.options, &setup.u_init, &progress)?,
             0,
         ),
-        Method::Ilqg => {
-            let d = s.task.delay_steps();
-            let delayed = Delayed::new(setup.dynamics.clone(), d);
-            let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
-            let cost = DelayedCost {
-                inner: &setup.cost,
-                nx,
-            };
-            let problem = Problem {
-                dynamics: &delayed,
-                cost: &cost,
-                x0,
-                horizon: steps,
-                bounds: setup.bounds.clone(),
-            };
-            // A command issued at k acts at k + d: start from the undelayed plant's plan from
-            // the state the commands in flight lead to (the deterministic optimum, exactly).
-            let guess_time = std::time::Instant::now();
-            let u_init = crate::core::delay::undelayed_guess(
-                &plain,
-                setup.u_init[0].as_slice(),
-                d,
-                &s.solver.options,
-                &setup.u_init,
-            )
-            .map_err(|e| format!("planning the undelayed first guess: {e}"))?;
-            let guess_time = guess_time.elapsed();
-            let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init, &progress)?;
-            sol.solve_time += guess_time;
-            for x in &mut sol.x {
-                *x = x.rows(0, nx).into_owned();
-            }
-            for g in &mut sol.gains {
-                *g = g.columns(0, nx).into_owned();
-            }
-            (sol, d)
-        }
+        Method::Ilqg => (
+            plan_delayed(s, &setup, &plain, &progress)?,
+            s.task.delay_steps(),
+        ),
     };
     // The commands that act at each step: with a delay, the hold command first.
     let acting: Vec<DVector<f64>> = (0..steps)
@@ -261,6 +205,92 @@ pub fn plan(
     Ok(file)
 }
 
+/// SOOC (Method::Sooc): the open-loop moments optimised from the deterministic optimum with the
+/// configured initial stiffness. Returns the solution (its `cost` the noise-free cost of the
+/// plan, `expected_cost` the moment problem's) and the solver's verdict.
+fn plan_sooc(
+    s: &Scenario,
+    setup: &Setup,
+    plain: &Problem,
+    progress: &Option<ProgressFn>,
+) -> Result<(Solution, (SoocStop, Optimality)), PlanError> {
+    // Warm start from the deterministic optimum, then optimise the open-loop moments.
+    let mut det = solver_for(plain, &s.solver.options, "deterministic", progress);
+    det.options.stochastic = false;
+    let first = det.solve(plain, &setup.u_init);
+    // The deterministic optimum has almost no stiffness (it buys nothing without noise),
+    // and from there the open-loop problem starts in an unstable field with a huge
+    // variance. Start the stiffness from the configured initial value instead.
+    let mut warm = first.u.clone();
+    if let Some(off) = s.model.actuator.stiffness_offset(s.model.dof())
+        && s.initial_stiffness > 0.0
+    {
+        for u in &mut warm {
+            for i in 0..s.model.dof() {
+                u[off + i] = s.initial_stiffness;
+            }
+            setup.bounds.clamp(u.as_mut_slice());
+        }
+    }
+    let result = solve_sooc(setup, &s.solver, &warm, progress)?;
+    let mut sol = result.solution;
+    sol.iterations += first.iterations;
+    sol.solve_time += first.solve_time;
+    // `cost` is the noise-free cost of the plan; `expected_cost` the moment problem's.
+    sol.cost = plain.rollout(&sol.u).1;
+    Ok((sol, (result.stop, result.optimality)))
+}
+
+/// ILQG on the delay-augmented plant (paper Eq. 13): a command issued at k acts at k + d. The
+/// returned states and gains are cut back to the plant's block.
+fn plan_delayed(
+    s: &Scenario,
+    setup: &Setup,
+    plain: &Problem,
+    progress: &Option<ProgressFn>,
+) -> Result<Solution, PlanError> {
+    let nx = setup.dynamics.nx();
+    let steps = s.task.steps;
+    let d = s.task.delay_steps();
+    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let cost = DelayedCost {
+        inner: &setup.cost,
+        nx,
+    };
+    let problem = Problem {
+        dynamics: &delayed,
+        cost: &cost,
+        x0,
+        horizon: steps,
+        bounds: setup.bounds.clone(),
+    };
+    // A command issued at k acts at k + d: start from the undelayed plant's plan from
+    // the state the commands in flight lead to (the deterministic optimum, exactly).
+    let guess_time = std::time::Instant::now();
+    let u_init = crate::core::delay::undelayed_guess(
+        plain,
+        setup.u_init[0].as_slice(),
+        d,
+        &s.solver.options,
+        &setup.u_init,
+    )
+    .map_err(|source| PlanError::Ilqg {
+        phase: "undelayed first guess",
+        source,
+    })?;
+    let guess_time = guess_time.elapsed();
+    let mut sol = solve_in_phases(&problem, &s.solver.options, &u_init, progress)?;
+    sol.solve_time += guess_time;
+    for x in &mut sol.x {
+        *x = x.rows(0, nx).into_owned();
+    }
+    for g in &mut sol.gains {
+        *g = g.columns(0, nx).into_owned();
+    }
+    Ok(sol)
+}
+
 /// Solves a stochastic problem by continuation: first the deterministic problem (whose landscape
 /// is benign), then the stochastic one from its solution. Started far from the optimum, the noise
 /// terms can lead ILQG to poor local solutions in an unstable field. Iterations and solve time
@@ -270,18 +300,22 @@ pub fn solve_in_phases(
     options: &IlqgOptions,
     u_init: &[DVector<f64>],
     progress: &Option<ProgressFn>,
-) -> Result<Solution, String> {
-    let start = |e: crate::core::solver::IlqgError| format!("ILQG: {e}");
+) -> Result<Solution, PlanError> {
+    let failed = |phase| move |source| PlanError::Ilqg { phase, source };
     if !options.stochastic || problem.dynamics.nw() == 0 {
         return solver_for(problem, options, "ilqg", progress)
             .try_solve(problem, u_init)
-            .map_err(start);
+            .map_err(failed("ilqg"));
     }
     let mut solver = solver_for(problem, options, "deterministic", progress);
     solver.options.stochastic = false;
-    let first = solver.try_solve(problem, u_init).map_err(start)?;
+    let first = solver
+        .try_solve(problem, u_init)
+        .map_err(failed("deterministic"))?;
     let mut solver = solver_for(problem, options, "stochastic", progress);
-    let mut second = solver.try_solve(problem, &first.u).map_err(start)?;
+    let mut second = solver
+        .try_solve(problem, &first.u)
+        .map_err(failed("stochastic"))?;
     second.iterations += first.iterations;
     second.solve_time += first.solve_time;
     Ok(second)

@@ -24,16 +24,22 @@ pub enum PlanError {
     StepsMismatch { plan: usize, scenario: usize },
     #[error("the plan's controls/states are not {nu}/{nx}-dimensional like the scenario's")]
     DimensionMismatch { nu: usize, nx: usize },
-    /// The solver could not start or failed (its message, with the phase that failed).
-    #[error("{0}")]
-    Solver(String),
-}
-
-/// The solver's failures arrive as messages naming the phase that failed.
-impl From<String> for PlanError {
-    fn from(message: String) -> Self {
-        PlanError::Solver(message)
-    }
+    /// ILQG could not start or failed in one of its phases (`deterministic`, `stochastic`,
+    /// `ilqg`: see `plan::solve_in_phases`).
+    #[error("ILQG ({phase} phase): {source}")]
+    Ilqg {
+        phase: &'static str,
+        source: crate::core::solver::IlqgError,
+    },
+    /// SOOC was given no stage of noise continuation (the scenario's validation refuses this).
+    #[error("SOOC needs at least one noise continuation stage")]
+    NoContinuationStage,
+    /// SOOC could not start or failed at one stage of the noise continuation.
+    #[error("SOOC at noise fraction {fraction}: {source}")]
+    Sooc {
+        fraction: f64,
+        source: crate::core::solver::sooc_newton::SoocError,
+    },
 }
 
 /// Everything needed to solve a scenario with any method.

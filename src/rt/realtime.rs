@@ -220,6 +220,8 @@ pub struct BoardStats {
     pub rejected_messages: u64,
     /// Rejected messages by reason (only reasons that occurred).
     pub rejected_by_reason: std::collections::BTreeMap<String, u64>,
+    /// Messages lost before the board saw them (sequence gaps within a sender session).
+    pub dropped_messages: u64,
     pub safe_hold_ticks: u64,
     pub watchdog_trips: u64,
     pub faults: u64,
@@ -314,6 +316,7 @@ fn telemetry(
         watchdog_trips: board.counters.watchdog_trips,
         disturbance_seq,
         disturbance_tick,
+        dropped_messages: board.counters.dropped,
     }
 }
 
@@ -363,6 +366,7 @@ pub fn run_board(
         missed_periods: periodic.skipped_periods,
         rejected_messages: board.counters.rejected,
         rejected_by_reason: rejections_by_name(&board.counters.rejected_by),
+        dropped_messages: board.counters.dropped,
         safe_hold_ticks: board.counters.safe_hold_ticks,
         watchdog_trips: board.counters.watchdog_trips,
         faults: board.counters.faults,

@@ -83,13 +83,15 @@ impl ChannelSpec {
     }
 }
 
-const HEADER_FIELDS: [Field; 3] = [
+const HEADER_FIELDS: [Field; 4] = [
+    f("session", Kind::Int, "session id of the sending process"),
     f("seq", Kind::Int, "sequence number of the sender"),
     f("time_ns", Kind::Int, "publish time [ns, CLOCK_MONOTONIC]"),
     f("version", Kind::Int, "protocol version of the sender"),
 ];
 
 fn header_json(h: &Header, m: &mut Map<String, Value>) {
+    m.insert("session".into(), json!(h.session));
     m.insert("seq".into(), json!(h.seq));
     m.insert("time_ns".into(), json!(h.time_ns));
     m.insert("version".into(), json!(h.version));
@@ -102,7 +104,7 @@ fn joints(n: u32) -> usize {
 
 macro_rules! with_header {
     ($($field:expr),* $(,)?) => {
-        &[HEADER_FIELDS[0], HEADER_FIELDS[1], HEADER_FIELDS[2], $($field),*]
+        &[HEADER_FIELDS[0], HEADER_FIELDS[1], HEADER_FIELDS[2], HEADER_FIELDS[3], $($field),*]
     };
 }
 
@@ -345,6 +347,11 @@ pub const TELEMETRY: ChannelSpec = ChannelSpec {
             Kind::Counts,
             "messages rejected by reason"
         ),
+        f(
+            "dropped_messages",
+            Kind::Int,
+            "messages lost before the board read them (sequence gaps per sender)"
+        ),
         f("safe_hold_ticks", Kind::Int, "ticks in the safe hold"),
         f(
             "watchdog_trips",
@@ -395,6 +402,7 @@ pub fn telemetry_json(t: &Telemetry) -> Value {
         })
         .collect();
     m.insert("rejected_by_reason".into(), Value::Object(reasons));
+    m.insert("dropped_messages".into(), json!(t.dropped_messages));
     m.insert("safe_hold_ticks".into(), json!(t.safe_hold_ticks));
     m.insert("watchdog_trips".into(), json!(t.watchdog_trips));
     m.insert("tracking_error".into(), json!(t.tracking_error));

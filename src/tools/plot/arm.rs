@@ -106,16 +106,7 @@ impl<'a> ArmFigure<'a> {
             .dim_in_pixel();
         let view = equal_aspect(self.hand_view, w, h);
         let mut chart = hand_chart(&area, view)?;
-        chart
-            .configure_mesh()
-            .x_labels(5)
-            .y_labels(6)
-            .max_light_lines(0)
-            .bold_line_style(GRID)
-            .x_label_formatter(&tick)
-            .y_label_formatter(&tick)
-            .label_style((FONT, TICK_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
+        house_mesh(&mut chart.configure_mesh(), 5, 6)
             .x_desc("x [m]")
             .y_desc("y [m]")
             .draw()?;
@@ -227,40 +218,36 @@ impl<'a> ArmFigure<'a> {
 
 impl Figure for ArmFigure<'_> {
     fn size(&self) -> (u32, u32) {
-        let width = GUTTER + COLUMN_WIDTH * self.columns.len() as u32;
-        (width, self.heights().iter().sum())
+        columns_size(self.columns.len(), &self.heights())
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
         let heights = self.heights();
-        let breaks = breakpoints(&heights);
-        let (gutter, body) = root.split_horizontally(GUTTER);
-        for (c, column) in body
-            .split_evenly((1, self.columns.len()))
-            .iter()
-            .enumerate()
-        {
-            let panels = column.split_by_breakpoints::<i32, i32, _, _>([], &breaks);
-            self.draw_hand(&panels[0], c)?;
-            let rows: [(&str, (f64, f64)); 2] = [
-                ("angle [deg]", self.angle),
-                ("velocity [deg/s]", self.velocity),
-            ];
-            for (r, (desc, range)) in rows.into_iter().enumerate() {
-                let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
-                self.draw_joint_stats(&mut chart, c, r == 0)?;
-            }
-            draw_command_rows(
-                &panels[3..],
-                self.time,
-                self.torque,
-                self.stiffness,
-                &self.columns[c],
-                c == 0,
-            )?;
-        }
-        let starts = [0, breaks[0], breaks[2]];
-        row_letters(&gutter, &starts, &[0, 4, 4])
+        draw_columns(
+            root,
+            &heights,
+            self.columns.len(),
+            [0, 1, 3],
+            |c, panels| {
+                self.draw_hand(&panels[0], c)?;
+                let rows: [(&str, (f64, f64)); 2] = [
+                    ("angle [deg]", self.angle),
+                    ("velocity [deg/s]", self.velocity),
+                ];
+                for (r, (desc, range)) in rows.into_iter().enumerate() {
+                    let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
+                    self.draw_joint_stats(&mut chart, c, r == 0)?;
+                }
+                draw_command_rows(
+                    &panels[3..],
+                    self.time,
+                    self.torque,
+                    self.stiffness,
+                    &self.columns[c],
+                    c == 0,
+                )
+            },
+        )
     }
 }
 

@@ -116,41 +116,37 @@ impl<'a> JointFigure<'a> {
 
 impl Figure for JointFigure<'_> {
     fn size(&self) -> (u32, u32) {
-        let width = GUTTER + COLUMN_WIDTH * self.columns.len() as u32;
-        (width, self.heights().iter().sum())
+        columns_size(self.columns.len(), &self.heights())
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
         let heights = self.heights();
-        let breaks = breakpoints(&heights);
-        let (gutter, body) = root.split_horizontally(GUTTER);
-        for (c, column) in body
-            .split_evenly((1, self.columns.len()))
-            .iter()
-            .enumerate()
-        {
-            let panels = column.split_by_breakpoints::<i32, i32, _, _>([], &breaks);
-            let top = titled(&panels[0], &self.columns[c].title)?;
-            let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
-            self.draw_trials(&mut chart, c, true)?;
-            let mut chart = time_chart(
-                &panels[1],
-                self.time,
-                self.velocity,
-                "velocity [deg/s]",
-                false,
-            )?;
-            self.draw_trials(&mut chart, c, false)?;
-            draw_command_rows(
-                &panels[2..],
-                self.time,
-                self.torque,
-                self.stiffness,
-                &self.columns[c],
-                c == 0,
-            )?;
-        }
-        let starts = [0, breaks[0], breaks[1]];
-        row_letters(&gutter, &starts, &[0, 4, 4])
+        draw_columns(
+            root,
+            &heights,
+            self.columns.len(),
+            [0, 1, 2],
+            |c, panels| {
+                let top = titled(&panels[0], &self.columns[c].title)?;
+                let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
+                self.draw_trials(&mut chart, c, true)?;
+                let mut chart = time_chart(
+                    &panels[1],
+                    self.time,
+                    self.velocity,
+                    "velocity [deg/s]",
+                    false,
+                )?;
+                self.draw_trials(&mut chart, c, false)?;
+                draw_command_rows(
+                    &panels[2..],
+                    self.time,
+                    self.torque,
+                    self.stiffness,
+                    &self.columns[c],
+                    c == 0,
+                )
+            },
+        )
     }
 }

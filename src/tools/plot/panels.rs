@@ -138,15 +138,7 @@ pub(super) fn time_chart<'a, DB: DrawingBackend>(
         .y_label_area_size(Y_LABEL_AREA)
         .build_cartesian_2d(time.0..time.1, y.0..y.1)?;
     let mut mesh = chart.configure_mesh();
-    mesh.x_labels(6)
-        .y_labels(5)
-        .max_light_lines(0)
-        .bold_line_style(GRID)
-        .x_label_formatter(&tick)
-        .y_label_formatter(&tick)
-        .label_style((FONT, TICK_SIZE))
-        .axis_desc_style((FONT, DESC_SIZE))
-        .y_desc(y_desc);
+    house_mesh(&mut mesh, 6, 5).y_desc(y_desc);
     if bottom {
         mesh.x_desc("time [s]");
     }
@@ -183,6 +175,48 @@ pub(super) fn row_letters<DB: DrawingBackend>(
         gutter.draw_text(letter, &style, (7, y + 4 + dy))?;
     }
     Ok(())
+}
+
+/// The mesh every panel of the paper's figures shares: `x_labels` × `y_labels` ticks, no light
+/// lines, the grid colour, the house fonts and tick labels.
+pub(super) fn house_mesh<'m, 'a, 'b, DB: DrawingBackend>(
+    mesh: &'m mut MeshStyle<'a, 'b, RangedCoordf64, RangedCoordf64, DB>,
+    x_labels: usize,
+    y_labels: usize,
+) -> &'m mut MeshStyle<'a, 'b, RangedCoordf64, RangedCoordf64, DB> {
+    mesh.x_labels(x_labels)
+        .y_labels(y_labels)
+        .max_light_lines(0)
+        .bold_line_style(GRID)
+        .x_label_formatter(&tick)
+        .y_label_formatter(&tick)
+        .label_style((FONT, TICK_SIZE))
+        .axis_desc_style((FONT, DESC_SIZE))
+}
+
+/// Width and height [px] of a figure of `columns` columns of panels of the given heights.
+pub(super) fn columns_size(columns: usize, heights: &[u32]) -> (u32, u32) {
+    (GUTTER + COLUMN_WIDTH * columns as u32, heights.iter().sum())
+}
+
+/// The layout the arm and joint figures share: a gutter of row letters, then one column per plan,
+/// each a stack of panels of the given heights. `draw_column(c, panels)` fills column `c`;
+/// `letter_panels` are the panels at which rows A, B and C start.
+pub(super) fn draw_columns<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    heights: &[u32],
+    columns: usize,
+    letter_panels: [usize; 3],
+    mut draw_column: impl FnMut(usize, &[DrawingArea<DB, Shift>]) -> DrawResult<(), DB>,
+) -> DrawResult<(), DB> {
+    let breaks = breakpoints(heights);
+    let (gutter, body) = root.split_horizontally(GUTTER);
+    for (c, column) in body.split_evenly((1, columns)).iter().enumerate() {
+        let panels = column.split_by_breakpoints::<i32, i32, _, _>([], &breaks);
+        draw_column(c, &panels)?;
+    }
+    let starts = letter_panels.map(|p| if p == 0 { 0 } else { breaks[p - 1] });
+    row_letters(&gutter, &starts, &[0, 4, 4])
 }
 
 /// Cumulative heights: where each panel but the first starts.
@@ -278,11 +312,9 @@ pub(super) fn legend_line<'c, DB: DrawingBackend + 'c>(
     label: &str,
     style: ShapeStyle,
 ) -> DrawResult<(), DB> {
-    chart
-        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
-        .label(label)
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-    Ok(())
+    legend_entry(chart, label, move |(x, y)| {
+        PathElement::new(vec![(x, y), (x + 18, y)], style)
+    })
 }
 
 pub(super) fn legend_dashed<'c, DB: DrawingBackend + 'c>(
@@ -290,15 +322,11 @@ pub(super) fn legend_dashed<'c, DB: DrawingBackend + 'c>(
     label: &str,
     style: ShapeStyle,
 ) -> DrawResult<(), DB> {
-    chart
-        .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
-        .label(label)
-        .legend(move |(x, y)| {
-            EmptyElement::at((x, y))
-                + PathElement::new(vec![(0, 0), (6, 0)], style)
-                + PathElement::new(vec![(11, 0), (17, 0)], style)
-        });
-    Ok(())
+    legend_entry(chart, label, move |(x, y)| {
+        EmptyElement::at((x, y))
+            + PathElement::new(vec![(0, 0), (6, 0)], style)
+            + PathElement::new(vec![(11, 0), (17, 0)], style)
+    })
 }
 
 pub(super) fn legend_band<'c, DB: DrawingBackend + 'c>(
@@ -306,10 +334,25 @@ pub(super) fn legend_band<'c, DB: DrawingBackend + 'c>(
     label: &str,
     colour: RGBAColor,
 ) -> DrawResult<(), DB> {
+    legend_entry(chart, label, move |(x, y)| {
+        Rectangle::new([(x, y - 5), (x + 18, y + 5)], colour.filled())
+    })
+}
+
+/// A legend entry with no data: an empty series that carries only the label and its glyph.
+fn legend_entry<'c, DB, E>(
+    chart: &mut Chart<'c, DB>,
+    label: &str,
+    glyph: impl Fn((i32, i32)) -> E + 'c,
+) -> DrawResult<(), DB>
+where
+    DB: DrawingBackend + 'c,
+    E: IntoDynElement<'c, DB, (i32, i32)>,
+{
     chart
         .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
         .label(label)
-        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], colour.filled()));
+        .legend(glyph);
     Ok(())
 }
 
