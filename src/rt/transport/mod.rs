@@ -23,5 +23,7 @@ pub use namespace::{
     DEFAULT_NAMESPACE, check_namespace_owner, dead_nodes, ensure_root_dir, namespace_files, prefix,
     remove_namespace, root_dir, validate_namespace,
 };
-pub use ports::{BoardObserver, BoardPorts, CentralPorts, STATE_BUFFER, ToolPorts, board_present};
+pub use ports::{
+    BoardObserver, BoardPorts, CentralPorts, RecorderPorts, STATE_BUFFER, ToolPorts, board_present,
+};
 pub use protocol::*;

@@ -179,9 +179,13 @@ impl Session {
     }
 
     fn subscriber<T: Topic>(&self) -> Result<Sub<T>, TransportError> {
+        self.subscriber_with_buffer(T::BUFFER)
+    }
+
+    fn subscriber_with_buffer<T: Topic>(&self, buffer: usize) -> Result<Sub<T>, TransportError> {
         self.service::<T>()?
             .subscriber_builder()
-            .buffer_size(T::BUFFER)
+            .buffer_size(buffer)
             .create()
             .map_err(|e| match e {
                 SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
@@ -446,6 +450,56 @@ impl std::ops::Deref for ToolPorts {
     type Target = BoardObserver;
     fn deref(&self) -> &BoardObserver {
         &self.observer
+    }
+}
+
+/// A recorder's ports (`vic record`): it subscribes to every service of the namespace, with the
+/// largest buffer the services allow, and publishes nothing, so it cannot disturb the board.
+pub struct RecorderPorts {
+    states: Sub<StateMsg>,
+    telemetry: Sub<Telemetry>,
+    commands: Sub<CommandSlice>,
+    controls: Sub<Control>,
+    disturbances: Sub<Disturbance>,
+    session: Session,
+}
+
+impl RecorderPorts {
+    /// Connects a recorder to namespace `ns`.
+    pub fn open(ns: &str) -> Result<RecorderPorts, TransportError> {
+        let session = Session::open(ns, "vic-recorder")?;
+        Ok(RecorderPorts {
+            states: session.subscriber_with_buffer(STATE_BUFFER)?,
+            telemetry: session.subscriber_with_buffer(STATE_BUFFER)?,
+            commands: session.subscriber_with_buffer(STATE_BUFFER)?,
+            controls: session.subscriber_with_buffer(STATE_BUFFER)?,
+            disturbances: session.subscriber_with_buffer(STATE_BUFFER)?,
+            session,
+        })
+    }
+    /// The node this recorder holds in its namespace.
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+    /// Every state received since the last call, oldest first.
+    pub fn drain_states(&self, f: impl FnMut(&StateMsg)) -> usize {
+        drain(&self.states, f)
+    }
+    /// Every telemetry message received since the last call.
+    pub fn drain_telemetry(&self, f: impl FnMut(&Telemetry)) -> usize {
+        drain(&self.telemetry, f)
+    }
+    /// Every command slice received since the last call.
+    pub fn drain_commands(&self, f: impl FnMut(&CommandSlice)) -> usize {
+        drain(&self.commands, f)
+    }
+    /// Every control request received since the last call.
+    pub fn drain_controls(&self, f: impl FnMut(&Control)) -> usize {
+        drain(&self.controls, f)
+    }
+    /// Every disturbance received since the last call.
+    pub fn drain_disturbances(&self, f: impl FnMut(&Disturbance)) -> usize {
+        drain(&self.disturbances, f)
     }
 }
 
