@@ -103,7 +103,7 @@ pub fn pin_to_cpu(cpu: usize) -> Result<(), SchedError> {
     }
 }
 
-/// Releases the memory locked by [`crate::rt::realtime::lock_memory`].
+/// Releases the memory locked by `lock_memory` (in `rt::realtime`, which imports this module).
 pub fn unlock_memory() -> bool {
     // SAFETY: munlockall takes no argument.
     unsafe { libc::munlockall() == 0 }
