@@ -40,9 +40,12 @@ pub struct DemoArgs {
     /// like the paper's Fig. 1), the table as JSON (demo.json) and each strategy's trials.
     #[arg(long, value_name = "DIR", default_value = "vic-demo")]
     out_dir: PathBuf,
-    /// Board spin before each deadline [µs] (0: sleep only).
-    #[arg(long, default_value_t = 0)]
-    spin_us: u64,
+    /// Board spin before each deadline [µs] (default: the board's, 100; 0 with --no-rt).
+    #[arg(long, value_name = "US")]
+    spin_us: Option<u64>,
+    /// Run the board without its real-time settings (no SCHED_FIFO, pinning or spin).
+    #[arg(long)]
+    no_rt: bool,
     #[command(flatten)]
     json: JsonArg,
 }
@@ -60,6 +63,7 @@ impl DemoArgs {
             feedback_plan: self.feedback_plan,
             spin_us: self.spin_us,
             out_dir: self.out_dir,
+            no_rt: self.no_rt,
             json: self.json.json,
         })
     }
