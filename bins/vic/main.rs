@@ -2,6 +2,8 @@
 //! into `vic::tools`; errors end the process with exit code 2 (bad input) or 1 (a failure).
 
 mod bench;
+#[cfg(feature = "zenoh")]
+mod bridge;
 mod demo;
 mod experiment;
 mod identify;
@@ -80,6 +82,13 @@ enum Command {
     ///
     /// Example: vic monitor --namespace lab1
     Monitor(monitor::MonitorArgs),
+    /// One end of a namespace split across two hosts over Zenoh: beside the board
+    /// (`--side board`) or beside the central process (`--side central`). Messages cross as
+    /// their wire bytes with the sender's session, sequence number and time stamp.
+    ///
+    /// Example: vic bridge --side board --namespace lab1 --listen tcp/0.0.0.0:7447
+    #[cfg(feature = "zenoh")]
+    Bridge(bridge::BridgeArgs),
     /// Identify the joint's torque noise from a log, the paper's procedure (Sec. III-B): bin the
     /// torque error by velocity, fit its mean and standard deviation with polynomials, estimate
     /// (a, b) of e = (a + b q') η by maximum likelihood and test the residual η for normality
@@ -109,6 +118,8 @@ impl Command {
             Command::Inject(a) => a.run(),
             Command::Status(a) => a.run(),
             Command::Monitor(a) => a.run(),
+            #[cfg(feature = "zenoh")]
+            Command::Bridge(a) => a.run(),
             Command::Identify(a) => a.run(),
             Command::Bench(a) => a.run(),
             Command::Sweep(a) => a.run(),
