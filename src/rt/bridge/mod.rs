@@ -296,7 +296,7 @@ pub fn run(
                 if let Some(t) = central.latest_telemetry() {
                     put(&telemetry, &t, &mut sent.telemetry, errors);
                 }
-                if central.wait_event(Duration::ZERO) {
+                if central.take_event() {
                     match events.put(Vec::<u8>::new()).wait() {
                         Ok(()) => sent.event += 1,
                         Err(_) => *errors += 1,
@@ -376,7 +376,13 @@ fn each_period(
     let mut deadline = Instant::now() + poll;
     while !stop.load(Ordering::Relaxed) {
         match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-            Ok(m) => inbound(m, stats),
+            Ok(m) => {
+                // Everything that arrived meanwhile goes on at once, before the next drain.
+                inbound(m, stats);
+                while let Ok(m) = rx.try_recv() {
+                    inbound(m, stats);
+                }
+            }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         }
