@@ -1,24 +1,15 @@
 //! `vic-planner`: the central controller. A 50 Hz loop that plays a plan back to `vic-board` as
-//! command slices, with a strategy (`stiffness`, `delayed-feedback`, `both`) and delay lines on the
+//! command slices, with a strategy (`naive-delayed`, `predictor`, `stiffness`,
+//! `stiffness+predictor`) and delay lines on the
 //! state and command paths; runs N trials and prints their errors. The flags are parsed here;
 //! [`vic::tools::central_daemon::run`] does the rest.
 
-use clap::{Parser, ValueEnum};
+use clap::Parser;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use vic::rt::central::Strategy;
 use vic::tools::central_daemon::{CentralOptions, run};
 use vic::tools::cli::{DefaultScenarioArgs, JsonArg, NamespaceArgs, SeedArgs, finish};
-
-#[derive(Clone, Copy, ValueEnum)]
-enum StrategyArg {
-    /// The SOOC plan's torque and stiffness, no central feedback.
-    Stiffness,
-    /// Zero stiffness, the ILQG plan plus its gains on the state seen --latency-ms late (Eq. 13).
-    DelayedFeedback,
-    /// The plan's torque and stiffness plus the delayed feedback.
-    Both,
-}
 
 /// The central controller: streams a plan's commands to the board at 50 Hz and runs trials.
 ///
@@ -34,12 +25,16 @@ struct Args {
     #[command(flatten)]
     scenario: DefaultScenarioArgs,
     /// Plan file from `vic plan --out` (default: plan at start-up: SOOC for `stiffness`, ILQG
-    /// for the latency otherwise, with zero stiffness for `delayed-feedback`).
+    /// for the latency for `naive-delayed`, undelayed ILQG for the predictor strategies; no
+    /// stiffness for `naive-delayed` and `predictor`).
     #[arg(long, value_name = "FILE")]
     plan: Option<PathBuf>,
-    /// How the plan is played.
-    #[arg(long, value_enum, default_value = "stiffness")]
-    strategy: StrategyArg,
+    /// How the plan is played: `naive-delayed` (the plan's gains on the state seen
+    /// --latency-ms late, Eq. 13, no stiffness), `predictor` (the gains on the present state
+    /// predicted from the delayed one over the commands in flight, no stiffness), `stiffness`
+    /// (the plan's torque and stiffness, no central feedback) or `stiffness+predictor` (both).
+    #[arg(long, default_value = "stiffness", value_parser = Strategy::from_name)]
+    strategy: Strategy,
     /// Feedback latency [ms]: knot k feeds back the state of k − latency (default: the plan's
     /// delay; a whole number of plan steps).
     #[arg(long, value_name = "MS")]
@@ -80,11 +75,7 @@ fn run_args(a: Args) -> anyhow::Result<()> {
         config: a.scenario.config,
         overrides: a.scenario.set.overrides,
         plan: a.plan,
-        strategy: match a.strategy {
-            StrategyArg::Stiffness => Strategy::Stiffness,
-            StrategyArg::DelayedFeedback => Strategy::DelayedFeedback,
-            StrategyArg::Both => Strategy::Both,
-        },
+        strategy: a.strategy,
         latency_ms: a.latency_ms,
         sensor_latency_ms: a.sensor_latency_ms,
         command_latency_ms: a.command_latency_ms,

@@ -72,11 +72,16 @@ fn watchdog_keeps_the_last_command_then_ramps_to_the_safe_hold() {
     let o = b.step(5 * ms, &mut inp);
     assert_eq!(o.state.mode, Mode::Running as u32);
     assert_eq!(o.state.trial_time_ns, 0);
-    // The slice covers trial time [0, 100 ms); the last covered period starts at 99 ms.
+    // The slice covers trial time [0, 100 ms); the last covered period starts at 99 ms. A
+    // sender keeps sending it, fresh, every tick: what trips the watchdog is that nothing
+    // covers the present any more.
     let mut t = 5;
     let mut entered = None;
     while t < 5 + 400 {
         t += 1;
+        let mut again = hold_slice(q0, t, 0, 150.0);
+        again.header.time_ns = t * ms;
+        inp.push_command(&again);
         let o = b.step(t * ms, &mut inp);
         assert_eq!(o.periods, 1);
         if o.state.mode == Mode::SafeHold as u32 && entered.is_none() {
@@ -108,7 +113,9 @@ fn watchdog_keeps_the_last_command_then_ramps_to_the_safe_hold() {
     assert!((b.state()[0] - q0[0]).abs() < 0.05);
     // Fresh valid commands covering the present resume the movement.
     let now_trial = b.trial_time_ns();
-    inp.push_command(&hold_slice(q0, 2, now_trial, 120.0));
+    let mut resume = hold_slice(q0, 1000, now_trial, 120.0);
+    resume.header.time_ns = (t + 1) * ms;
+    inp.push_command(&resume);
     let o = b.step((t + 1) * ms, &mut inp);
     assert_eq!(o.state.mode, Mode::Running as u32);
     assert_eq!(o.state.stiffness, [120.0, 120.0]);
@@ -192,11 +199,13 @@ fn the_plant_guard_latches_until_a_reset() {
     let mut stop = reset(q0, 0);
     stop.kind = ControlKind::Stop as u32;
     stop.header.seq = 2;
+    stop.header.time_ns = 400 * ms;
     inp.push_control(&stop);
     b.step(400 * ms, &mut inp);
     assert_eq!(b.mode(), Mode::Fault);
     let mut again = reset(q0, 401 * ms);
     again.header.seq = 3;
+    again.header.time_ns = 401 * ms;
     inp.push_control(&again);
     b.step(401 * ms, &mut inp);
     assert_eq!(b.mode(), Mode::Running);

@@ -65,10 +65,13 @@ fn a_board_step_does_not_allocate() {
         // A gap in the commands: the watchdog ramps the board into its safe hold and back.
         if tick % 20 == 0 && !(500..700).contains(&tick) {
             slice.header.seq = tick + 1;
+            slice.header.time_ns = now;
             slice.start_ns = tick * ms;
             inputs.push_command(&slice);
         }
         if tick == 100 {
+            let mut pulse = pulse;
+            pulse.header.time_ns = now;
             inputs.push_disturbance(&pulse);
         }
         // Every fifth tick is late by three periods.

@@ -91,7 +91,11 @@ fn a_killed_planner_leaves_the_board_in_safe_hold_and_a_new_one_resumes() {
     // A restarted planner resets the board and runs a clean trial.
     let again = run_planner(&ns, &plan, "stiffness", 1, false);
     assert_eq!(again.safe_hold_trials, 0);
-    assert!(again.final_error_max < 10.0, "{:?}", again.final_errors);
+    assert!(
+        again.final_error_max.is_some_and(|e| e < 10.0),
+        "{:?}",
+        again.final_errors
+    );
 
     drop(ep);
     let out = d.signal_and_wait(board, libc::SIGTERM);
@@ -106,7 +110,7 @@ fn a_killed_planner_leaves_the_board_in_safe_hold_and_a_new_one_resumes() {
 }
 
 #[test]
-fn a_killed_board_is_replaced_and_the_planner_carries_on() {
+fn a_killed_board_is_replaced_and_the_planner_reports_it_lost() {
     let _serial = serial();
     let plan = sooc_plan();
     let ns = unique_namespace("fb");
@@ -130,10 +134,20 @@ fn a_killed_board_is_replaced_and_the_planner_carries_on() {
     });
     let out = d.signal_and_wait(first, libc::SIGKILL);
     assert!(!out.status.success());
-    std::thread::sleep(Duration::from_millis(300));
+    // The planner does not carry on onto whichever board answers next: it lost its board in
+    // the middle of trial 0 and says so (exit 1, "board lost"; tests/board_lost.rs checks the
+    // message and the trials kept), with no result for a trial that never finished. Leaving,
+    // its node may clean the dead board's node itself (iceoryx2 cleans on node creation and
+    // drop), so the replacement finds one dead node or none; either way none may remain.
+    let result = d.wait(planner);
+    assert_eq!(
+        result.status.code(),
+        Some(1),
+        "the planner should report a lost board"
+    );
     assert!(
-        vic::rt::transport::dead_nodes(&ns) >= 1,
-        "the killed board should have left a dead node"
+        result.stdout.is_empty(),
+        "no trial finished before the loss"
     );
     let replacement = d.board(&ns, &[]);
     wait_for(&ep, Duration::from_secs(10), |_| true);
@@ -142,22 +156,12 @@ fn a_killed_board_is_replaced_and_the_planner_carries_on() {
         0,
         "the killed board's resources are still there"
     );
-    let result = d.wait(planner);
-    assert!(result.status.success(), "the planner gave up");
-    let r: vic::tools::report::StrategyResult = serde_json::from_slice(&result.stdout).unwrap();
-    assert_eq!(r.trials, 3);
-    // The trial after the restart ran on the new board, within 1 cm.
-    assert!(
-        *r.final_errors.last().unwrap() < 10.0,
-        "after the restart: {:?}",
-        r.final_errors
-    );
 
     drop(ep);
     let out = d.signal_and_wait(replacement, libc::SIGTERM);
     assert!(out.status.success());
     let stats: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(stats["cleaned_dead_nodes"].as_u64(), Some(1), "{stats}");
+    assert!(stats["cleaned_dead_nodes"].as_u64() <= Some(1), "{stats}");
     assert!(
         namespace_files(&ns).is_empty(),
         "{:?}",

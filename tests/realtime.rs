@@ -19,10 +19,10 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
     let board = d.board(&ns, &[]);
     let trials = 3;
     let stiff = run_planner(&ns, &sooc, "stiffness", trials, false);
-    let fb = run_planner(&ns, &ilqg, "delayed-feedback", trials, false);
+    let fb = run_planner(&ns, &ilqg, "naive-delayed", trials, false);
     // Without latency central feedback works: a plan for no delay, the planner at 250 Hz so
     // that its own loop adds only a few milliseconds.
-    let out = planner_command_at(&ns, &ilqg0_plan(), "delayed-feedback", trials, "0")
+    let out = planner_command_at(&ns, &ilqg0_plan(), "naive-delayed", trials, "0")
         .args(["--rate-hz", "250"])
         .stderr(std::process::Stdio::inherit())
         .output()
@@ -48,17 +48,20 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
     assert_eq!(stiff.trials, trials);
     assert_eq!(stiff.safe_hold_trials, 0, "commands arrived late");
     assert!(
-        stiff.final_errors.iter().all(|e| *e < 10.0),
+        stiff
+            .final_errors
+            .iter()
+            .all(|e| e.is_some_and(|e| e < 10.0)),
         "stiffness: every trial within 1 cm, got {:?} mm",
         stiff.final_errors
     );
     assert!(
-        fb.final_error_max > 10.0,
+        fb.diverged > 0 || fb.final_error_max.is_some_and(|e| e > 10.0),
         "delayed feedback without stiffness should miss by centimetres or diverge, got {:?} mm",
         fb.final_errors
     );
     assert!(
-        fb0.final_errors.iter().all(|e| *e < 10.0),
+        fb0.final_errors.iter().all(|e| e.is_some_and(|e| e < 10.0)),
         "delayed feedback at 0 ms latency should work, got {:?} mm",
         fb0.final_errors
     );
@@ -67,6 +70,7 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
     // strategy is open loop, so only late commands could make them differ.
     let lock = run_planner(&ns, &sooc, "stiffness", trials, true);
     for (a, b) in stiff.final_errors.iter().zip(&lock.final_errors) {
+        let (a, b) = (a.unwrap(), b.unwrap());
         assert!((a - b).abs() < 0.5, "live {a} mm vs lockstep {b} mm");
     }
 }

@@ -132,7 +132,7 @@ fn point(model: &ArmModel, rng: &mut StdRng) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
 fn gradient(dynamics: &MomentDynamics, k: usize, z: &[f64], u: &[f64], lam: &[f64]) -> Vec<f64> {
     let base = dynamics.base();
     let mut e = MomentExpansion::new(base.model.nx(), base.model.nu(), base.model.nw());
-    dynamics.expand(k, z, u, false, &mut e);
+    dynamics.expand(k, z, u, &mut e);
     let l = nalgebra::DVector::from_column_slice(lam);
     let gz = e.a.transpose() * &l;
     let gu = e.b.transpose() * &l;
@@ -167,7 +167,8 @@ fn moment_curvature_matches_finite_differences() {
         let (z, u, lam) = point(&case.model, &mut rng);
         let k = 1;
         let mut e = MomentExpansion::for_dynamics(&dynamics);
-        dynamics.expand(k, &z, &u, true, &mut e);
+        dynamics.expand(k, &z, &u, &mut e);
+        dynamics.second_order(k, &z, &u, &lam, &mut e);
         let (mut hzz, mut huz, mut huu) = (
             DMatrix::zeros(nz, nz),
             DMatrix::zeros(m, nz),

@@ -11,11 +11,18 @@ enum PolicyArg {
     OpenLoop,
     /// The plan's gains on the current state.
     Feedback,
-    /// The plan's gains on the state seen --delay-ms late (default: the plan's delay).
-    DelayedFeedback,
+    /// The plan's gains on the state seen --delay-ms late (Eq. 13; default: the plan's delay).
+    #[value(alias = "delayed-feedback")]
+    NaiveDelayed,
     /// The gains of an undelayed plan on the present state predicted from the one seen
     /// --delay-ms late, over the commands applied since (a Smith predictor).
     Predictor,
+    /// The central strategy `stiffness`: the plan's commands with no feedback (as open-loop).
+    Stiffness,
+    /// The central strategy `stiffness+predictor`: the plan's torque and stiffness plus the
+    /// predictor's feedback (as predictor; give it a plan with stiffness).
+    #[value(name = "stiffness+predictor")]
+    StiffnessPredictor,
 }
 
 #[derive(clap::Args)]
@@ -57,12 +64,12 @@ pub struct SimulateArgs {
 impl SimulateArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let execution = match self.policy {
-            PolicyArg::OpenLoop => Execution::OpenLoop,
+            PolicyArg::OpenLoop | PolicyArg::Stiffness => Execution::OpenLoop,
             PolicyArg::Feedback => Execution::Feedback,
-            PolicyArg::DelayedFeedback => Execution::DelayedFeedback {
+            PolicyArg::NaiveDelayed => Execution::DelayedFeedback {
                 delay_ms: self.delay_ms,
             },
-            PolicyArg::Predictor => Execution::Predictor {
+            PolicyArg::Predictor | PolicyArg::StiffnessPredictor => Execution::Predictor {
                 delay_ms: self.delay_ms.unwrap_or(0.0),
             },
         };

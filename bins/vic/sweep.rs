@@ -29,7 +29,7 @@ struct LatencyArgs {
     latencies: Vec<f64>,
     /// Strategies: naive-delayed (Eq. 13, planned for the latency, no stiffness), predictor
     /// (a Smith predictor across the latency, no stiffness), stiffness (the open-loop SOOC plan).
-    #[arg(long, value_delimiter = ',', value_parser = parse_strategy,
+    #[arg(long, value_delimiter = ',', value_parser = Strategy::from_name,
           default_value = "naive-delayed,predictor,stiffness")]
     strategies: Vec<Strategy>,
     /// Monte Carlo trials per point.
@@ -46,16 +46,6 @@ struct LatencyArgs {
     out_dir: Option<PathBuf>,
     #[command(flatten)]
     json: JsonArg,
-}
-
-fn parse_strategy(s: &str) -> Result<Strategy, String> {
-    Strategy::ALL
-        .into_iter()
-        .find(|x| x.name() == s)
-        .ok_or_else(|| {
-            let names: Vec<&str> = Strategy::ALL.iter().map(|x| x.name()).collect();
-            format!("unknown strategy \"{s}\" (one of {})", names.join(", "))
-        })
 }
 
 impl SweepArgs {

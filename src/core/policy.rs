@@ -59,6 +59,87 @@ impl std::fmt::Display for Feedback {
     }
 }
 
+/// How a central controller that sees the state `D` steps late commands the joint: the one list
+/// of strategy names that `vic-planner --strategy`, `vic simulate --policy`, the lockstep pair, the
+/// sweep and the demo share.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Strategy {
+    /// Eq. 13: the gains of a plan made for the delay on the state seen `D` steps late, no
+    /// stiffness (the paper's delayed feedback).
+    NaiveDelayed,
+    /// The best delayed feedback without stiffness: a Smith predictor across the latency
+    /// ([`Feedback::Predicted`]) with the gains of an undelayed plan.
+    Predictor,
+    /// The open-loop plan of torque and stiffness (SOOC), no central feedback.
+    Stiffness,
+    /// The plan's torque and stiffness plus the predictor's feedback on top.
+    StiffnessPredictor,
+}
+
+impl Strategy {
+    pub const ALL: [Strategy; 4] = [
+        Strategy::NaiveDelayed,
+        Strategy::Predictor,
+        Strategy::Stiffness,
+        Strategy::StiffnessPredictor,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Strategy::NaiveDelayed => "naive-delayed",
+            Strategy::Predictor => "predictor",
+            Strategy::Stiffness => "stiffness",
+            Strategy::StiffnessPredictor => "stiffness+predictor",
+        }
+    }
+
+    /// The strategy called `name`, or an error that lists the names.
+    pub fn from_name(name: &str) -> Result<Strategy, UnknownStrategy> {
+        Strategy::ALL
+            .into_iter()
+            .find(|s| s.name() == name)
+            .ok_or_else(|| UnknownStrategy(name.to_string()))
+    }
+
+    /// How its plan is executed by a controller that sees the state `latency_steps` late.
+    pub fn feedback(self, latency_steps: usize) -> Feedback {
+        match self {
+            Strategy::NaiveDelayed => Feedback::Delayed { latency_steps },
+            Strategy::Predictor | Strategy::StiffnessPredictor => {
+                Feedback::Predicted { latency_steps }
+            }
+            Strategy::Stiffness => Feedback::OpenLoop,
+        }
+    }
+
+    /// Whether it commands stiffness: the feedback-only strategies send none, whatever the plan
+    /// holds (feedback is all they have).
+    pub fn uses_stiffness(self) -> bool {
+        matches!(self, Strategy::Stiffness | Strategy::StiffnessPredictor)
+    }
+}
+
+impl std::fmt::Display for Strategy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A strategy name that is not one of [`Strategy::ALL`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "unknown strategy \"{0}\" (one of naive-delayed, predictor, stiffness, stiffness+predictor)"
+)]
+pub struct UnknownStrategy(pub String);
+
+impl std::str::FromStr for Strategy {
+    type Err = UnknownStrategy;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Strategy::from_name(s)
+    }
+}
+
 /// A state the controller has seen: the state at knot `knot`, fed back through the gain of knot
 /// `gain` (the same knot, unless a live controller falls back to an older state).
 #[derive(Debug, Clone, Copy)]
@@ -127,6 +208,45 @@ impl Policy {
             }
         }
         self.bounds.clamp(&mut u[..nu]);
+    }
+}
+
+impl Policy {
+    /// The command of knot `k` under `feedback` for a controller holding the state `x` of knot
+    /// `seen` (or none yet): Eq. 9 / 13 on it, or for the predictor the gain of knot `k` on the
+    /// present predicted from it over the commands `applied` since (`applied` yields the
+    /// commands of knots `seen..k`). The Monte Carlo and the central controller both call this,
+    /// so that offline, lockstep and live execute one law. A live controller whose state of
+    /// `k − D` has not arrived passes an older one: the naive law then applies the gain of
+    /// `k − D` to it (Eq. 13 with a stale state), the predictor simply predicts over more
+    /// commands. `scratch` holds the prediction (`≥ nx`). Allocates nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn command_into<'a>(
+        &self,
+        dynamics: &dyn Dynamics,
+        k: usize,
+        feedback: Feedback,
+        seen: Option<(usize, &[f64])>,
+        applied: impl IntoIterator<Item = &'a [f64]>,
+        scratch: &mut [f64],
+        u: &mut [f64],
+    ) {
+        let seen = match (feedback, seen) {
+            (Feedback::OpenLoop, _) | (_, None) => None,
+            (Feedback::Predicted { .. }, Some((l, x))) => {
+                predict_present(dynamics, l, x, applied, scratch);
+                Some(Seen {
+                    gain: k,
+                    knot: k,
+                    x: &scratch[..x.len()],
+                })
+            }
+            (Feedback::Full | Feedback::Delayed { .. }, Some((l, x))) => {
+                let gain = feedback.seen_knot(k).unwrap_or(l);
+                Some(Seen { gain, knot: l, x })
+            }
+        };
+        self.control_into(k, seen, u);
     }
 }
 

@@ -5,7 +5,7 @@
 //! depend on how many threads run the trials or in which order.
 
 use crate::core::dynamics::{DiscreteDynamics, Dynamics};
-use crate::core::policy::{Feedback, Policy, Seen, predict_present};
+use crate::core::policy::{Feedback, Policy};
 use crate::core::rng::{add_diffusion, trial_rng};
 use crate::planning::plan::Setup;
 use nalgebra::{DMatrix, DVector};
@@ -41,30 +41,18 @@ pub fn run_trial(
     let mut total = 0.0;
     for k in 0..steps {
         let mut u = DVector::zeros(policy.nu());
-        let seen = match (feedback, feedback.seen_knot(k)) {
-            (_, None) => None,
-            (Feedback::Predicted { .. }, Some(j)) => {
-                let applied = us[j..k].iter().map(|u: &DVector<f64>| u.as_slice());
-                predict_present(
-                    dynamics,
-                    j,
-                    x[j].as_slice(),
-                    applied,
-                    predicted.as_mut_slice(),
-                );
-                Some(Seen {
-                    gain: k,
-                    knot: k,
-                    x: predicted.as_slice(),
-                })
-            }
-            (_, Some(j)) => Some(Seen {
-                gain: j,
-                knot: j,
-                x: x[j].as_slice(),
-            }),
-        };
-        policy.control_into(k, seen, u.as_mut_slice());
+        let seen = feedback.seen_knot(k);
+        policy.command_into(
+            dynamics,
+            k,
+            feedback,
+            seen.map(|j| (j, x[j].as_slice())),
+            us[seen.unwrap_or(k)..k]
+                .iter()
+                .map(|u: &DVector<f64>| u.as_slice()),
+            predicted.as_mut_slice(),
+            u.as_mut_slice(),
+        );
         let mut next = DVector::zeros(nx);
         dynamics.step(k, x[k].as_slice(), u.as_slice(), next.as_mut_slice());
         if nw > 0 {

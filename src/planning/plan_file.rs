@@ -49,6 +49,18 @@ pub struct PlanSummary {
     /// whether they were met).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optimality: Option<crate::core::solver::sooc_newton::Optimality>,
+    /// Total variation of the commands per control channel, `Σ_k |u[k+1] − u[k]|`, in the
+    /// channel's unit (`control_names`): how much a plan chatters.
+    #[serde(default)]
+    pub total_variation: Vec<f64>,
+}
+
+/// `Σ_k |u[k+1]_j − u[k]_j|` for every channel `j` of the command sequence `u`.
+pub fn total_variation(u: &[nalgebra::DVector<f64>]) -> Vec<f64> {
+    let nu = u.first().map_or(0, |v| v.len());
+    (0..nu)
+        .map(|j| u.windows(2).map(|w| (w[1][j] - w[0][j]).abs()).sum())
+        .collect()
 }
 
 /// A plan as written by `vic plan`.
@@ -246,6 +258,7 @@ pub(crate) fn plan_file(
             open_loop_expected_cost: open_loop.expected_cost,
             open_loop_final_std,
             optimality: None,
+            total_variation: total_variation(&sol.u),
         },
     }
 }
@@ -328,5 +341,23 @@ pub fn final_position_covariance(
         );
         let largest = 0.5 * (tr + (tr * tr - 4.0 * det).max(0.0).sqrt());
         (c, largest.max(0.0).sqrt() * Unit::Millimetre.scale())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::total_variation;
+    use nalgebra::DVector;
+
+    #[test]
+    fn total_variation_sums_absolute_changes_per_channel() {
+        let u: Vec<DVector<f64>> = [[0.0, 5.0], [2.0, 5.0], [-1.0, 6.0], [-1.0, 4.0]]
+            .iter()
+            .map(|r| DVector::from_column_slice(r))
+            .collect();
+        // Channel 0: 2 + 3 + 0; channel 1: 0 + 1 + 2.
+        assert_eq!(total_variation(&u), vec![5.0, 3.0]);
+        assert!(total_variation(&u[..1]).iter().all(|&v| v == 0.0));
+        assert!(total_variation(&[]).is_empty());
     }
 }

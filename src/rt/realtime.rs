@@ -87,6 +87,11 @@ impl Periodic {
         }
     }
 
+    /// The deadline the next [`Periodic::wait`] waits for [ns, monotonic].
+    pub fn next_deadline(&self) -> u64 {
+        self.next_ns
+    }
+
     /// Waits for the next deadline. A wake-up later than a whole period skips the missed
     /// deadlines: the next one is the first still in the future.
     pub fn wait(&mut self) -> Wake {
@@ -220,6 +225,8 @@ pub struct BoardStats {
     pub rejected_messages: u64,
     /// Rejected messages by reason (only reasons that occurred).
     pub rejected_by_reason: std::collections::BTreeMap<String, u64>,
+    /// Messages lost before the board saw them (sequence gaps within a sender session).
+    pub dropped_messages: u64,
     pub safe_hold_ticks: u64,
     pub watchdog_trips: u64,
     pub faults: u64,
@@ -312,6 +319,7 @@ fn telemetry(
         watchdog_trips: board.counters.watchdog_trips,
         disturbance_seq,
         disturbance_tick,
+        dropped_messages: board.counters.dropped,
     }
 }
 
@@ -361,6 +369,7 @@ pub fn run_board(
         missed_periods: periodic.skipped_periods,
         rejected_messages: board.counters.rejected,
         rejected_by_reason: rejections_by_name(&board.counters.rejected_by),
+        dropped_messages: board.counters.dropped,
         safe_hold_ticks: board.counters.safe_hold_ticks,
         watchdog_trips: board.counters.watchdog_trips,
         faults: board.counters.faults,

@@ -1,5 +1,6 @@
 //! `vic-planner`: the central controller as a process. It plays a plan back to the board as
-//! command slices at 50 Hz with a strategy (stiffness, delayed feedback by Eq. 13, or both), puts
+//! command slices at 50 Hz with a strategy (`naive-delayed`: Eq. 13; `predictor`: a Smith
+//! predictor over the commands in flight; `stiffness`: the open-loop plan; `stiffness+predictor`), puts
 //! delay lines on the state and command paths so that the feedback sees the state the configured
 //! latency late, runs the trials live against a `vic-board` (or in lockstep with a board in this
 //! process on a simulated clock) and reports their errors.
@@ -7,7 +8,7 @@
 use crate::planning::plan::{Method, PlanFile, plan, setup};
 use crate::planning::scenario::Scenario;
 use crate::rt::central::{
-    Central, Strategy, Timing, TrialRecord, lockstep, run_live, split_latency_ms,
+    Central, LiveError, Strategy, Timing, TrialRecord, lockstep, run_live, split_latency_ms,
 };
 use crate::rt::transport::CentralPorts;
 use crate::tools::cli::{
@@ -59,7 +60,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     }
     crate::rt::transport::validate_namespace(&o.namespace).input()?;
     let mut overrides = o.overrides.clone();
-    if o.strategy == Strategy::DelayedFeedback {
+    if !o.strategy.uses_stiffness() {
         overrides.push("actuator.stiffness_max=0".into());
     }
     let base = Scenario::load(&o.config, &overrides).input()?;
@@ -81,14 +82,26 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         lookahead_ns: (lookahead_ms * 1e6) as u64,
     };
     let mut central = Central::new(track, o.strategy, timing);
-    let records = run_trials(o, &mut central, &setup.x0, period_ns)?;
+    let (records, lost) = match run_trials(o, &mut central, &setup.x0, period_ns)? {
+        Ok(records) => (records, None),
+        // The trials before the board was lost are results: print them, then fail.
+        Err(e) => (e.records().to_vec(), Some(e)),
+    };
     let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
-    let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
-    if o.json {
-        print_json(&result)
-    } else {
-        print_result(&result, &delays);
-        Ok(())
+    if !records.is_empty() || lost.is_none() {
+        let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
+        if o.json {
+            print_json(&result)?;
+        } else {
+            print_result(&result, &delays);
+        }
+    }
+    match lost {
+        None => Ok(()),
+        Some(e) => Err(anyhow::anyhow!(
+            "{e} ({} trials finished before, reported above)",
+            e.records().len()
+        )),
     }
 }
 
@@ -99,18 +112,18 @@ fn run_trials(
     central: &mut Central,
     x0: &[f64],
     period_ns: u64,
-) -> anyhow::Result<Vec<TrialRecord>> {
+) -> anyhow::Result<Result<Vec<TrialRecord>, LiveError>> {
     if o.lockstep {
         let s = Scenario::load(&o.config, &o.overrides).input()?;
         let cfg = crate::tools::launch::board_config(&s, 1_000_000);
         let mut board = crate::rt::board::Board::new(s.model.clone(), cfg, x0).input()?;
-        Ok(lockstep(
+        Ok(Ok(lockstep(
             &mut board, central, 1_000_000, period_ns, o.trials, o.seed,
-        ))
+        )))
     } else {
         let stop = stop_on_signal()?;
         let ep = CentralPorts::open(&o.namespace)?;
-        run_live(
+        match run_live(
             &ep,
             central,
             o.trials,
@@ -118,20 +131,28 @@ fn run_trials(
             period_ns,
             o.board_timeout,
             &stop,
-        )
-        .runtime()
+        ) {
+            Err(LiveError::Transport(e)) => Err(e).runtime(),
+            other => Ok(other),
+        }
     }
 }
 
-/// Without a plan file: SOOC for `stiffness`, else ILQG for the latency (zero stiffness for
-/// `delayed-feedback`, set in `overrides`).
+/// Without a plan file: SOOC for `stiffness`, ILQG for the latency for `naive-delayed` (Eq. 13
+/// needs the augmented plan's gains), an undelayed ILQG plan for the predictor strategies (zero
+/// stiffness for the feedback-only ones, set in `overrides`).
 fn plan_at_start(o: &CentralOptions, overrides: &[String]) -> anyhow::Result<PlanFile> {
     let mut overrides = overrides.to_vec();
-    let method = if o.strategy == Strategy::Stiffness {
-        Method::Sooc
-    } else {
-        overrides.push(format!("task.delay_ms={}", o.latency_ms.unwrap_or(0.0)));
-        Method::Ilqg
+    let method = match o.strategy {
+        Strategy::Stiffness => Method::Sooc,
+        Strategy::NaiveDelayed => {
+            overrides.push(format!("task.delay_ms={}", o.latency_ms.unwrap_or(0.0)));
+            Method::Ilqg
+        }
+        Strategy::Predictor | Strategy::StiffnessPredictor => {
+            overrides.push("task.delay_ms=0".into());
+            Method::Ilqg
+        }
     };
     let s = Scenario::load(&o.config, &overrides).input()?;
     eprintln!("vic-planner: planning ({}) ...", method.name());
@@ -161,31 +182,32 @@ fn delay_lines(o: &CentralOptions, latency_ms: f64, lookahead_ms: f64) -> anyhow
     Ok(Delays { sensor, command })
 }
 
-/// A distance as printed in the tables: "diverged" for a trial that left the workspace.
-fn distance_text(v: f64) -> String {
-    if v >= 1e9 {
-        "diverged".to_string()
-    } else {
-        format!("{v:.2}")
-    }
+/// A distance as printed in the tables: "diverged" when no trial completed.
+pub fn distance_text(v: Option<f64>) -> String {
+    v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.2}"))
 }
 
 fn print_result(result: &StrategyResult, delays: &Delays) {
     let u = &result.unit;
-    let f = |v: f64| distance_text(v);
+    let f = distance_text;
     println!(
         "{} ({} trials, latency {} ms = sensor {} + command {} + lookahead)",
         result.name, result.trials, result.latency_ms, delays.sensor, delays.command
     );
     println!(
-        "errors   RMS {} {u}, final mean {} / max {} {u}, max {} {u}",
+        "errors   RMS {} {u}, final mean {} / max {} {u}, max {} {u} (trials that completed)",
         f(result.rms_error),
         f(result.final_error_mean),
         f(result.final_error_max),
         f(result.max_error)
     );
     println!(
-        "diverged {} of {}; safe hold in {} trials; {} stale feedback knots",
-        result.diverged, result.trials, result.safe_hold_trials, result.stale_feedback
+        "diverged {} of {}; safe hold in {}, fault in {}, stalled {} trials; {} stale feedback knots",
+        result.diverged,
+        result.trials,
+        result.safe_hold_trials,
+        result.fault_trials,
+        result.stalled_trials,
+        result.stale_feedback
     );
 }

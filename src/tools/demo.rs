@@ -194,7 +194,7 @@ fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'
             rate_hz: 50,
         },
         StrategyRun {
-            name: "delayed-feedback",
+            name: "naive-delayed",
             plan: &plans.feedback,
             latency_ms: o.latency_ms,
             rate_hz: 50,
@@ -202,7 +202,7 @@ fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'
     ];
     if let Some(p) = &plans.feedback_at_zero {
         runs.push(StrategyRun {
-            name: "delayed-feedback",
+            name: "naive-delayed",
             plan: p,
             latency_ms: 0.0,
             rate_hz: 250,
@@ -320,13 +320,7 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
     );
     let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let j = &stats["jitter_us"];
-    let f = |v: f64| {
-        if v >= 1e9 {
-            "diverged".to_string()
-        } else {
-            format!("{v:.2} {unit}")
-        }
-    };
+    let f = |v: Option<f64>| v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.2} {unit}"));
     for r in results {
         println!(
             "{:<17} {:>5} ms {:>10} {:>12} {:>10} {:>5} / {:<2} {:>8.1} /{:>7.1} /{:>8.1} {:>6}",
@@ -390,8 +384,8 @@ mod tests {
             rows,
             [
                 ("stiffness", 200.0, 50),
-                ("delayed-feedback", 200.0, 50),
-                ("delayed-feedback", 0.0, 250)
+                ("naive-delayed", 200.0, 50),
+                ("naive-delayed", 0.0, 250)
             ]
         );
         let plans = DemoPlans {

@@ -47,10 +47,8 @@ pub fn board_config(s: &Scenario, period_ns: u64) -> BoardConfig {
 pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, String> {
     Track::new(
         plan.policy(setup).map_err(|e| e.to_string())?,
-        setup.reference.clone(),
+        setup.dynamics.clone(),
         &setup.x0,
-        setup.dynamics.model.dof(),
-        setup.dynamics.dt,
     )
     .map_err(|e| e.to_string())
 }

@@ -29,6 +29,8 @@ pub fn to_trials(setup: &Setup, records: &[TrialRecord]) -> Vec<Trial> {
 }
 
 /// The results of a strategy's trials (the JSON `vic-planner` prints and `vic demo` reads).
+/// Errors are over the trials that completed and did not diverge, `None` (`null`) when none did:
+/// a diverged trial is counted in `diverged`, never averaged in as a huge number.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct StrategyResult {
     pub name: String,
@@ -38,20 +40,35 @@ pub struct StrategyResult {
     pub trials: usize,
     /// Unit of the errors: "mm" (hand) or "deg" (joint).
     pub unit: crate::planning::unit::Unit,
-    pub rms_error: f64,
-    pub final_error_mean: f64,
-    pub final_error_max: f64,
-    /// Final error of every trial.
-    pub final_errors: Vec<f64>,
-    pub max_error: f64,
+    pub rms_error: Option<f64>,
+    pub final_error_mean: Option<f64>,
+    pub final_error_max: Option<f64>,
+    /// Final error of every trial (`None`: diverged, stalled or not finite).
+    pub final_errors: Vec<Option<f64>>,
+    pub max_error: Option<f64>,
+    /// Trials that ended further than the divergence distance from the target, blew up, or
+    /// tripped the board's plant guard (a fault); not those cut short by a safe hold or a stall.
     pub diverged: usize,
-    /// Trials during which the board fell back to safe hold or faulted.
+    /// Trials during which the board fell back to safe hold (commands late or missing).
     pub safe_hold_trials: usize,
     pub fault_trials: usize,
+    /// Trials that ended before their final state arrived (time limit, stop, board silent).
+    #[serde(default)]
+    pub stalled_trials: usize,
     /// Knots whose feedback used a state older than the latency (all trials).
     pub stale_feedback: usize,
     pub missing_states: usize,
-    pub expected_cost: f64,
+    /// Monte Carlo expected cost over the trials that did not diverge.
+    pub expected_cost: Option<f64>,
+}
+
+/// How one trial ended, as the report counts it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Outcome {
+    Completed,
+    Diverged,
+    /// Safe hold or stalled: the transport, not the control law, decided the ending.
+    Interrupted,
 }
 
 /// Summarises records like the offline evaluation does (`divergence` in the report's unit).
@@ -62,9 +79,8 @@ pub fn summarize(
     divergence: f64,
 ) -> StrategyResult {
     let trials = to_trials(setup, records);
-    let report = crate::planning::evaluation::summarize(setup, &trials, divergence);
     let model = &setup.dynamics.model;
-    let scale = report.unit.scale();
+    let scale = crate::planning::unit::Unit::for_model(model).scale();
     let steps = setup.reference.len() - 1;
     let target = |k: usize| {
         let mut x = DVector::zeros(model.nx());
@@ -73,36 +89,52 @@ pub fn summarize(
         }
         crate::planning::montecarlo::position(model, &x)
     };
-    let dist = |a: &[f64], b: &[f64]| {
-        a.iter()
-            .zip(b)
+    let dist = |k: usize, x: &DVector<f64>| {
+        crate::planning::montecarlo::position(model, x)
+            .iter()
+            .zip(target(k))
             .map(|(p, q)| (p - q).powi(2))
             .sum::<f64>()
             .sqrt()
             * scale
     };
-    let goal = target(steps);
-    let final_errors: Vec<f64> = trials
+    let outcome: Vec<Outcome> = records
         .iter()
-        .map(|t| {
-            let e = dist(
-                &crate::planning::montecarlo::position(model, &t.x[steps]),
-                &goal,
-            );
-            if e.is_finite() { e } else { f64::MAX }
+        .zip(&trials)
+        .map(|(r, t)| {
+            let e = dist(steps, &t.x[steps]);
+            // A fault is the plant guard catching an arm that left its limits: the control
+            // diverged. A safe hold or a stall is the transport's doing, not the law's.
+            if r.fault {
+                Outcome::Diverged
+            } else if r.safe_hold || r.stalled {
+                Outcome::Interrupted
+            } else if !e.is_finite() || e > divergence {
+                Outcome::Diverged
+            } else {
+                Outcome::Completed
+            }
         })
         .collect();
-    let max_error = trials
+    let kept: Vec<&crate::planning::montecarlo::Trial> = trials
         .iter()
-        .flat_map(|t| {
-            t.x.iter()
-                .enumerate()
-                .map(|(k, x)| dist(&crate::planning::montecarlo::position(model, x), &target(k)))
-        })
-        .fold(
-            0.0,
-            |m: f64, e| if e.is_finite() { m.max(e) } else { f64::MAX },
-        );
+        .zip(&outcome)
+        .filter(|(_, o)| **o == Outcome::Completed)
+        .map(|(t, _)| t)
+        .collect();
+    let final_errors: Vec<Option<f64>> = trials
+        .iter()
+        .zip(&outcome)
+        .map(|(t, o)| (*o != Outcome::Diverged).then(|| dist(steps, &t.x[steps])))
+        .map(|e| e.filter(|e| e.is_finite()))
+        .collect();
+    let finals: Vec<f64> = kept.iter().map(|t| dist(steps, &t.x[steps])).collect();
+    let count = kept.len() as f64;
+    let some = |v: f64| (!kept.is_empty() && v.is_finite()).then_some(v);
+    let sq: f64 = kept
+        .iter()
+        .flat_map(|t| t.x.iter().enumerate().map(|(k, x)| dist(k, x).powi(2)))
+        .sum();
     let t = &central.timing;
     StrategyResult {
         name: central.strategy.name().into(),
@@ -110,30 +142,22 @@ pub fn summarize(
         sensor_latency_ms: t.sensor_latency_ns as f64 * 1e-6,
         command_latency_ms: t.command_latency_ns as f64 * 1e-6,
         trials: records.len(),
-        unit: report.unit,
-        rms_error: if report.rms_error.is_finite() {
-            report.rms_error
-        } else {
-            f64::MAX
-        },
-        final_error_mean: (final_errors.iter().map(|e| e.min(1e12)).sum::<f64>()
-            / final_errors.len().max(1) as f64)
-            .min(f64::MAX),
-        final_error_max: final_errors.iter().copied().fold(0.0, f64::max),
-        diverged: final_errors
-            .iter()
-            .filter(|e| !e.is_finite() || **e > divergence)
-            .count(),
+        unit: crate::planning::unit::Unit::for_model(model),
+        rms_error: some((sq / (count * (steps + 1) as f64)).sqrt()),
+        final_error_mean: some(finals.iter().sum::<f64>() / count),
+        final_error_max: some(finals.iter().copied().fold(0.0, f64::max)),
         final_errors,
-        max_error,
+        max_error: some(
+            kept.iter()
+                .flat_map(|t| t.x.iter().enumerate().map(|(k, x)| dist(k, x)))
+                .fold(0.0, f64::max),
+        ),
+        diverged: outcome.iter().filter(|o| **o == Outcome::Diverged).count(),
         safe_hold_trials: records.iter().filter(|r| r.safe_hold).count(),
         fault_trials: records.iter().filter(|r| r.fault).count(),
+        stalled_trials: records.iter().filter(|r| r.stalled).count(),
         stale_feedback: records.iter().map(|r| r.stale_feedback).sum(),
         missing_states: records.iter().map(|r| r.missing_states).sum(),
-        expected_cost: if report.expected_cost_mc.is_finite() {
-            report.expected_cost_mc
-        } else {
-            f64::MAX
-        },
+        expected_cost: some(kept.iter().map(|t| t.cost).sum::<f64>() / count),
     }
 }

@@ -65,10 +65,10 @@ pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
     if let Some(png) = &o.plot {
         plot_trials(png, feedback, &plan, &scenario, &trials)?;
     }
-    let predicted = match feedback {
-        Feedback::OpenLoop => plan.summary.open_loop_expected_cost,
-        _ => plan.summary.expected_cost,
-    };
+    // The executed law's own prediction (closed-loop covariance propagation); for the naive
+    // delayed law, the plan's (that of the augmented policy it was planned as).
+    let predicted = crate::planning::evaluation::predicted_cost(&setup, &policy, feedback)
+        .unwrap_or(plan.summary.expected_cost);
     if o.json {
         let mut v = serde_json::to_value(&report)?;
         v["policy"] = serde_json::to_value(feedback)?;

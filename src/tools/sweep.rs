@@ -7,8 +7,8 @@
 //! a Smith predictor across the latency, [`Feedback::Predicted`]) and `stiffness` (the open-loop
 //! SOOC plan of torque and stiffness, which no latency affects).
 
-use crate::core::policy::Feedback;
-use crate::planning::evaluation::summarize;
+pub use crate::core::policy::Strategy;
+use crate::planning::evaluation::{predicted_cost, summarize};
 use crate::planning::montecarlo::run_trials;
 use crate::planning::plan::{Method, PlanFile, plan, setup};
 use crate::planning::scenario::Scenario;
@@ -16,79 +16,37 @@ use crate::planning::unit::Unit;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// How the central controller acts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Strategy {
-    NaiveDelayed,
-    Predictor,
-    Stiffness,
+/// How a strategy's plan is made.
+pub fn method(strategy: Strategy) -> Method {
+    match strategy {
+        Strategy::Stiffness => Method::Sooc,
+        _ => Method::Ilqg,
+    }
 }
 
-impl Strategy {
-    pub const ALL: [Strategy; 3] = [
-        Strategy::NaiveDelayed,
-        Strategy::Predictor,
-        Strategy::Stiffness,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Strategy::NaiveDelayed => "naive-delayed",
-            Strategy::Predictor => "predictor",
-            Strategy::Stiffness => "stiffness",
-        }
-    }
-
-    /// How its plan is made.
-    pub fn method(self) -> Method {
-        match self {
-            Strategy::Stiffness => Method::Sooc,
-            _ => Method::Ilqg,
-        }
-    }
-
-    /// The scenario overrides of its plan at `latency_ms`: the feedback strategies get no
-    /// stiffness (feedback is all they have); only the naive law is planned for the delay (Eq. 13
-    /// needs the augmented plan's gains), the predictor uses the undelayed gains on its prediction.
-    pub fn overrides(self, latency_ms: f64) -> Vec<String> {
-        let no_stiffness = [
-            "actuator.stiffness_min=0".to_string(),
+/// The scenario overrides of a strategy's plan at `latency_ms`: the feedback-only strategies get
+/// no stiffness (feedback is all they have); only the naive law is planned for the delay (Eq. 13
+/// needs the augmented plan's gains), the predictors use the undelayed gains on their prediction.
+pub fn plan_overrides(strategy: Strategy, latency_ms: f64) -> Vec<String> {
+    let mut o: Vec<String> = if strategy.uses_stiffness() {
+        Vec::new()
+    } else {
+        vec![
+            "actuator.stiffness_min=0".into(),
             "actuator.stiffness_max=0".into(),
             "actuator.initial_stiffness=0".into(),
-        ];
-        match self {
-            Strategy::NaiveDelayed => {
-                let mut o = no_stiffness.to_vec();
-                o.push(format!("task.delay_ms={latency_ms}"));
-                o
-            }
-            Strategy::Predictor => {
-                let mut o = no_stiffness.to_vec();
-                o.push("task.delay_ms=0".into());
-                o
-            }
-            Strategy::Stiffness => vec!["task.delay_ms=0".into()],
-        }
-    }
+        ]
+    };
+    o.push(match strategy {
+        Strategy::NaiveDelayed => format!("task.delay_ms={latency_ms}"),
+        _ => "task.delay_ms=0".into(),
+    });
+    o
+}
 
-    /// Whether its plan depends on the latency.
-    fn plan_per_latency(self) -> bool {
-        self == Strategy::NaiveDelayed
-    }
-
-    /// How its plan is executed at a latency of `steps`.
-    pub fn feedback(self, steps: usize) -> Feedback {
-        match self {
-            Strategy::NaiveDelayed => Feedback::Delayed {
-                latency_steps: steps,
-            },
-            Strategy::Predictor => Feedback::Predicted {
-                latency_steps: steps,
-            },
-            Strategy::Stiffness => Feedback::OpenLoop,
-        }
-    }
+/// Whether a strategy's plan depends on the latency.
+fn plan_per_latency(strategy: Strategy) -> bool {
+    strategy == Strategy::NaiveDelayed
 }
 
 /// What to sweep.
@@ -113,9 +71,8 @@ pub struct SweepPoint {
     pub rms_error: Option<f64>,
     pub diverged_fraction: f64,
     pub expected_cost_mc: Option<f64>,
-    /// The plan's own prediction of the executed policy's expected cost, where one exists: the
-    /// open-loop prediction for `stiffness`, the plan's for `predictor` at 0 latency; `None`
-    /// where the plan predicts another policy than the one executed.
+    /// The executed policy's expected cost predicted by closed-loop covariance propagation
+    /// ([`predicted_cost`]); `None` for `naive-delayed`, whose law it does not model.
     pub expected_cost_predicted: Option<f64>,
     pub mean_stiffness: f64,
     pub unit: Unit,
@@ -146,22 +103,17 @@ pub fn sweep_latency(
         let mut cached: Option<(Scenario, PlanFile)> = None;
         for &latency_ms in &opts.latencies_ms {
             progress(&format!("{} at {latency_ms} ms", strategy.name()));
-            if cached.is_none() || strategy.plan_per_latency() {
-                let s = load(strategy.overrides(latency_ms))?;
-                let p = plan(&s, strategy.method(), None).map_err(|e| e.to_string())?;
+            if cached.is_none() || plan_per_latency(strategy) {
+                let s = load(plan_overrides(strategy, latency_ms))?;
+                let p = plan(&s, method(strategy), None).map_err(|e| e.to_string())?;
                 cached = Some((s, p));
             }
             let (s, p) = cached.as_ref().expect("planned above");
             let set = setup(s).map_err(|e| e.to_string())?;
             let steps = latency_steps(latency_ms, s.task.dt)?;
             let feedback = strategy.feedback(steps);
-            let trials = run_trials(
-                &set,
-                &p.policy(&set).map_err(|e| e.to_string())?,
-                feedback,
-                opts.trials,
-                opts.seed,
-            );
+            let policy = p.policy(&set).map_err(|e| e.to_string())?;
+            let trials = run_trials(&set, &policy, feedback, opts.trials, opts.seed);
             let divergence = opts
                 .divergence
                 .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
@@ -176,11 +128,7 @@ pub fn sweep_latency(
                 rms_error: finite(r.rms_error),
                 diverged_fraction: r.diverged_fraction,
                 expected_cost_mc: r.expected_cost_mc.is_finite().then_some(r.expected_cost_mc),
-                expected_cost_predicted: match feedback {
-                    Feedback::OpenLoop => Some(p.summary.open_loop_expected_cost),
-                    Feedback::Predicted { latency_steps: 0 } => Some(p.summary.expected_cost),
-                    _ => None,
-                },
+                expected_cost_predicted: predicted_cost(&set, &policy, feedback),
                 mean_stiffness: p.summary.mean_stiffness,
                 unit: r.unit,
             });

@@ -80,7 +80,9 @@ pub struct QpSolution {
     pub status: QpStatus,
 }
 
-/// Solves the box QP from the starting point `x0` (clamped into the box first).
+/// Solves the box QP from the starting point `x0` (clamped into the box first): projected
+/// Newton on the free variables with a projected Armijo line search (Bertsekas 1982, as in
+/// Tassa, Mansard & Todorov 2014).
 pub fn solve_box_qp(
     h: impl Fn(usize, usize) -> f64 + Copy,
     g: &[f64],
@@ -90,42 +92,26 @@ pub fn solve_box_qp(
 ) -> QpSolution {
     let n = g.len();
     assert!(n <= MAX_QP, "box QP of size {n} exceeds {MAX_QP}");
+    let qp = BoxQp {
+        h,
+        g,
+        lower,
+        upper,
+        n,
+    };
     let mut x = [0.0; MAX_QP];
     for i in 0..n {
         x[i] = x0[i].clamp(lower[i], upper[i]);
     }
-    let value = |x: &[f64; MAX_QP]| {
-        let mut v = 0.0;
-        for i in 0..n {
-            v += g[i] * x[i];
-            for j in 0..n {
-                v += 0.5 * x[i] * h(i, j) * x[j];
-            }
-        }
-        v
-    };
     let mut free = [true; MAX_QP];
     let mut old_free = [false; MAX_QP];
     let mut factor: Option<SmallCholesky> = None;
     let mut idx = [0usize; MAX_QP];
-    let mut nfree = 0;
     let mut status = QpStatus::MaxIterations;
-    let mut f = value(&x);
+    let mut f = qp.value(&x);
     for iter in 0..100 {
-        let mut grad = [0.0; MAX_QP];
-        for i in 0..n {
-            grad[i] = g[i] + (0..n).map(|j| h(i, j) * x[j]).sum::<f64>();
-        }
-        nfree = 0;
-        for i in 0..n {
-            let clamped =
-                (x[i] <= lower[i] && grad[i] > 0.0) || (x[i] >= upper[i] && grad[i] < 0.0);
-            free[i] = !clamped;
-            if free[i] {
-                idx[nfree] = i;
-                nfree += 1;
-            }
-        }
+        let grad = qp.gradient(&x);
+        let (nfree, _) = qp.classify(&x, &grad, &mut free, &mut idx);
         if nfree == 0 {
             // No free block: a factor from an earlier iteration would describe the wrong set.
             factor = None;
@@ -155,82 +141,159 @@ pub fn solve_box_qp(
             status = QpStatus::Converged;
             break;
         }
-        // Newton step on the free variables with the clamped ones fixed.
-        let mut rhs = [0.0; MAX_QP];
-        for (a, &i) in idx[..nfree].iter().enumerate() {
-            rhs[a] = g[i]
-                + (0..n)
-                    .filter(|&j| !free[j])
-                    .map(|j| h(i, j) * x[j])
-                    .sum::<f64>();
-        }
-        factor
-            .as_ref()
-            .expect("factor computed")
-            .solve(&mut rhs[..nfree]);
-        let mut dir = [0.0; MAX_QP];
-        for (a, &i) in idx[..nfree].iter().enumerate() {
-            dir[i] = -rhs[a] - x[i];
-        }
+        let chol = factor.as_ref().expect("factor computed");
+        let dir = qp.newton_direction(&x, &free, &idx[..nfree], chol);
         let sdotg: f64 = (0..n).map(|i| dir[i] * grad[i]).sum();
         if sdotg >= -1e-14 * (1.0 + f.abs()) {
             status = QpStatus::Converged;
             break;
         }
-        // Projected Armijo line search.
-        let mut step = 1.0;
-        let mut accepted = false;
-        while step > 1e-12 {
-            let mut xc = [0.0; MAX_QP];
-            for i in 0..n {
-                xc[i] = (x[i] + step * dir[i]).clamp(lower[i], upper[i]);
-            }
-            let fc = value(&xc);
-            if (fc - f) / (step * sdotg) > 0.1 {
+        match qp.line_search(&x, &dir, f, sdotg) {
+            Some((xc, fc)) => {
                 x = xc;
                 f = fc;
-                accepted = true;
+            }
+            None => {
+                status = QpStatus::Converged;
                 break;
+            }
+        }
+    }
+    qp.finish(x, free, factor, status)
+}
+
+/// The problem `min ½ xᵀ H x + gᵀ x` over `lower ≤ x ≤ upper` (`n` variables).
+struct BoxQp<'a, H> {
+    h: H,
+    g: &'a [f64],
+    lower: &'a [f64],
+    upper: &'a [f64],
+    n: usize,
+}
+
+impl<H: Fn(usize, usize) -> f64 + Copy> BoxQp<'_, H> {
+    fn value(&self, x: &[f64; MAX_QP]) -> f64 {
+        let mut v = 0.0;
+        for i in 0..self.n {
+            v += self.g[i] * x[i];
+            for j in 0..self.n {
+                v += 0.5 * x[i] * (self.h)(i, j) * x[j];
+            }
+        }
+        v
+    }
+
+    fn gradient(&self, x: &[f64; MAX_QP]) -> [f64; MAX_QP] {
+        let mut grad = [0.0; MAX_QP];
+        for (i, gi) in grad.iter_mut().enumerate().take(self.n) {
+            *gi = self.g[i] + (0..self.n).map(|j| (self.h)(i, j) * x[j]).sum::<f64>();
+        }
+        grad
+    }
+
+    /// The free set at `x`: a variable is clamped when it sits at a bound its gradient pushes
+    /// against. Writes `free` and the free indices into `idx`; their number, and whether `free`
+    /// changed.
+    fn classify(
+        &self,
+        x: &[f64; MAX_QP],
+        grad: &[f64; MAX_QP],
+        free: &mut [bool; MAX_QP],
+        idx: &mut [usize; MAX_QP],
+    ) -> (usize, bool) {
+        let mut changed = false;
+        let mut k = 0;
+        for i in 0..self.n {
+            let clamped = (x[i] <= self.lower[i] && grad[i] > 0.0)
+                || (x[i] >= self.upper[i] && grad[i] < 0.0);
+            changed |= free[i] == clamped;
+            free[i] = !clamped;
+            if free[i] {
+                idx[k] = i;
+                k += 1;
+            }
+        }
+        (k, changed)
+    }
+
+    /// The Newton step on the free variables `idx` with the clamped ones fixed (`chol`: the
+    /// factor of the free block of `H`), as a direction from `x`.
+    fn newton_direction(
+        &self,
+        x: &[f64; MAX_QP],
+        free: &[bool; MAX_QP],
+        idx: &[usize],
+        chol: &SmallCholesky,
+    ) -> [f64; MAX_QP] {
+        let n = self.n;
+        let mut rhs = [0.0; MAX_QP];
+        for (a, &i) in idx.iter().enumerate() {
+            rhs[a] = self.g[i]
+                + (0..n)
+                    .filter(|&j| !free[j])
+                    .map(|j| (self.h)(i, j) * x[j])
+                    .sum::<f64>();
+        }
+        chol.solve(&mut rhs[..idx.len()]);
+        let mut dir = [0.0; MAX_QP];
+        for (a, &i) in idx.iter().enumerate() {
+            dir[i] = -rhs[a] - x[i];
+        }
+        dir
+    }
+
+    /// The solution at `x`: the final free set and its factor must describe the returned point,
+    /// so both are recomputed when the free set changed at the last step.
+    fn finish(
+        &self,
+        x: [f64; MAX_QP],
+        mut free: [bool; MAX_QP],
+        mut factor: Option<SmallCholesky>,
+        mut status: QpStatus,
+    ) -> QpSolution {
+        let grad = self.gradient(&x);
+        let mut idx = [0usize; MAX_QP];
+        let (k, changed) = self.classify(&x, &grad, &mut free, &mut idx);
+        if changed || factor.is_none() {
+            factor = if k == 0 {
+                None
+            } else {
+                SmallCholesky::new(self.h, &idx[..k])
+            };
+            if k > 0 && factor.is_none() {
+                status = QpStatus::NotPositiveDefinite;
+            }
+        }
+        QpSolution {
+            x,
+            free,
+            factor,
+            status,
+        }
+    }
+
+    /// Projected Armijo line search along `dir` from `x` (value `f`, slope `sdotg`): the first
+    /// accepted point and its value.
+    fn line_search(
+        &self,
+        x: &[f64; MAX_QP],
+        dir: &[f64; MAX_QP],
+        f: f64,
+        sdotg: f64,
+    ) -> Option<([f64; MAX_QP], f64)> {
+        let mut step = 1.0;
+        while step > 1e-12 {
+            let mut xc = [0.0; MAX_QP];
+            for i in 0..self.n {
+                xc[i] = (x[i] + step * dir[i]).clamp(self.lower[i], self.upper[i]);
+            }
+            let fc = self.value(&xc);
+            if (fc - f) / (step * sdotg) > 0.1 {
+                return Some((xc, fc));
             }
             step *= 0.6;
         }
-        if !accepted {
-            status = QpStatus::Converged;
-            break;
-        }
-    }
-    // The final free set and its factor must describe the returned point.
-    let mut grad = [0.0; MAX_QP];
-    for i in 0..n {
-        grad[i] = g[i] + (0..n).map(|j| h(i, j) * x[j]).sum::<f64>();
-    }
-    let mut changed = false;
-    let mut k = 0;
-    for i in 0..n {
-        let clamped = (x[i] <= lower[i] && grad[i] > 0.0) || (x[i] >= upper[i] && grad[i] < 0.0);
-        changed |= free[i] == clamped;
-        free[i] = !clamped;
-        if free[i] {
-            idx[k] = i;
-            k += 1;
-        }
-    }
-    if changed || factor.is_none() {
-        factor = if k == 0 {
-            None
-        } else {
-            SmallCholesky::new(h, &idx[..k])
-        };
-        if k > 0 && factor.is_none() {
-            status = QpStatus::NotPositiveDefinite;
-        }
-    }
-    let _ = nfree;
-    QpSolution {
-        x,
-        free,
-        factor,
-        status,
+        None
     }
 }
 

@@ -19,6 +19,10 @@ pub(super) struct Covering {
 pub(super) struct CommandBuffer {
     slices: [CommandSlice; SLICES],
     valid: [bool; SLICES],
+    /// Arrival order of each slice: the newest wins. (Not the sequence number: those of two
+    /// sender sessions do not compare.)
+    arrival: [u64; SLICES],
+    arrivals: u64,
     next: usize,
 }
 
@@ -27,6 +31,8 @@ impl CommandBuffer {
         CommandBuffer {
             slices: [CommandSlice::default(); SLICES],
             valid: [false; SLICES],
+            arrival: [0; SLICES],
+            arrivals: 0,
             next: 0,
         }
     }
@@ -35,6 +41,8 @@ impl CommandBuffer {
     pub fn insert(&mut self, c: &CommandSlice) {
         self.slices[self.next] = *c;
         self.valid[self.next] = true;
+        self.arrivals += 1;
+        self.arrival[self.next] = self.arrivals;
         self.next = (self.next + 1) % SLICES;
     }
 
@@ -52,7 +60,7 @@ impl CommandBuffer {
             if self.valid[s]
                 && c.start_ns <= t
                 && t < c.end_ns()
-                && best.is_none_or(|b| self.slices[b].header.seq < c.header.seq)
+                && best.is_none_or(|b| self.arrival[b] < self.arrival[s])
             {
                 best = Some(s);
             }

@@ -29,7 +29,7 @@ use commands::CommandBuffer;
 use plant::SimulatedPlant;
 pub use supervisor::FaultReason;
 use supervisor::{Supervisor, guard};
-use validation::{Checks, TrialState};
+use validation::{Checks, GapCounter, LastSeen, TrialState};
 
 pub use crate::rt::transport::Rejection;
 
@@ -119,13 +119,16 @@ impl<T: Copy + Default> Queue<T> {
 }
 
 /// Messages that arrived since the last step (fixed capacity: a step allocates nothing). Extra
-/// messages beyond the capacity are counted as rejected.
+/// messages beyond the capacity are counted as rejected; messages a sender numbered but that
+/// never arrived (overwritten in the receive buffers) are counted from the sequence gaps.
 #[derive(Debug, Clone, Default)]
 pub struct Inputs {
     commands: Queue<CommandSlice>,
     controls: Queue<Control>,
     disturbances: Queue<Disturbance>,
     overflow: u64,
+    gaps: [GapCounter; 3],
+    dropped: u64,
     /// When the messages were taken [ns, monotonic] (0: the step's deadline). Time stamps later
     /// than this by more than the tolerance are rejected.
     pub received_ns: u64,
@@ -133,12 +136,15 @@ pub struct Inputs {
 
 impl Inputs {
     pub fn push_command(&mut self, c: &CommandSlice) {
+        self.dropped += self.gaps[0].missing_before(&c.header);
         self.overflow += !self.commands.push(c) as u64;
     }
     pub fn push_control(&mut self, c: &Control) {
+        self.dropped += self.gaps[1].missing_before(&c.header);
         self.overflow += !self.controls.push(c) as u64;
     }
     pub fn push_disturbance(&mut self, d: &Disturbance) {
+        self.dropped += self.gaps[2].missing_before(&d.header);
         self.overflow += !self.disturbances.push(d) as u64;
     }
 }
@@ -169,6 +175,8 @@ pub struct Counters {
     pub rejected: u64,
     /// Rejected messages by [`Rejection`] (index `reason as usize`).
     pub rejected_by: [u64; Rejection::COUNT],
+    /// Messages lost before the board saw them (sequence gaps within a sender session).
+    pub dropped: u64,
     pub safe_hold_ticks: u64,
     /// Times the watchdog expired and the board ramped to its safe hold.
     pub watchdog_trips: u64,
@@ -199,8 +207,10 @@ pub struct Board {
     /// Deadline up to which the plant is integrated.
     plant_ns: u64,
     trial_time_ns: u64,
-    last_command_seq: u64,
-    last_control_seq: u64,
+    /// The last command, control and disturbance accepted (the sequence rules of `Header`).
+    last_command: LastSeen,
+    last_control: LastSeen,
+    last_disturbance: LastSeen,
     /// Sequence number of the reset that started the present trial.
     reset_seq: u64,
     disturbance_seq: u64,
@@ -254,8 +264,9 @@ impl Board {
             start_ns: None,
             plant_ns: 0,
             trial_time_ns: 0,
-            last_command_seq: 0,
-            last_control_seq: 0,
+            last_command: LastSeen::default(),
+            last_control: LastSeen::default(),
+            last_disturbance: LastSeen::default(),
             reset_seq: 0,
             disturbance_seq: 0,
             disturbance_tick: 0,
@@ -343,17 +354,18 @@ impl Board {
             faulted: self.supervisor.mode == Mode::Fault,
             trial: self.trial,
             reset: self.start_ns.is_some(),
-            last_command_seq: self.last_command_seq,
+            last: self.last_command,
+            now_ns: self.trial_time_ns,
         };
         self.checks().command(c, &trial)
     }
 
     fn apply_control(&mut self, c: &Control, clock_ns: u64) {
-        if let Err(r) = self.checks().control(c, self.last_control_seq, clock_ns) {
+        if let Err(r) = self.checks().control(c, &self.last_control, clock_ns) {
             self.counters.reject(r);
             return;
         }
-        self.last_control_seq = c.header.seq;
+        self.last_control.record(&c.header);
         self.applied = true;
         self.commands.clear();
         if c.kind == ControlKind::Reset as u32 {
@@ -363,7 +375,10 @@ impl Board {
             self.reset_seq = c.header.seq;
             self.start_ns = Some(c.start_ns);
             self.trial_time_ns = 0;
-            self.last_command_seq = 0;
+            // A new trial starts every order afresh: whatever a sender (or a forger) numbered
+            // before cannot block the commands and disturbances after the reset.
+            self.last_command = LastSeen::default();
+            self.last_disturbance = LastSeen::default();
             self.supervisor = Supervisor::new(self.plant.hold_target(&self.cfg));
             self.counters.resets += 1;
         } else if self.supervisor.mode != Mode::Fault {
@@ -374,9 +389,13 @@ impl Board {
     }
 
     fn apply_disturbance(&mut self, d: &Disturbance, now_ns: u64, clock_ns: u64) {
-        match self.checks().disturbance(d, self.disturbance_seq, clock_ns) {
+        match self
+            .checks()
+            .disturbance(d, &self.last_disturbance, clock_ns)
+        {
             Ok(kind) => {
                 self.plant.apply(kind, d, now_ns);
+                self.last_disturbance.record(&d.header);
                 self.disturbance_seq = d.header.seq;
                 self.disturbance_tick = self.tick;
                 self.applied = true;
@@ -385,16 +404,21 @@ impl Board {
         }
     }
 
-    fn accept_command(&mut self, c: &CommandSlice, clock_ns: u64) {
-        let verdict = if self.checks().in_future(c.header.time_ns, clock_ns) {
-            Err(Rejection::FutureTimestamp)
-        } else {
-            self.validate(c)
-        };
+    /// A command slice arrived at the step of board time `now_ns` (the clock of its arrival
+    /// `clock_ns`): kept when valid; it feeds the watchdog when it reaches past the present.
+    fn accept_command(&mut self, c: &CommandSlice, now_ns: u64, clock_ns: u64) {
+        let verdict = self
+            .validate(c)
+            .and_then(|()| self.checks().time(c.header.time_ns, clock_ns));
         match verdict {
             Ok(()) => {
                 self.commands.insert(c);
-                self.last_command_seq = c.header.seq;
+                self.last_command.record(&c.header);
+                // A slice that ends before the present holds nothing: it is no sign of a live
+                // sender (and a replay of old ones cannot keep the watchdog quiet).
+                if c.end_ns() > self.trial_time_ns {
+                    self.supervisor.fed(now_ns);
+                }
             }
             Err(r) => self.counters.reject(r),
         }
@@ -406,6 +430,7 @@ impl Board {
         for _ in 0..std::mem::take(&mut inputs.overflow) {
             self.counters.reject(Rejection::Overflow);
         }
+        self.counters.dropped += std::mem::take(&mut inputs.dropped);
         let received = std::mem::take(&mut inputs.received_ns);
         let clock = if received == 0 {
             now_ns
@@ -419,7 +444,7 @@ impl Board {
             self.apply_disturbance(&d, now_ns, clock);
         }
         for c in inputs.commands.take() {
-            self.accept_command(&c, clock);
+            self.accept_command(&c, now_ns, clock);
         }
     }
 
@@ -437,6 +462,9 @@ impl Board {
                 self.supervisor.mode = Mode::Running;
                 self.plant_ns = now_ns;
                 self.trial_time_ns = 0;
+                // The watchdog's window opens at the start (the reset state's hold is in force
+                // until the first command covers the present).
+                self.supervisor.fed(now_ns);
             }
             (Mode::Fault, _) if self.supervisor.fault == FaultReason::NotFinite => {
                 // Nothing to hold: the state is lost. Frozen until a reset.
@@ -514,7 +542,7 @@ impl Board {
     fn state_msg(&self, now_ns: u64) -> StateMsg {
         let dof = self.plant.dof;
         let mut s = StateMsg {
-            header: Header::new(0, 0),
+            header: Header::in_session(0, 0, 0),
             joints: dof as u32,
             tick: self.tick,
             trial: self.trial,
@@ -526,7 +554,11 @@ impl Board {
             command_seq: self.supervisor.used_command_seq,
             disturbance_seq: self.disturbance_seq,
             disturbance_tick: self.disturbance_tick,
-            watchdog_deadline_ns: self.supervisor.watchdog_deadline_ns(&self.cfg),
+            watchdog_deadline_ns: self.supervisor.watchdog_deadline_ns(
+                self.trial_time_ns,
+                now_ns,
+                &self.cfg,
+            ),
             reset_seq: self.reset_seq,
             ..Default::default()
         };

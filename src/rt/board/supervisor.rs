@@ -1,9 +1,10 @@
 //! The board's supervision: which knot acts at each period, and what happens when none should.
 //!
-//! When no valid command covers the present, the last one stays in force for the watchdog time
-//! ([`BoardConfig::watchdog_ns`]); then the board ramps to a *safe hold* (the current position,
-//! the hold stiffness, gravity and field compensated) and resumes when valid commands cover the
-//! present again. Leaving the joint or speed limits latches a fault (ramp to the hold, commands
+//! The watchdog ([`BoardConfig::watchdog_ns`]) is fed by the *arrival* of fresh valid commands,
+//! never by how far a command claims to reach: when none has arrived for the watchdog time, or
+//! none has covered the present for that long (the last one stays in force meanwhile), the board
+//! ramps to a *safe hold* (the current position, the hold stiffness, gravity and field
+//! compensated) and resumes when fresh valid commands cover the present again. Leaving the joint or speed limits latches a fault (ramp to the hold, commands
 //! refused) that only a reset clears.
 
 use super::commands::CommandBuffer;
@@ -65,6 +66,9 @@ pub(super) struct Supervisor {
     /// The knot last taken from a valid command, and the trial time it covered last.
     pub last_knot: Knot,
     pub last_cover_ns: u64,
+    /// Board clock at the arrival of the last fresh valid command (or at the trial start) [ns,
+    /// monotonic]; `None`: none since the reset.
+    pub fresh_ns: Option<u64>,
     /// The safe hold: ramp from `hold_from` to `hold_to` starting at trial time `hold_start_ns`.
     hold_from: Knot,
     hold_to: Knot,
@@ -80,6 +84,7 @@ impl Supervisor {
             used_command_seq: 0,
             last_knot,
             last_cover_ns: 0,
+            fresh_ns: None,
             hold_from: Knot::default(),
             hold_to: Knot::default(),
             hold_start_ns: 0,
@@ -105,9 +110,23 @@ impl Supervisor {
         self.hold_from.lerp(&self.hold_to, a)
     }
 
+    /// A fresh valid command arrived at board time `now_ns`.
+    pub fn fed(&mut self, now_ns: u64) {
+        self.fresh_ns = Some(self.fresh_ns.map_or(now_ns, |f| f.max(now_ns)));
+    }
+
+    /// Whether the watchdog still runs for the period that starts at board time `start_ns`
+    /// and trial time `t`: a fresh command arrived less than the timeout before, and the last
+    /// covered period is less than the timeout before.
+    fn alive(&self, start_ns: u64, t: u64, cfg: &BoardConfig) -> bool {
+        self.fresh_ns
+            .is_some_and(|f| start_ns < f.saturating_add(cfg.watchdog_ns))
+            && t < self.last_cover_ns.saturating_add(cfg.watchdog_ns)
+    }
+
     /// The knot for the plant period at trial time `t` (the period ends at `now_ns`): the valid
-    /// command covering it; else the last one while the watchdog runs; else the safe-hold ramp.
-    /// `command_age_ns` gets the age of the command used, if one was.
+    /// command covering it while the watchdog runs (the last one while none covers it); else the
+    /// safe-hold ramp. `command_age_ns` gets the age of the command used, if one was.
     #[allow(clippy::too_many_arguments)]
     pub fn knot_for(
         &mut self,
@@ -122,7 +141,11 @@ impl Supervisor {
         if self.mode == Mode::Fault {
             return self.hold_knot(t, cfg);
         }
-        if let Some(c) = commands.covering(t) {
+        let start_ns = now_ns.saturating_sub(cfg.period_ns);
+        let fresh = self
+            .fresh_ns
+            .is_some_and(|f| start_ns < f.saturating_add(cfg.watchdog_ns));
+        if fresh && let Some(c) = commands.covering(t) {
             self.mode = Mode::Running;
             self.used_command_seq = c.seq;
             self.last_knot = c.knot;
@@ -131,7 +154,7 @@ impl Supervisor {
             return c.knot;
         }
         if self.mode != Mode::SafeHold {
-            if t < self.last_cover_ns + cfg.watchdog_ns {
+            if self.alive(start_ns, t, cfg) {
                 return self.last_knot;
             }
             self.mode = Mode::SafeHold;
@@ -149,8 +172,16 @@ impl Supervisor {
         counters.faults += 1;
     }
 
-    /// Trial time at which the watchdog expires unless a valid command covers the present.
-    pub fn watchdog_deadline_ns(&self, cfg: &BoardConfig) -> u64 {
-        self.last_cover_ns + cfg.watchdog_ns
+    /// Trial time at which the watchdog expires unless a fresh valid command arrives (and
+    /// covers the present), for a board at trial time `t` and board time `now_ns`: the earlier
+    /// of the two timeouts, the arrival one mapped from board time to trial time.
+    pub fn watchdog_deadline_ns(&self, t: u64, now_ns: u64, cfg: &BoardConfig) -> u64 {
+        let cover = self.last_cover_ns.saturating_add(cfg.watchdog_ns);
+        let Some(f) = self.fresh_ns else {
+            return t.min(cover);
+        };
+        let arrival = (t as i128 + f as i128 + cfg.watchdog_ns as i128 - now_ns as i128)
+            .clamp(0, u64::MAX as i128) as u64;
+        arrival.min(cover)
     }
 }

@@ -1,11 +1,12 @@
 //! What the board checks before a message may touch the plant. A message that fails a check is
 //! counted by [`Rejection`] and dropped; the order of the checks decides which reason a message
-//! with several faults is counted under.
+//! with several faults is counted under (`docs/PROTOCOL.md` lists the order).
 
 use super::BoardConfig;
 use crate::core::model::Damping;
 use crate::rt::transport::{
-    CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Interpolation, MAX_KNOTS,
+    CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Header, Interpolation,
+    MAX_KNOT_DT_NS, MAX_KNOTS, MAX_MESSAGE_AGE_NS, MAX_REACH_NS, MAX_SLICE_NS, MIN_KNOT_DT_NS,
     PROTOCOL_VERSION, Rejection,
 };
 
@@ -24,17 +25,85 @@ pub(super) struct TrialState {
     pub trial: u32,
     /// A reset announced the trial.
     pub reset: bool,
-    pub last_command_seq: u64,
+    /// The last command slice accepted in this trial.
+    pub last: LastSeen,
+    /// The board's present trial time [ns] (0 before the start).
+    pub now_ns: u64,
 }
 
+/// The last message of one kind that the board accepted: the sequence rules of [`Header`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LastSeen {
+    /// Nothing accepted yet (or forgotten by a reset).
+    pub any: bool,
+    pub session: u32,
+    pub seq: u64,
+    pub time_ns: u64,
+}
+
+impl LastSeen {
+    /// Whether `h` may follow: a higher sequence number in the same session, or another session
+    /// whose time stamp is not earlier than the last message's (a restarted sender). A poisoned
+    /// `u64::MAX` thus blocks its own session only, and the time stamps it could poison are
+    /// bounded by the future tolerance.
+    pub fn admits(&self, h: &Header) -> bool {
+        !self.any
+            || if h.session == self.session {
+                h.seq > self.seq
+            } else {
+                h.time_ns >= self.time_ns
+            }
+    }
+    /// Remembers `h` as the last accepted.
+    pub fn record(&mut self, h: &Header) {
+        *self = LastSeen {
+            any: true,
+            session: h.session,
+            seq: h.seq,
+            time_ns: h.time_ns,
+        };
+    }
+}
+
+/// Gap accounting of one kind of message, over every message received (valid or not): the
+/// messages a sender numbered but the board never saw were overwritten in its receive buffer.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GapCounter {
+    last: Option<(u32, u64)>,
+}
+
+/// Largest gap counted as lost messages; a larger jump is a sender's renumbering (or junk), not
+/// a loss the receive buffers could cause.
+pub const MAX_COUNTED_GAP: u64 = 1 << 24;
+
+impl GapCounter {
+    /// Messages missing before `h` in its session (0 for a new session or a jump back).
+    pub fn missing_before(&mut self, h: &Header) -> u64 {
+        let gap = match self.last {
+            Some((session, seq)) if session == h.session && h.seq > seq => h.seq - seq - 1,
+            _ => 0,
+        };
+        self.last = Some((h.session, h.seq));
+        if gap <= MAX_COUNTED_GAP { gap } else { 0 }
+    }
+}
 impl Checks<'_> {
-    /// A time stamp later than the board's clock by more than the tolerance.
-    pub fn in_future(&self, time_ns: u64, clock_ns: u64) -> bool {
-        time_ns > clock_ns.saturating_add(self.cfg.future_tolerance_ns)
+    /// A time stamp later than the board's clock by more than the tolerance, or older than
+    /// [`MAX_MESSAGE_AGE_NS`].
+    pub fn time(&self, time_ns: u64, clock_ns: u64) -> Result<(), Rejection> {
+        if time_ns > clock_ns.saturating_add(self.cfg.future_tolerance_ns) {
+            return Err(Rejection::FutureTimestamp);
+        }
+        if clock_ns.saturating_sub(time_ns) > MAX_MESSAGE_AGE_NS {
+            return Err(Rejection::Stale);
+        }
+        Ok(())
     }
 
-    /// A command slice: its shape, then the trial, then every knot (finite; stiffness, damping,
-    /// torque and equilibrium within the limits). Its time stamp is checked by the caller.
+    /// A command slice: its shape (the duration bounded before it is computed, so nothing can
+    /// overflow), then the trial, the order, how far ahead it reaches and every knot (finite;
+    /// stiffness, damping, torque and equilibrium within the limits). Its time stamp is checked
+    /// by the caller, against the clock.
     pub fn command(&self, c: &CommandSlice, trial: &TrialState) -> Result<(), Rejection> {
         if c.header.version != PROTOCOL_VERSION {
             return Err(Rejection::Version);
@@ -44,11 +113,9 @@ impl Checks<'_> {
         }
         if c.count == 0
             || c.count as usize > MAX_KNOTS
-            || c.knot_dt_ns == 0
+            || !(MIN_KNOT_DT_NS..=MAX_KNOT_DT_NS).contains(&c.knot_dt_ns)
             || c.interpolation > Interpolation::Linear as u32
-            || c.start_ns
-                .checked_add(c.count as u64 * c.knot_dt_ns)
-                .is_none()
+            || c.duration_ns().is_none_or(|d| d > MAX_SLICE_NS)
         {
             return Err(Rejection::Shape);
         }
@@ -58,8 +125,14 @@ impl Checks<'_> {
         if c.trial != trial.trial || !trial.reset {
             return Err(Rejection::WrongTrial);
         }
-        if c.header.seq <= trial.last_command_seq {
+        if !trial.last.admits(&c.header) {
             return Err(Rejection::OutOfOrder);
+        }
+        // The duration is at most MAX_SLICE_NS: the end overflows only with a start near
+        // u64::MAX, which is too far ahead anyway.
+        let reach = trial.now_ns.saturating_add(MAX_REACH_NS);
+        if c.start_ns.checked_add(MAX_SLICE_NS).is_none() || c.end_ns() > reach {
+            return Err(Rejection::TooFarAhead);
         }
         c.knots[..c.count as usize]
             .iter()
@@ -95,9 +168,9 @@ impl Checks<'_> {
         Ok(())
     }
 
-    /// A control request: known kind, finite, in order, not from the future, and a reset state
-    /// inside the plant guard's limits.
-    pub fn control(&self, c: &Control, last_seq: u64, clock_ns: u64) -> Result<(), Rejection> {
+    /// A control request: known kind, finite, in order, fresh, and a reset state inside the
+    /// plant guard's limits whose start is not too far ahead.
+    pub fn control(&self, c: &Control, last: &LastSeen, clock_ns: u64) -> Result<(), Rejection> {
         let (cfg, dof) = (self.cfg, self.dof);
         if c.header.version != PROTOCOL_VERSION {
             return Err(Rejection::Version);
@@ -112,12 +185,10 @@ impl Checks<'_> {
         {
             return Err(Rejection::NotFinite);
         }
-        if c.header.seq <= last_seq {
+        if !last.admits(&c.header) {
             return Err(Rejection::OutOfOrder);
         }
-        if self.in_future(c.header.time_ns, clock_ns) {
-            return Err(Rejection::FutureTimestamp);
-        }
+        self.time(c.header.time_ns, clock_ns)?;
         if c.kind == ControlKind::Reset as u32 {
             let q = &c.q0[..dof];
             let inside = (0..dof).all(|i| q[i] >= cfg.joint_min[i] && q[i] <= cfg.joint_max[i])
@@ -125,16 +196,18 @@ impl Checks<'_> {
             if !inside {
                 return Err(Rejection::DisturbanceOutOfBounds);
             }
+            if c.start_ns > clock_ns.saturating_add(MAX_REACH_NS) {
+                return Err(Rejection::TooFarAhead);
+            }
         }
         Ok(())
     }
 
-    /// A disturbance: known kind, finite, in order, not from the future, within the configured
-    /// limits.
+    /// A disturbance: known kind, finite, in order, fresh, within the configured limits.
     pub fn disturbance(
         &self,
         d: &Disturbance,
-        last_seq: u64,
+        last: &LastSeen,
         clock_ns: u64,
     ) -> Result<DisturbanceKind, Rejection> {
         let (cfg, dof) = (self.cfg, self.dof);
@@ -145,12 +218,10 @@ impl Checks<'_> {
         if !(d.torque.iter().all(|v| v.is_finite()) && d.value.is_finite()) {
             return Err(Rejection::NotFinite);
         }
-        if d.header.seq <= last_seq {
+        if !last.admits(&d.header) {
             return Err(Rejection::OutOfOrder);
         }
-        if self.in_future(d.header.time_ns, clock_ns) {
-            return Err(Rejection::FutureTimestamp);
-        }
+        self.time(d.header.time_ns, clock_ns)?;
         let torque = d.torque[..dof].iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         let ok = match kind {
             DisturbanceKind::Pulse => {

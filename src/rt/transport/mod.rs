@@ -15,7 +15,7 @@ pub mod namespace;
 pub mod ports;
 pub mod protocol;
 
-pub use clock::{monotonic_ns, session_seq};
+pub use clock::{monotonic_ns, process_session, session_seq};
 pub use error::TransportError;
 pub use namespace::{
     DEFAULT_NAMESPACE, dead_nodes, namespace_files, prefix, remove_namespace, validate_namespace,

@@ -20,6 +20,20 @@ use std::time::{Duration, Instant};
 /// Subscriber buffer of the state service: a 50 Hz reader sees every 1 kHz state.
 pub const STATE_BUFFER: usize = 128;
 
+/// The limits of every service of a namespace, in one place. Sized for one board, one central
+/// process, one recorder, `vic inject` and at least 8 read-only observers (`vic status`,
+/// `vic monitor`, a Python client), with room to spare:
+/// - publishers per message service: the board or the central process, plus a tool or a
+///   test's hostile sender;
+pub const MAX_PUBLISHERS: usize = 4;
+/// - subscribers per message service: board, central, recorder, inject and 8 observers = 12;
+pub const MAX_SUBSCRIBERS: usize = 16;
+/// - nodes (processes) per service;
+pub const MAX_NODES: usize = 32;
+/// - notifiers and listeners of the board's event service (every observer listens).
+pub const MAX_NOTIFIERS: usize = 4;
+pub const MAX_LISTENERS: usize = 24;
+
 /// A message type with its service: the name, how many past samples a late subscriber gets and
 /// how many a subscriber buffers.
 pub trait Topic: std::fmt::Debug + ZeroCopySend + Copy + 'static {
@@ -54,7 +68,8 @@ impl Topic for Disturbance {
     const BUFFER: usize = 8;
 }
 
-const EVENT_SERVICE: &str = "vic/board-event";
+/// The board's event service ([`super::protocol::BoardEvent`] ids).
+pub const EVENT_SERVICE: &str = "vic/board-event";
 /// The board's node name: how a second board finds the first.
 const BOARD_NODE: &str = "vic-board";
 
@@ -127,8 +142,9 @@ impl Session {
         self.node()
             .service_builder(&name)
             .publish_subscribe::<T>()
-            .max_publishers(4)
-            .max_subscribers(8)
+            .max_publishers(MAX_PUBLISHERS)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
             .subscriber_max_buffer_size(STATE_BUFFER)
             .history_size(T::HISTORY)
             .enable_safe_overflow(true)
@@ -176,8 +192,9 @@ impl Session {
         self.node()
             .service_builder(&name)
             .event()
-            .max_notifiers(4)
-            .max_listeners(16)
+            .max_notifiers(MAX_NOTIFIERS)
+            .max_listeners(MAX_LISTENERS)
+            .max_nodes(MAX_NODES)
             .open_or_create()
             .map_err(|e| TransportError::ipc(ns, format!("service {EVENT_SERVICE}"), e))
     }

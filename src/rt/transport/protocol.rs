@@ -1,43 +1,71 @@
 //! The wire protocol between the board, the planner and the command-line tools.
 //!
 //! Every payload is a fixed-size `#[repr(C)]` struct with a stable type name that starts with the
-//! same [`Header`]: the protocol [`PROTOCOL_VERSION`], a sequence number and a publish time stamp
-//! on the monotonic clock that all processes of the machine share
+//! same [`Header`]: the protocol [`PROTOCOL_VERSION`], the sender's session, a sequence number
+//! and a publish time stamp on the monotonic clock that all processes of the machine share
 //! ([`super::clock::monotonic_ns`]). Enumerations travel as `u32` so that an unknown value from a
-//! newer or broken sender is a rejection, not undefined behaviour.
+//! newer or broken sender is a rejection, not undefined behaviour. `docs/PROTOCOL.md` describes
+//! the wire format for clients in other languages (a test keeps it in step with these types).
 
 use iceoryx2::prelude::*;
 
 /// Version of the message layout; a message with another version is rejected.
 /// 3: one [`Header`] leads every payload; rejection counts sized by [`Rejection::COUNT`].
-pub const PROTOCOL_VERSION: u32 = 3;
+/// 4: a sender session in the header (sequence numbers count per session); bounds on the knot
+/// interval, the slice duration, how far ahead a slice reaches and the age of a message; the
+/// rejections [`Rejection::Stale`] and [`Rejection::TooFarAhead`].
+pub const PROTOCOL_VERSION: u32 = 4;
 /// Largest number of joints a message carries.
 pub const MAX_JOINTS: usize = 2;
 /// Knots per command slice. At 10 ms per knot a slice covers up to 320 ms.
 pub const MAX_KNOTS: usize = 32;
+/// Shortest and longest time between knots [ns] (0.1 ms and 100 ms).
+pub const MIN_KNOT_DT_NS: u64 = 100_000;
+pub const MAX_KNOT_DT_NS: u64 = 100_000_000;
+/// Longest slice, `count · knot_dt` [ns] (1 s).
+pub const MAX_SLICE_NS: u64 = 1_000_000_000;
+/// How far past the board's present trial time a slice may end, and how far past the board's
+/// clock a reset may schedule its trial start [ns] (2 s). A command cannot buy time from the
+/// watchdog anyway (only the arrival of fresh commands feeds it); this keeps what a board holds
+/// close to the present.
+pub const MAX_REACH_NS: u64 = 2_000_000_000;
+/// Oldest message accepted: its time stamp at most this long before the board's clock [ns]
+/// (100 ms). An old message is not a fresh command, whatever its sequence number.
+pub const MAX_MESSAGE_AGE_NS: u64 = 100_000_000;
 
-/// What every message starts with: who may read it (the version), its order among the sender's
-/// messages (receivers refuse sequence numbers that repeat or go backwards) and when it was
-/// published.
+/// What every message starts with: who may read it (the version), which sender session it
+/// belongs to, its order among that session's messages and when it was published.
+///
+/// Sequence rules (the board's, per kind of message): within a session the sequence number must
+/// increase; a message of another session is accepted when its time stamp is not earlier than
+/// that of the last message accepted, and then starts the order anew. So a restarted sender (a
+/// new session) is recognised at once, and a `seq` of `u64::MAX` blocks nothing but its own
+/// session. A reset forgets the last command and disturbance seen.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("vic::Header/3")]
+#[type_name("vic::Header/4")]
 #[repr(C)]
 pub struct Header {
     /// [`PROTOCOL_VERSION`] of the sender.
     pub version: u32,
-    pub _pad: u32,
-    /// Sequence number, increasing per sender.
+    /// Sender session: a number the sender draws at random when it starts
+    /// ([`super::clock::process_session`]).
+    pub session: u32,
+    /// Sequence number, increasing within the session.
     pub seq: u64,
     /// Publish time [ns, monotonic].
     pub time_ns: u64,
 }
 
 impl Header {
-    /// A header of this protocol version.
+    /// A header of this protocol version in this process's session.
     pub fn new(seq: u64, time_ns: u64) -> Header {
+        Header::in_session(super::clock::process_session(), seq, time_ns)
+    }
+    /// A header of this protocol version in `session`.
+    pub fn in_session(session: u32, seq: u64, time_ns: u64) -> Header {
         Header {
             version: PROTOCOL_VERSION,
-            _pad: 0,
+            session,
             seq,
             time_ns,
         }
@@ -82,7 +110,7 @@ impl Mode {
 
 /// The board's plant state, published every tick.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("vic::State/3")]
+#[type_name("vic::State/4")]
 #[repr(C)]
 pub struct StateMsg {
     pub header: Header,
@@ -109,8 +137,8 @@ pub struct StateMsg {
     /// Sequence number of the last disturbance applied and the tick it was applied at.
     pub disturbance_seq: u64,
     pub disturbance_tick: u64,
-    /// Trial time at which the watchdog expires unless a valid command covers the present
-    /// [ns] (the last covered period + the watchdog timeout).
+    /// Trial time at which the watchdog expires unless a fresh valid command arrives before
+    /// [ns] (the arrival of the last one + the watchdog timeout, in trial time).
     pub watchdog_deadline_ns: u64,
     /// Sequence number of the reset that started this trial: a restarted planner numbers its
     /// trials from 0 again, and this tells its trial from the one before the restart.
@@ -158,7 +186,7 @@ pub enum Interpolation {
 
 /// A slice of commands covering `[start, start + count · knot_dt)` of a trial's plant time.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("vic::CommandSlice/3")]
+#[type_name("vic::CommandSlice/4")]
 #[repr(C)]
 pub struct CommandSlice {
     pub header: Header,
@@ -193,9 +221,17 @@ impl Default for CommandSlice {
 }
 
 impl CommandSlice {
-    /// Trial time just after the last knot's interval [ns].
+    /// Duration `count · knot_dt` [ns], `None` when it overflows (the board bounds both factors
+    /// before it asks).
+    pub fn duration_ns(&self) -> Option<u64> {
+        (self.count as u64).checked_mul(self.knot_dt_ns)
+    }
+    /// Trial time just after the last knot's interval [ns] (saturating: only a validated slice,
+    /// whose end cannot overflow, is ever asked).
     pub fn end_ns(&self) -> u64 {
-        self.start_ns + self.count as u64 * self.knot_dt_ns
+        self.duration_ns()
+            .and_then(|d| self.start_ns.checked_add(d))
+            .unwrap_or(u64::MAX)
     }
 }
 
@@ -227,7 +263,7 @@ impl DisturbanceKind {
 
 /// A disturbance for the board to apply.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("vic::Disturbance/3")]
+#[type_name("vic::Disturbance/4")]
 #[repr(C)]
 pub struct Disturbance {
     pub header: Header,
@@ -255,7 +291,7 @@ pub enum ControlKind {
 
 /// A control request to the board.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("vic::Control/3")]
+#[type_name("vic::Control/4")]
 #[repr(C)]
 pub struct Control {
     pub header: Header,
@@ -292,7 +328,7 @@ pub enum Rejection {
     Version = 0,
     /// Another number of joints.
     Joints = 1,
-    /// Knot count, knot interval or interpolation out of range.
+    /// Knot count, knot interval, slice duration or interpolation out of range.
     Shape = 2,
     /// A number that is NaN or infinite.
     NotFinite = 3,
@@ -304,7 +340,8 @@ pub enum Rejection {
     DampingUnstable = 6,
     /// A command for another trial, or with no trial reset.
     WrongTrial = 7,
-    /// A sequence number that repeats or goes backwards.
+    /// A sequence number that repeats or goes backwards within its session, or a new session
+    /// whose time stamp is earlier than the last message accepted.
     OutOfOrder = 8,
     /// A time stamp later than the board's clock beyond the tolerance.
     FutureTimestamp = 9,
@@ -318,12 +355,17 @@ pub enum Rejection {
     Faulted = 13,
     /// An equilibrium `q_d` outside the joint range or `q_d'` beyond the speed limit.
     EquilibriumOutOfBounds = 14,
+    /// A time stamp older than [`MAX_MESSAGE_AGE_NS`] by the board's clock.
+    Stale = 15,
+    /// A slice that ends more than [`MAX_REACH_NS`] after the board's present trial time, or a
+    /// reset whose start is more than that after the board's clock.
+    TooFarAhead = 16,
 }
 
 impl Rejection {
     /// Number of reasons: one past the last variant (a new reason goes last, and [`Self::ALL`]
     /// fails to compile until it lists it).
-    pub const COUNT: usize = Rejection::EquilibriumOutOfBounds as usize + 1;
+    pub const COUNT: usize = Rejection::TooFarAhead as usize + 1;
     /// Every reason, in wire order (`ALL[r as usize] == r`).
     pub const ALL: [Rejection; Rejection::COUNT] = [
         Rejection::Version,
@@ -341,6 +383,8 @@ impl Rejection {
         Rejection::Overflow,
         Rejection::Faulted,
         Rejection::EquilibriumOutOfBounds,
+        Rejection::Stale,
+        Rejection::TooFarAhead,
     ];
     /// Name for reports and JSON.
     pub fn name(self) -> &'static str {
@@ -360,6 +404,8 @@ impl Rejection {
             Rejection::Overflow => "overflow",
             Rejection::Faulted => "faulted",
             Rejection::EquilibriumOutOfBounds => "equilibrium-out-of-bounds",
+            Rejection::Stale => "stale",
+            Rejection::TooFarAhead => "too-far-ahead",
         }
     }
 }
@@ -377,7 +423,7 @@ const _: () = {
 
 /// The board's telemetry, published at a lower rate than the state.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("vic::Telemetry/3")]
+#[type_name("vic::Telemetry/4")]
 #[repr(C)]
 pub struct Telemetry {
     pub header: Header,
@@ -411,6 +457,9 @@ pub struct Telemetry {
     /// Sequence number of the last disturbance applied and the tick it was applied at.
     pub disturbance_seq: u64,
     pub disturbance_tick: u64,
+    /// Messages lost before the board saw them (overwritten in its receive buffers), counted
+    /// from the gaps in each sender session's sequence numbers.
+    pub dropped_messages: u64,
 }
 
 /// What a board's event wakes its listeners for (iceoryx2 event ids).

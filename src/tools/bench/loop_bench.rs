@@ -352,12 +352,19 @@ fn run_variant_in(
         hist = BoardHistograms::default();
         periodic.late_ticks = 0;
         periodic.skipped_periods = 0;
-        let t0 = monotonic_ns();
+        // The window is `seconds` of deadlines from the next one: every deadline in it is either
+        // ticked or counted as skipped, exactly once.
+        let t0 = periodic.next_deadline();
         let cpu0 = sched::thread_cpu_ns();
         let end = t0 + seconds * 1_000_000_000;
         loop {
             let w = periodic.wait();
             if w.deadline_ns >= end {
+                // A late wake that crossed the end skipped deadlines on both sides of it: only
+                // those before the end belong to the window.
+                let first = w.deadline_ns - w.skipped * PERIOD_NS;
+                let inside = end.saturating_sub(first).div_ceil(PERIOD_NS).min(w.skipped);
+                periodic.skipped_periods -= w.skipped - inside;
                 break;
             }
             seq += 1;

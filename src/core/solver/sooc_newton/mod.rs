@@ -22,7 +22,7 @@
 //! to `J`.
 
 use super::Bounds;
-use super::boxqp::{MAX_QP, QpStatus, solve_box_qp};
+use super::boxqp::MAX_QP;
 use super::sooc::{MomentCost, MomentDynamics, MomentExpansion};
 use crate::core::cost::{Cost, CostDerivatives};
 use crate::core::dynamics::Dynamics;
@@ -30,6 +30,12 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
+
+mod backward;
+mod forward;
+
+use backward::Backward;
+use forward::rollout;
 
 /// Relative regularisation above which an iteration gives up on the Newton model and takes a
 /// Gauss–Newton step instead.
@@ -158,31 +164,12 @@ pub struct SoocProblem<'a> {
     pub horizon: usize,
 }
 
-/// Scratch of the backward pass.
-struct Backward {
-    v: DMatrix<f64>,
-    vv: DVector<f64>,
-    va: DMatrix<f64>,
-    vb: DMatrix<f64>,
-    qzz: DMatrix<f64>,
-    quz: DMatrix<f64>,
-    quu: DMatrix<f64>,
-    qz: DVector<f64>,
-    qu: DVector<f64>,
-    hzz: DMatrix<f64>,
-    huz: DMatrix<f64>,
-    huu: DMatrix<f64>,
-    kt_quu: DMatrix<f64>,
-    t_mz: DMatrix<f64>,
-}
-
 /// The solver with its preallocated workspace, sized for one problem size; reuse it across solves
 /// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`] allocates nothing per
 /// iteration).
 pub struct SoocSolver {
     pub options: SoocOptions,
     n: usize,
-    nz: usize,
     nu: usize,
     horizon: usize,
     z: Vec<DVector<f64>>,
@@ -207,11 +194,9 @@ impl SoocSolver {
         let (n, m) = (dynamics.n(), dynamics.nu());
         assert!(m <= MAX_QP, "at most {MAX_QP} controls");
         let nz = n + super::sooc::vech_len(n);
-        let zm = |r, c| DMatrix::zeros(r, c);
         SoocSolver {
             options,
             n,
-            nz,
             nu: m,
             horizon,
             z: (0..=horizon).map(|_| DVector::zeros(nz)).collect(),
@@ -226,22 +211,7 @@ impl SoocSolver {
             grad: (0..horizon).map(|_| DVector::zeros(m)).collect(),
             ff: (0..horizon).map(|_| DVector::zeros(m)).collect(),
             gains: (0..horizon).map(|_| DMatrix::zeros(m, nz)).collect(),
-            bw: Backward {
-                v: zm(nz, nz),
-                vv: DVector::zeros(nz),
-                va: zm(nz, nz),
-                vb: zm(nz, m),
-                qzz: zm(nz, nz),
-                quz: zm(m, nz),
-                quu: zm(m, m),
-                qz: DVector::zeros(nz),
-                qu: DVector::zeros(m),
-                hzz: zm(nz, nz),
-                huz: zm(m, nz),
-                huu: zm(m, m),
-                kt_quu: zm(nz, m),
-                t_mz: zm(m, nz),
-            },
+            bw: Backward::new(nz, m),
             dz: DVector::zeros(nz),
             solved: false,
         }
@@ -317,158 +287,72 @@ impl SoocSolver {
         self.run(problem)
     }
 
-    /// The solver proper, from the controls in `self.u`.
+    /// The solver proper, from the controls in `self.u`: per iteration the model (first
+    /// derivatives, costates, and the Newton curvature when tried), the convergence test on the
+    /// exact gradient, the regularised backward pass and the line search on the true `J`.
     fn run(&mut self, problem: &SoocProblem) -> Result<SoocSolution, SoocError> {
         let start = Instant::now();
         self.solved = false;
-        for u in &mut self.u {
-            problem.bounds.clamp(u.as_mut_slice());
-        }
-        for g in &mut self.gains {
-            g.fill(0.0);
-        }
-        self.z[0].fill(0.0);
-        self.z[0].rows_mut(0, self.n).copy_from_slice(problem.x0);
-        let mut cost = rollout(problem, &mut self.z, &self.u);
-        if !cost.is_finite() {
-            return Err(SoocError::NonFiniteStart);
-        }
-        // Control scales: the box width where finite, else 1; the regularisation's metric: each
-        // control's own cost curvature.
-        let mut scale = [1.0; MAX_QP];
-        for j in 0..self.nu {
-            let (lo, hi) = (problem.bounds.lower[j], problem.bounds.upper[j]);
-            if lo.is_finite() && hi.is_finite() && hi > lo {
-                scale[j] = hi - lo;
-            }
-        }
-        let mut mu = 0.0_f64;
-        let mut mu_step = 1.0_f64;
+        let mut cost = self.start(problem)?;
+        let scale = control_scales(problem.bounds);
+        let mut damping = Damping { mu: 0.0, step: 1.0 };
+        let mut model = ModelState {
+            needs_expansion: true,
+            has_second_order: false,
+            gauss_newton_run: 0,
+        };
         let mut history = Vec::new();
         let mut iterations = 0;
-        let mut stop = SoocStop::MaxIterations;
-        let mut optimality;
-        let mut needs_expansion = true;
-        let mut newton;
-        let mut has_second_order = false;
-        let mut gauss_newton_run = 0usize;
-        loop {
-            if needs_expansion {
-                self.expand(problem);
-                self.costates();
-                needs_expansion = false;
-                has_second_order = false;
-            }
+        let (stop, optimality) = loop {
             // The Newton model costs the flow's third derivatives. While it keeps failing (far
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
             // in between.
-            let try_newton = gauss_newton_run.is_multiple_of(NEWTON_RETRY);
-            if try_newton && !has_second_order {
-                self.expand_second_order(problem);
-                has_second_order = true;
-            }
+            let try_newton = self.prepare_model(problem, &mut model);
             let pg = self.projected_gradient(problem.bounds, &scale) / cost.abs().max(1e-300);
-            // Backward pass, raising μ until every stage QP is convex. Far from the optimum the
-            // Newton model can be too indefinite for any sensible μ; then this iteration uses the
-            // Gauss–Newton model (no curvature term, the ILQG model), which is convex in the
-            // controls, and the next iteration tries Newton again.
-            newton = try_newton;
-            let mut mu_here = mu;
-            let predicted = loop {
-                match self.backward(problem.bounds, mu_here, newton) {
-                    Some(dv) => break Some(dv),
-                    None => {
-                        mu_step = (mu_step * 2.0).max(2.0);
-                        mu_here = (mu_here * mu_step).max(self.options.mu_min);
-                        if newton && mu_here > NEWTON_MU_LIMIT {
-                            newton = false;
-                            mu_here = mu;
-                        } else if mu_here > self.options.mu_max {
-                            break None;
-                        }
-                    }
-                }
-            };
+            let (predicted, newton) =
+                self.regularized_backward(problem.bounds, &mut damping, try_newton);
             if newton {
-                mu = mu_here;
-                gauss_newton_run = 0;
+                model.gauss_newton_run = 0;
             } else {
-                gauss_newton_run += 1;
+                model.gauss_newton_run += 1;
             }
             let Some((dv1, dv2)) = predicted else {
-                stop = SoocStop::RegularizationLimit;
-                optimality = Optimality {
-                    projected_gradient: pg,
-                    predicted_decrease: f64::INFINITY,
-                    gradient_tolerance: self.options.gradient_tolerance,
-                    decrease_tolerance: self.options.decrease_tolerance,
-                };
-                break;
+                break (
+                    SoocStop::RegularizationLimit,
+                    self.optimality(pg, None, cost),
+                );
             };
-            optimality = Optimality {
-                projected_gradient: pg,
-                // The Gauss–Newton model's prediction says nothing about optimality.
-                predicted_decrease: if newton {
-                    -(dv1 + dv2) / cost.abs().max(1e-300)
-                } else {
-                    f64::INFINITY
-                },
-                gradient_tolerance: self.options.gradient_tolerance,
-                decrease_tolerance: self.options.decrease_tolerance,
-            };
+            // The Gauss–Newton model's prediction says nothing about optimality.
+            let optimality = self.optimality(pg, newton.then_some(dv1 + dv2), cost);
             if optimality.met() {
-                stop = SoocStop::Converged;
-                break;
+                break (SoocStop::Converged, optimality);
             }
             if iterations >= self.options.max_iterations {
-                break;
+                break (SoocStop::MaxIterations, optimality);
             }
-            // Line search on the true cost.
-            let mut accepted = None;
-            let mut alpha = 1.0;
-            for _ in 0..12 {
-                let c = self.forward(problem, alpha);
-                let actual = c - cost;
-                let expected = alpha * dv1 + alpha * alpha * dv2;
-                if c.is_finite() && actual < 0.0 && (expected >= 0.0 || actual <= 0.1 * expected) {
-                    accepted = Some(c);
-                    break;
-                }
-                alpha *= 0.5;
-            }
-            match accepted {
-                Some(c) => {
+            match self.line_search(problem, cost, dv1, dv2) {
+                Some((c, alpha)) => {
                     std::mem::swap(&mut self.z, &mut self.cand_z);
                     std::mem::swap(&mut self.u, &mut self.cand_u);
                     cost = c;
                     iterations += 1;
                     history.push(c);
-                    needs_expansion = true;
+                    model.needs_expansion = true;
                     // A full step: trust the model more.
                     if alpha >= 0.5 {
-                        mu_step = (mu_step / 2.0).min(0.5);
-                        mu *= mu_step;
-                        if mu < self.options.mu_min {
-                            mu = 0.0;
-                        }
+                        damping.decrease(&self.options);
                     }
                 }
                 None => {
-                    if optimality.predicted_decrease < ROUND_OFF {
-                        // Nothing left to gain above round-off, yet the gradient test fails:
-                        // stop rather than inflate μ.
-                        stop = SoocStop::RegularizationLimit;
-                        break;
-                    }
-                    mu_step = (mu_step * 2.0).max(2.0);
-                    mu = (mu * mu_step).max(self.options.mu_min.max(1e-3));
-                    if mu > self.options.mu_max {
-                        stop = SoocStop::RegularizationLimit;
-                        break;
+                    // Nothing left to gain above round-off, yet the gradient test fails: stop
+                    // rather than inflate μ.
+                    if optimality.predicted_decrease < ROUND_OFF || !damping.increase(&self.options)
+                    {
+                        break (SoocStop::RegularizationLimit, optimality);
                     }
                 }
             }
-        }
+        };
         self.solved = true;
         Ok(SoocSolution {
             u: self.u.clone(),
@@ -482,17 +366,96 @@ impl SoocSolver {
         })
     }
 
+    /// Clamps the controls, clears the gains and rolls the start out: its cost.
+    fn start(&mut self, problem: &SoocProblem) -> Result<f64, SoocError> {
+        for u in &mut self.u {
+            problem.bounds.clamp(u.as_mut_slice());
+        }
+        for g in &mut self.gains {
+            g.fill(0.0);
+        }
+        self.z[0].fill(0.0);
+        self.z[0].rows_mut(0, self.n).copy_from_slice(problem.x0);
+        let cost = rollout(problem, &mut self.z, &self.u);
+        if cost.is_finite() {
+            Ok(cost)
+        } else {
+            Err(SoocError::NonFiniteStart)
+        }
+    }
+
+    /// Brings the model up to date with the trajectory: first derivatives and costates after
+    /// a step, the Newton curvature when this iteration tries Newton. Whether it does.
+    fn prepare_model(&mut self, problem: &SoocProblem, model: &mut ModelState) -> bool {
+        if model.needs_expansion {
+            self.expand(problem);
+            self.costates();
+            model.needs_expansion = false;
+            model.has_second_order = false;
+        }
+        let try_newton = model.gauss_newton_run.is_multiple_of(NEWTON_RETRY);
+        if try_newton && !model.has_second_order {
+            self.expand_second_order(problem);
+            model.has_second_order = true;
+        }
+        try_newton
+    }
+
+    /// The optimality measures for the projected gradient `pg` (already relative) and the
+    /// Newton model's predicted change `dv` (`None`: no Newton prediction).
+    fn optimality(&self, pg: f64, dv: Option<f64>, cost: f64) -> Optimality {
+        Optimality {
+            projected_gradient: pg,
+            predicted_decrease: dv.map_or(f64::INFINITY, |dv| -dv / cost.abs().max(1e-300)),
+            gradient_tolerance: self.options.gradient_tolerance,
+            decrease_tolerance: self.options.decrease_tolerance,
+        }
+    }
+
+    /// Backward passes, raising μ until every stage QP is convex. Far from the optimum the
+    /// Newton model can be too indefinite for any sensible μ; then this iteration uses the
+    /// Gauss–Newton model (no curvature term, the ILQG model), which is convex in the controls,
+    /// and a later iteration tries Newton again. The predicted decrease terms (`None`: μ passed
+    /// its limit) and whether they are Newton's.
+    fn regularized_backward(
+        &mut self,
+        bounds: &Bounds,
+        damping: &mut Damping,
+        try_newton: bool,
+    ) -> (Option<(f64, f64)>, bool) {
+        let mut newton = try_newton;
+        let mut mu_here = damping.mu;
+        let predicted = loop {
+            if let Some(dv) = self.backward(bounds, mu_here, newton) {
+                break Some(dv);
+            }
+            damping.step = (damping.step * 2.0).max(2.0);
+            mu_here = (mu_here * damping.step).max(self.options.mu_min);
+            if newton && mu_here > NEWTON_MU_LIMIT {
+                newton = false;
+                mu_here = damping.mu;
+            } else if mu_here > self.options.mu_max {
+                break None;
+            }
+        };
+        if newton {
+            damping.mu = mu_here;
+        }
+        (predicted, newton)
+    }
+
     /// The second-order pieces of the moment step at every knot (in parallel), for the Newton
     /// model.
     fn expand_second_order(&mut self, problem: &SoocProblem) {
-        let (z, u) = (&self.z, &self.u);
+        let (z, u, lam) = (&self.z, &self.u, &self.lam);
         self.expansions
             .par_iter_mut()
             .enumerate()
             .for_each(|(k, e)| {
+                let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
                 problem
                     .dynamics
-                    .second_order(k, z[k].as_slice(), u[k].as_slice(), e);
+                    .second_order(k, zk, uk, lam[k + 1].as_slice(), e);
             });
     }
 
@@ -508,7 +471,7 @@ impl SoocSolver {
             .for_each(|(k, (e, d))| {
                 problem
                     .dynamics
-                    .expand(k, z[k].as_slice(), u[k].as_slice(), false, e);
+                    .expand(k, z[k].as_slice(), u[k].as_slice(), e);
                 problem
                     .cost
                     .running_derivatives(k, z[k].as_slice(), u[k].as_slice(), d);
@@ -550,169 +513,50 @@ impl SoocSolver {
         }
         worst
     }
+}
 
-    /// The Riccati recursion of the Newton step with box-limited stage QPs; the predicted
-    /// decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)`, or `None` if some stage QP is not convex at
-    /// this μ.
-    fn backward(&mut self, bounds: &Bounds, mu: f64, newton: bool) -> Option<(f64, f64)> {
-        let h = self.horizon;
-        let m = self.nu;
-        let bw = &mut self.bw;
-        bw.v.copy_from(&self.derivs[h].lxx);
-        bw.vv.copy_from(&self.derivs[h].lx);
-        let (mut dv1, mut dv2) = (0.0, 0.0);
-        for k in (0..h).rev() {
-            let e = &mut self.expansions[k];
-            let d = &self.derivs[k];
-            if newton {
-                e.curvature(
-                    self.lam[k + 1].as_slice(),
-                    &mut bw.hzz,
-                    &mut bw.huz,
-                    &mut bw.huu,
-                );
-            } else {
-                bw.hzz.fill(0.0);
-                bw.huz.fill(0.0);
-                bw.huu.fill(0.0);
-            }
-            // Q terms.
-            bw.va.gemm(1.0, &bw.v, &e.a, 0.0);
-            bw.vb.gemm(1.0, &bw.v, &e.b, 0.0);
-            bw.qzz.copy_from(&d.lxx);
-            bw.qzz += &bw.hzz;
-            bw.qzz.gemm_tr(1.0, &e.a, &bw.va, 1.0);
-            bw.quz.copy_from(&d.lux);
-            bw.quz += &bw.huz;
-            bw.quz.gemm_tr(1.0, &e.b, &bw.va, 1.0);
-            bw.quu.copy_from(&d.luu);
-            bw.quu += &bw.huu;
-            bw.quu.gemm_tr(1.0, &e.b, &bw.vb, 1.0);
-            bw.qz.copy_from(&d.lx);
-            bw.qz.gemv_tr(1.0, &e.a, &bw.vv, 1.0);
-            bw.qu.copy_from(&d.lu);
-            bw.qu.gemv_tr(1.0, &e.b, &bw.vv, 1.0);
-            // Stage QP on the regularised Q_uu within the box around u_k.
-            let mut lo = [0.0; MAX_QP];
-            let mut hi = [0.0; MAX_QP];
-            let mut reg = [0.0; MAX_QP];
-            for j in 0..m {
-                lo[j] = bounds.lower[j] - self.u[k][j];
-                hi[j] = bounds.upper[j] - self.u[k][j];
-                reg[j] = mu * d.luu[(j, j)].abs().max(1e-12);
-            }
-            let quu = &bw.quu;
-            let hq = |i: usize, j: usize| {
-                0.5 * (quu[(i, j)] + quu[(j, i)]) + if i == j { reg[i] } else { 0.0 }
-            };
-            let qp = solve_box_qp(
-                hq,
-                bw.qu.as_slice(),
-                &lo[..m],
-                &hi[..m],
-                self.ff[k].as_slice(),
-            );
-            if qp.status == QpStatus::NotPositiveDefinite {
-                return None;
-            }
-            let ff = &mut self.ff[k];
-            for j in 0..m {
-                ff[j] = qp.x[j];
-            }
-            // Gains: free rows −(Q_uu,ff)⁻¹ Q_uz,f; clamped rows 0.
-            let gain = &mut self.gains[k];
-            gain.fill(0.0);
-            let mut free = [0usize; MAX_QP];
-            let mut nf = 0;
-            for j in 0..m {
-                if qp.free[j] {
-                    free[nf] = j;
-                    nf += 1;
-                }
-            }
-            if nf > 0 {
-                let factor = qp.factor.as_ref()?;
-                let mut col = [0.0; MAX_QP];
-                for c in 0..self.nz {
-                    for (i, &j) in free[..nf].iter().enumerate() {
-                        col[i] = -bw.quz[(j, c)];
-                    }
-                    factor.solve(&mut col[..nf]);
-                    for (i, &j) in free[..nf].iter().enumerate() {
-                        gain[(j, c)] = col[i];
-                    }
-                }
-            }
-            // Predicted decrease with the unregularised model.
-            let mut quu_k = 0.0;
-            for i in 0..m {
-                for j in 0..m {
-                    quu_k += ff[i] * bw.quu[(i, j)] * ff[j];
-                }
-            }
-            dv1 += ff.dot(&bw.qu);
-            dv2 += 0.5 * quu_k;
-            // V = Q_zz + Kᵀ Q_uu K + Kᵀ Q_uz + Q_uzᵀ K, v = Q_z + Kᵀ Q_uu k + Kᵀ Q_u + Q_uzᵀ k.
-            bw.kt_quu.gemm_tr(1.0, gain, &bw.quu, 0.0);
-            bw.t_mz.copy_from(&bw.quz);
-            bw.t_mz.gemm(1.0, &bw.quu, gain, 1.0);
-            bw.v.copy_from(&bw.qzz);
-            bw.v.gemm_tr(1.0, gain, &bw.t_mz, 1.0);
-            bw.v.gemm_tr(1.0, &bw.quz, gain, 1.0);
-            bw.vv.copy_from(&bw.qz);
-            bw.vv.gemv(1.0, &bw.kt_quu, ff, 1.0);
-            bw.vv.gemv_tr(1.0, gain, &bw.qu, 1.0);
-            bw.vv.gemv_tr(1.0, &bw.quz, ff, 1.0);
-            let nz = self.nz;
-            for i in 0..nz {
-                for j in 0..i {
-                    let s = 0.5 * (bw.v[(i, j)] + bw.v[(j, i)]);
-                    bw.v[(i, j)] = s;
-                    bw.v[(j, i)] = s;
-                }
-            }
+/// Control scales: the box width where finite, else 1 (N m).
+fn control_scales(bounds: &Bounds) -> [f64; MAX_QP] {
+    let mut scale = [1.0; MAX_QP];
+    for (s, (lo, hi)) in scale.iter_mut().zip(bounds.lower.iter().zip(&bounds.upper)) {
+        if lo.is_finite() && hi.is_finite() && hi > lo {
+            *s = hi - lo;
         }
-        Some((dv1, dv2))
+    }
+    scale
+}
+
+/// Levenberg–Marquardt regularisation μ (relative to each control's own cost curvature) with
+/// Tassa's multiplicative schedule.
+struct Damping {
+    mu: f64,
+    step: f64,
+}
+
+impl Damping {
+    /// After a long accepted step: μ falls, to exactly 0 below `mu_min`.
+    fn decrease(&mut self, options: &SoocOptions) {
+        self.step = (self.step / 2.0).min(0.5);
+        self.mu *= self.step;
+        if self.mu < options.mu_min {
+            self.mu = 0.0;
+        }
     }
 
-    /// Rolls out `u + α k + K (z' − z)` (clamped) into the candidate; its cost.
-    fn forward(&mut self, problem: &SoocProblem, alpha: f64) -> f64 {
-        let h = self.horizon;
-        self.cand_z[0].copy_from(&self.z[0]);
-        let mut cost = 0.0;
-        for k in 0..h {
-            self.dz.copy_from(&self.cand_z[k]);
-            self.dz -= &self.z[k];
-            let u = &mut self.cand_u[k];
-            u.copy_from(&self.u[k]);
-            u.axpy(alpha, &self.ff[k], 1.0);
-            u.gemv(1.0, &self.gains[k], &self.dz, 1.0);
-            problem.bounds.clamp(u.as_mut_slice());
-            let (head, tail) = self.cand_z.split_at_mut(k + 1);
-            cost += problem.cost.running(k, head[k].as_slice(), u.as_slice());
-            problem
-                .dynamics
-                .step(k, head[k].as_slice(), u.as_slice(), tail[0].as_mut_slice());
-            if !cost.is_finite() || tail[0].iter().any(|v| !v.is_finite()) {
-                return f64::INFINITY;
-            }
-        }
-        cost + problem.cost.terminal(self.cand_z[h].as_slice())
+    /// After a rejected step: μ rises; false when it passed `mu_max`.
+    fn increase(&mut self, options: &SoocOptions) -> bool {
+        self.step = (self.step * 2.0).max(2.0);
+        self.mu = (self.mu * self.step).max(options.mu_min.max(1e-3));
+        self.mu <= options.mu_max
     }
 }
 
-/// Rolls `u` out from `z[0]`; the cost (infinite if the moments blow up).
-fn rollout(problem: &SoocProblem, z: &mut [DVector<f64>], u: &[DVector<f64>]) -> f64 {
-    let mut cost = 0.0;
-    for (k, uk) in u.iter().enumerate() {
-        let (head, tail) = z.split_at_mut(k + 1);
-        cost += problem.cost.running(k, head[k].as_slice(), uk.as_slice());
-        problem
-            .dynamics
-            .step(k, head[k].as_slice(), uk.as_slice(), tail[0].as_mut_slice());
-        if !cost.is_finite() || tail[0].iter().any(|v| !v.is_finite()) {
-            return f64::INFINITY;
-        }
-    }
-    cost + problem.cost.terminal(z[u.len()].as_slice())
+/// Which model the iterations have.
+struct ModelState {
+    /// The trajectory moved since the last expansion.
+    needs_expansion: bool,
+    /// The Newton curvature of the current expansion is computed.
+    has_second_order: bool,
+    /// Iterations in a row that fell back to Gauss–Newton.
+    gauss_newton_run: usize,
 }

@@ -5,27 +5,28 @@
 //! polled with the time, and says which command slices to publish now. The live planner
 //! (`vic-planner`) and the lockstep mode ([`lockstep`]) drive the same code.
 //!
-//! Latency: the feedback of knot `k` uses the state of knot `k − D` (paper Eq. 13, `D` =
-//! `latency_steps`), as the offline [`Feedback::Delayed`] does. Live, the state must also have
+//! Latency: the feedback of knot `k` uses the state of knot `k − D` (`D` = `latency_steps`), as
+//! the offline Monte Carlo does: on it directly (paper Eq. 13, [`Feedback::Delayed`]) or through
+//! the prediction of the present over the commands sent since ([`Feedback::Predicted`]), one
+//! code path ([`Policy::command_into`]) for both. Live, the state must also have
 //! passed the sensor delay line before knot `k` is computed, and the slice must pass the command
 //! delay line and reach the board before knot `k` acts; when the state of `k − D` is not there
 //! yet, the freshest released state is used and the knot is counted in `stale_feedback`.
 
+use crate::core::dynamics::DiscreteDynamics;
 use crate::core::model::Exogenous;
-#[cfg(doc)]
-use crate::core::policy::Feedback;
-use crate::core::policy::{Policy, Seen};
+pub use crate::core::policy::Strategy;
+use crate::core::policy::{Feedback, Policy};
 use crate::core::scalar::{MAX_NU, MAX_NX};
+mod live;
+pub use live::{LiveError, run_live};
+
 use crate::rt::board::{Board, Inputs};
-use crate::rt::realtime::Periodic;
 use crate::rt::transport::{
-    CentralPorts, CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode,
-    StateMsg, TransportError, monotonic_ns,
+    CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, StateMsg,
 };
 use nalgebra::DVector;
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
 
 /// Why a policy cannot be played on the board.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -35,31 +36,6 @@ pub enum TrackError {
     NotImpedance,
     #[error("the reference has {reference} knots, the policy {steps} steps")]
     ReferenceLength { reference: usize, steps: usize },
-}
-
-/// How the central controller commands the board.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Strategy {
-    /// The (SOOC) plan's torque and stiffness, no central feedback.
-    Stiffness,
-    /// Zero stiffness; the (ILQG) plan plus its gains on the state of `latency` ago (Eq. 13).
-    DelayedFeedback,
-    /// The plan's torque and stiffness plus the delayed feedback.
-    Both,
-}
-
-impl Strategy {
-    pub fn name(self) -> &'static str {
-        match self {
-            Strategy::Stiffness => "stiffness",
-            Strategy::DelayedFeedback => "delayed-feedback",
-            Strategy::Both => "both",
-        }
-    }
-    fn feedback(self) -> bool {
-        !matches!(self, Strategy::Stiffness)
-    }
 }
 
 /// Timing of the central controller.
@@ -84,6 +60,8 @@ pub struct Track {
     pub dt_ns: u64,
     pub steps: usize,
     pub policy: Policy,
+    /// The plan's discrete model: the predictor runs it over the commands in flight.
+    pub dynamics: DiscreteDynamics,
     pub reference: Vec<Exogenous>,
     pub x0: [f64; MAX_NX],
 }
@@ -93,11 +71,11 @@ impl Track {
     /// a grid of `dt` [s], tracking `reference` (one entry per knot `0..=N`) from `x0`.
     pub fn new(
         policy: Policy,
-        reference: Vec<Exogenous>,
+        dynamics: DiscreteDynamics,
         x0: &[f64],
-        dof: usize,
-        dt: f64,
     ) -> Result<Track, TrackError> {
+        let (dof, dt) = (dynamics.model.dof(), dynamics.dt);
+        let reference = dynamics.exogenous.clone();
         let (nx, nu) = (x0.len(), policy.nu());
         if nx != 2 * dof || nu != 2 * dof || policy.nx() != nx || nx > MAX_NX || nu > MAX_NU {
             return Err(TrackError::NotImpedance);
@@ -117,6 +95,7 @@ impl Track {
             dt_ns: (dt * 1e9).round() as u64,
             steps: policy.steps(),
             policy,
+            dynamics,
             reference,
             x0: x,
         })
@@ -144,6 +123,8 @@ pub struct TrialRecord {
     /// The board went to safe hold or fault during the movement.
     pub safe_hold: bool,
     pub fault: bool,
+    /// The trial ended (time limit, stop request, board silent) before its final state arrived.
+    pub stalled: bool,
 }
 
 /// The central controller.
@@ -170,6 +151,10 @@ pub struct Central {
     stale_feedback: usize,
     safe_hold: bool,
     fault: bool,
+    /// A state acknowledging this trial's reset arrived.
+    acknowledged: bool,
+    /// The live loop gave up on this trial before its end (see [`TrialRecord::stalled`]).
+    pub stalled: bool,
 }
 
 impl Central {
@@ -193,6 +178,8 @@ impl Central {
             stale_feedback: 0,
             safe_hold: false,
             fault: false,
+            acknowledged: false,
+            stalled: false,
             track,
         }
     }
@@ -211,6 +198,8 @@ impl Central {
         self.stale_feedback = 0;
         self.safe_hold = false;
         self.fault = false;
+        self.acknowledged = false;
+        self.stalled = false;
         let dof = self.track.dof;
         self.control_seq += 1;
         self.reset_seq = self.control_seq;
@@ -250,6 +239,7 @@ impl Central {
         if s.trial != self.trial || s.reset_seq != self.reset_seq {
             return;
         }
+        self.acknowledged = true;
         let mode = Mode::from_u32(s.mode);
         if mode == Mode::Idle {
             return;
@@ -282,34 +272,47 @@ impl Central {
         now_ns.saturating_sub(self.start_ns)
     }
 
+    /// The state the controller feeds back at knot `k`: that of `k − D` once it has passed the
+    /// sensor line, else the freshest older one (counted in `stale_feedback`); none before `D`.
+    fn seen_for(&mut self, k: usize) -> Option<(usize, [f64; MAX_NX])> {
+        let j = self.feedback().seen_knot(k)?;
+        match (self.seen[j], self.latest_seen) {
+            (Some(x), _) => Some((j, x)),
+            (None, Some(l)) if l < j => {
+                self.stale_feedback += 1;
+                self.seen[l].map(|x| (l, x))
+            }
+            _ => {
+                self.stale_feedback += 1;
+                None
+            }
+        }
+    }
+
+    /// How the policy is executed: the strategy's feedback at the configured latency.
+    pub fn feedback(&self) -> Feedback {
+        self.strategy.feedback(self.timing.latency_steps)
+    }
+
     fn compute_knot(&mut self, k: usize) -> Knot {
+        let seen = self.seen_for(k);
+        let feedback = self.feedback();
         let t = &self.track;
         let (dof, nx, nu) = (t.dof, t.nx, t.nu);
-        let mut seen = None;
-        let d = self.timing.latency_steps;
-        if self.strategy.feedback() && k >= d {
-            let j = k - d;
-            let (x, stale) = match (self.seen[j], self.latest_seen) {
-                (Some(x), _) => (Some((j, x)), false),
-                (None, Some(l)) if l < j => (self.seen[l].map(|x| (l, x)), true),
-                _ => (None, true),
-            };
-            if stale {
-                self.stale_feedback += 1;
-            }
-            seen = x.map(|(l, x)| (j, l, x));
-        }
         let mut u = [0.0; MAX_NU];
-        t.policy.control_into(
+        let mut predicted = [0.0; MAX_NX];
+        let from = seen.map_or(k, |(l, _)| l);
+        // The commands in flight: the controller sent them, so it knows them exactly.
+        t.policy.command_into(
+            &t.dynamics,
             k,
-            seen.as_ref().map(|(j, l, x)| Seen {
-                gain: *j,
-                knot: *l,
-                x: &x[..nx],
-            }),
+            feedback,
+            seen.as_ref().map(|(l, x)| (*l, &x[..nx])),
+            self.sent_u[from..k].iter().map(|u| &u[..nu]),
+            &mut predicted,
             &mut u,
         );
-        if self.strategy == Strategy::DelayedFeedback {
+        if !self.strategy.uses_stiffness() {
             // No stiffness: the feedback alone must hold the arm (clamped again, should the
             // bounds exclude zero stiffness).
             u[dof..2 * dof].iter_mut().for_each(|v| *v = 0.0);
@@ -376,6 +379,11 @@ impl Central {
         }
     }
 
+    /// Whether a state acknowledging the present trial's reset has arrived.
+    pub fn acknowledged(&self) -> bool {
+        self.acknowledged
+    }
+
     /// Whether the final state of the trial has arrived (or the board faulted).
     pub fn trial_done(&self) -> bool {
         self.recorded[self.track.steps].is_some() || self.fault
@@ -416,6 +424,7 @@ impl Central {
             missing_states: missing,
             safe_hold: self.safe_hold,
             fault: self.fault,
+            stalled: self.stalled || !self.trial_done(),
         }
     }
 }
@@ -463,96 +472,6 @@ pub fn lockstep(
         records.push(central.record());
     }
     records
-}
-
-/// Runs `trials` trials live: waits for a board in the namespace, then for each trial resets it,
-/// streams the slices at the planner period and collects the states until the movement's end.
-pub fn run_live(
-    ep: &CentralPorts,
-    central: &mut Central,
-    trials: usize,
-    seed: u64,
-    planner_period_ns: u64,
-    board_timeout: Duration,
-    stop: &AtomicBool,
-) -> Result<Vec<TrialRecord>, TransportError> {
-    crate::rt::realtime::set_timer_slack_1ns();
-    let mut records = Vec::with_capacity(trials);
-    let mut last_state_ns = 0;
-    for trial in 0..trials as u32 {
-        // A board must be there (again, if it was restarted after a crash).
-        if ep.latest_state().is_none() && monotonic_ns().saturating_sub(last_state_ns) > 200_000_000
-        {
-            wait_for_board(ep, board_timeout, stop)?;
-        }
-        let now = monotonic_ns();
-        // Start on a whole millisecond, once the first slice has crossed the command line.
-        let start =
-            (now + central.lead_time_ns(planner_period_ns) + 20_000_000) / 1_000_000 * 1_000_000;
-        ep.publish_control(&central.begin_trial(trial, seed, start, now))?;
-        let limit = start + central.track.steps as u64 * central.track.dt_ns + 2_000_000_000;
-        stream_trial(
-            ep,
-            central,
-            planner_period_ns,
-            limit,
-            stop,
-            &mut last_state_ns,
-        )?;
-        ep.publish_control(&central.stop(monotonic_ns()))?;
-        records.push(central.record());
-        if stop.load(Ordering::Relaxed) {
-            break;
-        }
-    }
-    Ok(records)
-}
-
-/// Waits for a board's telemetry (woken by its events rather than polling), up to `timeout` or
-/// until `stop`.
-fn wait_for_board(
-    ep: &CentralPorts,
-    timeout: Duration,
-    stop: &AtomicBool,
-) -> Result<(), TransportError> {
-    let t0 = Instant::now();
-    while ep.wait_for_telemetry(Duration::from_millis(100)).is_none() {
-        if t0.elapsed() > timeout || stop.load(Ordering::Relaxed) {
-            return Err(TransportError::NoBoard {
-                namespace: ep.session().namespace().to_string(),
-            });
-        }
-    }
-    Ok(())
-}
-
-/// One trial's loop at the planner period: feed the states received to `central`, publish the
-/// slices it asks for, until the trial is done, the monotonic time `limit` passes or `stop`.
-fn stream_trial(
-    ep: &CentralPorts,
-    central: &mut Central,
-    planner_period_ns: u64,
-    limit: u64,
-    stop: &AtomicBool,
-    last_state_ns: &mut u64,
-) -> Result<(), TransportError> {
-    let mut periodic = Periodic::new(planner_period_ns, 0);
-    let mut out = Vec::new();
-    loop {
-        let wake = periodic.wait();
-        let now = monotonic_ns();
-        if ep.drain_states(|s| central.on_state(s, now)) > 0 {
-            *last_state_ns = now;
-        }
-        out.clear();
-        central.poll(wake.deadline_ns.max(now), &mut out);
-        for c in &out {
-            ep.publish_command(c)?;
-        }
-        if central.trial_done() || now > limit || stop.load(Ordering::Relaxed) {
-            return Ok(());
-        }
-    }
 }
 
 /// The default split of a feedback latency into the sensor and command delay lines [ms]: what

@@ -1,0 +1,338 @@
+//! The backward pass of ILQG (Todorov & Li 2005, Eq. 4–6 of the Q-function with the noise terms):
+//! per knot from the last, the Q-function, the box-limited policy and the value update.
+
+use super::*;
+
+/// Scratch matrices of the backward pass.
+pub(super) struct Backward {
+    s_mat: DMatrix<f64>,
+    s_vec: DVector<f64>,
+    sa: DMatrix<f64>,
+    /// `(S A)ᵀ = Aᵀ S` (S is symmetric), so that `Aᵀ S A` is a product by A's columns.
+    sat: DMatrix<f64>,
+    /// `Lᵀ` and `Q_uxᵀ` (n×m): the value update by contiguous columns.
+    lt: DMatrix<f64>,
+    xt: DMatrix<f64>,
+    sb: DMatrix<f64>,
+    scx: DMatrix<f64>,
+    scu: DMatrix<f64>,
+    sc: DVector<f64>,
+    qx: DVector<f64>,
+    qu: DVector<f64>,
+    qxx: DMatrix<f64>,
+    quu: DMatrix<f64>,
+    qux: DMatrix<f64>,
+    quu_reg: DMatrix<f64>,
+    qux_reg: DMatrix<f64>,
+    t_mn: DMatrix<f64>,
+    t_m: DVector<f64>,
+}
+
+impl Ilqg {
+    /// Backward passes with μ raised until every `Q_uu` is positive definite; `None` when μ
+    /// passes its limit first.
+    pub(super) fn regularized_backward_pass(
+        &mut self,
+        problem: &Problem,
+        reg: &mut Regularization,
+        stochastic: bool,
+    ) -> Option<BackwardPass> {
+        loop {
+            if let Some(pass) = self.backward_pass(problem, reg.mu, stochastic) {
+                return Some(pass);
+            }
+            if !reg.increase(&self.options) {
+                return None;
+            }
+        }
+    }
+
+    /// Mean magnitude of the diagonal of the value Hessian at the first knot of the last backward
+    /// pass: the scale against which the regularisation μ is large or small.
+    pub(super) fn value_scale(&self) -> f64 {
+        let s = &self.bw.s_mat;
+        let n = s.nrows().max(1);
+        (0..s.nrows()).map(|i| s[(i, i)].abs()).sum::<f64>() / n as f64
+    }
+
+    /// One backward pass (DESIGN §4) at the nominal with regularisation `mu`: per knot, from the
+    /// last, the Q-function, the policy from the (box) QP, the value update. `None` when a
+    /// `Q_uu` is not positive definite.
+    pub(super) fn backward_pass(
+        &mut self,
+        problem: &Problem,
+        mu: f64,
+        stochastic: bool,
+    ) -> Option<BackwardPass> {
+        let horizon = self.dims.3;
+        let bw = &mut self.bw;
+        let traj = &self.nominal;
+        let term = &traj.derivs[horizon];
+        copy(&term.lxx, &mut bw.s_mat);
+        bw.s_vec.copy_from(&term.lx);
+        let mut pass = BackwardPass {
+            s0: problem.cost.terminal(traj.x[horizon].as_slice()),
+            dv1: 0.0,
+            dv2: 0.0,
+        };
+        for k in (0..horizon).rev() {
+            if stochastic {
+                // Only the stochastic merit reads them.
+                copy(&bw.s_mat, &mut self.value_hessians[k]);
+            }
+            let q0 = bw.q_function(problem, traj, k, stochastic) + pass.s0;
+            bw.regularize(&traj.sparse[k], &traj.lin[k], mu);
+            if !bw.policy(
+                &problem.bounds,
+                &traj.u[k],
+                &mut self.ff[k],
+                &mut self.gains[k],
+            ) {
+                return None;
+            }
+            let (lqu, lquul) = bw.value_update(&self.ff[k], &self.gains[k]);
+            pass.s0 = q0 + lqu + 0.5 * lquul;
+            pass.dv1 += lqu;
+            pass.dv2 += 0.5 * lquul;
+        }
+        Some(pass)
+    }
+}
+
+impl Backward {
+    pub(super) fn new(nx: usize, nu: usize) -> Self {
+        Backward {
+            s_mat: DMatrix::zeros(nx, nx),
+            s_vec: DVector::zeros(nx),
+            sa: DMatrix::zeros(nx, nx),
+            sat: DMatrix::zeros(nx, nx),
+            lt: DMatrix::zeros(nx, nu),
+            xt: DMatrix::zeros(nx, nu),
+            sb: DMatrix::zeros(nx, nu),
+            scx: DMatrix::zeros(nx, nx),
+            scu: DMatrix::zeros(nx, nu),
+            sc: DVector::zeros(nx),
+            qx: DVector::zeros(nx),
+            qu: DVector::zeros(nu),
+            qxx: DMatrix::zeros(nx, nx),
+            quu: DMatrix::zeros(nu, nu),
+            qux: DMatrix::zeros(nu, nx),
+            quu_reg: DMatrix::zeros(nu, nu),
+            qux_reg: DMatrix::zeros(nu, nx),
+            t_mn: DMatrix::zeros(nu, nx),
+            t_m: DVector::zeros(nu),
+        }
+    }
+
+    /// The Q-function of knot `k` (DESIGN §4) from the value `(S, s)` of knot `k + 1`, into
+    /// `qx, qu, qxx, quu, qux`; returns its constant term `Δ l + ½ Σ c_iᵀ S c_i` (without `s`).
+    /// The products take A, B, Cx, Cu by their nonzeros (see `sparse`): n·nnz, not n³.
+    fn q_function(
+        &mut self,
+        problem: &Problem,
+        traj: &Trajectory,
+        k: usize,
+        stochastic: bool,
+    ) -> f64 {
+        let (lin, d, sp) = (&traj.lin[k], &traj.derivs[k], &traj.sparse[k]);
+        let mut q0 = problem
+            .cost
+            .running(k, traj.x[k].as_slice(), traj.u[k].as_slice());
+        self.qx.copy_from(&d.lx);
+        sp.a.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qx.as_mut_slice());
+        self.qu.copy_from(&d.lu);
+        sp.b.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qu.as_mut_slice());
+        sp.a.right_mul(&self.s_mat, &mut self.sa);
+        sp.b.right_mul(&self.s_mat, &mut self.sb);
+        copy(&d.lxx, &mut self.qxx);
+        transpose(&self.sa, &mut self.sat);
+        sp.a.right_mul_add(&self.sat, &mut self.qxx);
+        copy(&d.luu, &mut self.quu);
+        sp.b.tr_mul_add(1.0, &self.sb, &mut self.quu);
+        copy(&d.lux, &mut self.qux);
+        sp.b.tr_mul_add(1.0, &self.sa, &mut self.qux);
+        if stochastic && lin.noise != NoiseKind::None {
+            for i in 0..lin.c.ncols() {
+                self.sc.gemv(1.0, &self.s_mat, &lin.c.column(i), 0.0);
+                q0 += 0.5 * lin.c.column(i).dot(&self.sc);
+                if lin.noise == NoiseKind::Dependent {
+                    let (cx, cu) = (&sp.cx[i], &sp.cu[i]);
+                    cx.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qx.as_mut_slice());
+                    cu.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qu.as_mut_slice());
+                    cx.right_mul(&self.s_mat, &mut self.scx);
+                    cu.right_mul(&self.s_mat, &mut self.scu);
+                    transpose(&self.scx, &mut self.sat);
+                    cx.right_mul_add(&self.sat, &mut self.qxx);
+                    cu.tr_mul_add(1.0, &self.scu, &mut self.quu);
+                    cu.tr_mul_add(1.0, &self.scx, &mut self.qux);
+                }
+            }
+        }
+        q0
+    }
+
+    /// Regularisation on the value function (Tassa, Erez & Todorov 2012): S + μ I in the
+    /// control terms, into `quu_reg`, `qux_reg`. As μ grows the gains tend to −(BᵀB)⁻¹BᵀA, which
+    /// cancels state deviations, rather than to zero (open loop), so the line search stays
+    /// meaningful in an unstable field. The value update uses the unregularised Q.
+    fn regularize(&mut self, sp: &SparseLinearization, lin: &Linearization, mu: f64) {
+        copy(&self.quu, &mut self.quu_reg);
+        copy(&self.qux, &mut self.qux_reg);
+        if mu > 0.0 {
+            sp.b.tr_mul_add(mu, &lin.b, &mut self.quu_reg);
+            sp.b.tr_mul_add(mu, &lin.a, &mut self.qux_reg);
+            for j in 0..self.quu_reg.nrows() {
+                // A trace of control-space damping for controls that do not move the state.
+                self.quu_reg[(j, j)] += mu * 1e-6;
+            }
+        }
+    }
+
+    /// The policy `δu = l + L δx` of the knot: the feedforward step `l` from the box QP
+    /// `min ½ lᵀ Q_uu l + Q_uᵀ l` over `lower − ū ≤ l ≤ upper − ū` on the regularised `Q_uu`
+    /// (projected Newton, Tassa, Mansard & Todorov 2014), warm-started at the previous `l`; the
+    /// gains `L = −Q_uu⁻¹ Q_ux` on its free components, zero on the clamped ones. Without limits
+    /// the QP is one Newton step and is not run. (Skipping it also whenever the Newton step
+    /// happens to land inside a finite box would be the same mathematics, but the QP reaches
+    /// that point along another sequence of roundings; the stochastic single joint, whose
+    /// optimum is flat in the stiffness, then settles 3 % away in expected cost.) False when
+    /// `Q_uu` is not positive definite.
+    fn policy(
+        &self,
+        bounds: &Bounds,
+        u: &DVector<f64>,
+        l: &mut DVector<f64>,
+        gain: &mut DMatrix<f64>,
+    ) -> bool {
+        let nu = u.len();
+        let quu = &self.quu_reg;
+        let h = |i: usize, j: usize| quu[(i, j)];
+        let mut lower = [0.0; MAX_QP];
+        let mut upper = [0.0; MAX_QP];
+        for j in 0..nu {
+            lower[j] = bounds.lower[j] - u[j];
+            upper[j] = bounds.upper[j] - u[j];
+        }
+        let unbounded = (0..nu).all(|j| lower[j] == f64::NEG_INFINITY && upper[j] == f64::INFINITY);
+        let (x, free, factor) = if unbounded {
+            let all = [0, 1, 2, 3, 4, 5, 6, 7];
+            match newton_step(h, self.qu.as_slice(), &all[..nu]) {
+                None => return false,
+                Some((x, factor)) => (x, [true; MAX_QP], Some(factor)),
+            }
+        } else {
+            let qp = solve_box_qp(
+                h,
+                self.qu.as_slice(),
+                &lower[..nu],
+                &upper[..nu],
+                l.as_slice(),
+            );
+            if qp.status == QpStatus::NotPositiveDefinite {
+                return false;
+            }
+            (qp.x, qp.free, qp.factor)
+        };
+        l.as_mut_slice().copy_from_slice(&x[..nu]);
+        gain.as_mut_slice().fill(0.0);
+        if let Some(factor) = factor {
+            let mut idx = [0usize; MAX_QP];
+            let mut nfree = 0;
+            for j in (0..nu).filter(|&j| free[j]) {
+                idx[nfree] = j;
+                nfree += 1;
+            }
+            let mut col = [0.0; MAX_QP];
+            for c in 0..gain.ncols() {
+                for (a, &j) in idx[..nfree].iter().enumerate() {
+                    col[a] = self.qux_reg[(j, c)];
+                }
+                factor.solve(&mut col[..nfree]);
+                for (a, &j) in idx[..nfree].iter().enumerate() {
+                    gain[(j, c)] = -col[a];
+                }
+            }
+        }
+        true
+    }
+
+    /// Value function update (Tassa 2012 form, valid with regularisation and clamping):
+    /// `s = Q_x + Lᵀ Q_uu l + Lᵀ Q_u + Q_uxᵀ l`, `S = Q_xx + Lᵀ Q_uu L + Lᵀ Q_ux + Q_uxᵀ L`.
+    /// Returns `(lᵀ Q_u, lᵀ Q_uu l)` for `s_0` and the expected improvement.
+    fn value_update(&mut self, l: &DVector<f64>, gain: &DMatrix<f64>) -> (f64, f64) {
+        let nu = l.len();
+        self.t_m.gemv(1.0, &self.quu, l, 0.0); // Q_uu l
+        let lqu = l.dot(&self.qu);
+        let lquul = l.dot(&self.t_m);
+        self.t_m += &self.qu; // Q_uu l + Q_u
+        self.s_vec.copy_from(&self.qx);
+        self.s_vec.gemv_tr(1.0, gain, &self.t_m, 1.0);
+        self.s_vec.gemv_tr(1.0, &self.qux, l, 1.0);
+        copy(&self.qux, &mut self.t_mn);
+        self.t_mn.gemm(1.0, &self.quu, gain, 1.0); // Q_uu L + Q_ux
+        // S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L as 2m rank-one updates, each an axpy on
+        // contiguous columns of the transposed thin factors (nalgebra's transposed products
+        // are plain dot loops).
+        transpose(gain, &mut self.lt);
+        transpose(&self.qux, &mut self.xt);
+        let n = self.s_mat.nrows();
+        let (gd, td) = (gain.as_slice(), self.t_mn.as_slice());
+        let (ltd, xtd) = (self.lt.as_slice(), self.xt.as_slice());
+        let sd = self.s_mat.as_mut_slice();
+        sd.copy_from_slice(self.qxx.as_slice());
+        for j in 0..n {
+            let col = &mut sd[j * n..(j + 1) * n];
+            for r in 0..nu {
+                let (t, g) = (td[j * nu + r], gd[j * nu + r]);
+                let (lr, xr) = (&ltd[r * n..(r + 1) * n], &xtd[r * n..(r + 1) * n]);
+                for ((s, l), x) in col.iter_mut().zip(lr).zip(xr) {
+                    *s += l * t + x * g;
+                }
+            }
+        }
+        // Symmetric against round-off: the average of the two triangles.
+        for j in 0..n {
+            for i in j + 1..n {
+                let m = 0.5 * (sd[j * n + i] + sd[i * n + j]);
+                sd[j * n + i] = m;
+                sd[i * n + j] = m;
+            }
+        }
+        (lqu, lquul)
+    }
+}
+
+/// The unconstrained Newton step `x = −H⁻¹ g` with the Cholesky factor of `H` over the indices
+/// `idx` (all of them), or `None` when `H` is not positive definite.
+fn newton_step(
+    h: impl Fn(usize, usize) -> f64 + Copy,
+    g: &[f64],
+    idx: &[usize],
+) -> Option<([f64; MAX_QP], SmallCholesky)> {
+    let factor = SmallCholesky::new(h, idx)?;
+    let mut x = [0.0; MAX_QP];
+    for (a, &i) in idx.iter().enumerate() {
+        x[a] = -g[i];
+    }
+    factor.solve(&mut x[..idx.len()]);
+    Some((x, factor))
+}
+
+/// `dst = src` for matrices of one size, as one `memcpy` (nalgebra's `copy_from` goes element by
+/// element through a generic iterator, which showed in profiles of the 42-dimensional delay
+/// problem).
+fn copy(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
+    dst.as_mut_slice().copy_from_slice(src.as_slice());
+}
+
+/// `dst = srcᵀ` on the column-major storage (see [`copy`]).
+fn transpose(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
+    let (r, c) = (src.nrows(), src.ncols());
+    debug_assert_eq!((dst.nrows(), dst.ncols()), (c, r));
+    let (sd, dd) = (src.as_slice(), dst.as_mut_slice());
+    for j in 0..c {
+        for (i, &v) in sd[j * r..(j + 1) * r].iter().enumerate() {
+            dd[i * c + j] = v;
+        }
+    }
+}

@@ -1,0 +1,489 @@
+//! Iterative LQG for stochastic plants with state- and control-dependent noise (Todorov & Li 2005,
+//! DESIGN §4), with box-constrained controls by projected Newton (Tassa, Mansard & Todorov 2014),
+//! adaptive Levenberg–Marquardt regularisation and a backtracking line search.
+//!
+//! The line search compares *expected* costs when the plant is stochastic: the nominal cost plus
+//! the second-order noise cost of the candidate under the new feedback gains
+//! ([`crate::core::solver::moments::expected_cost`]). The deterministic cost alone would reject the very steps the noise
+//! terms of the backward pass ask for.
+
+use super::boxqp::{MAX_QP, QpStatus, SmallCholesky, solve_box_qp};
+use super::sparse::SparseLinearization;
+use super::{Bounds, Problem};
+use crate::core::cost::CostDerivatives;
+use crate::core::dynamics::{Linearization, NoiseKind};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+use std::time::{Duration, Instant};
+
+mod backward;
+mod rollout;
+mod search;
+
+use backward::Backward;
+use rollout::{linearize, rollout};
+
+/// Regularisation, relative to the mean diagonal of the value Hessian `S_0`, below which the
+/// backward pass's model is trusted for a convergence verdict.
+const TRUSTED_MU: f64 = 1e-3;
+
+/// Solver settings. Defaults suit the paper's problems.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IlqgOptions {
+    /// Iteration limit (default 200).
+    pub max_iterations: usize,
+    /// Stop when a step improves (or is predicted to improve) the cost by less than this fraction
+    /// (default 1e-6).
+    pub tolerance: f64,
+    /// Stop when every feedforward step `|l_k| / (|ū_k| + 1)` is below this (default 1e-6).
+    pub gradient_tolerance: f64,
+    /// Initial Levenberg–Marquardt regularisation μ added to `Q_uu` (default 0: exact Newton).
+    pub mu_init: f64,
+    /// Below this μ is set to 0 (default 1e-6).
+    pub mu_min: f64,
+    /// Give up above this μ (default 1e10).
+    pub mu_max: f64,
+    /// Raise μ after an accepted step shorter than `shrink_below_step` (default true, 0.5).
+    pub damp_short_steps: bool,
+    pub shrink_below_step: f64,
+    /// Include the noise terms in the backward pass and the line search (default true). False
+    /// gives deterministic DDP on the same plant.
+    pub stochastic: bool,
+}
+
+impl Default for IlqgOptions {
+    fn default() -> Self {
+        IlqgOptions {
+            max_iterations: 200,
+            tolerance: 1e-6,
+            gradient_tolerance: 1e-6,
+            mu_init: 0.0,
+            mu_min: 1e-6,
+            mu_max: 1e10,
+            damp_short_steps: true,
+            shrink_below_step: 0.5,
+            stochastic: true,
+        }
+    }
+}
+
+/// Why the solver stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// The feedforward step vanished (first-order optimality, projected onto the limits).
+    SmallGradient,
+    /// An accepted step improved the cost by less than the tolerance.
+    SmallImprovement,
+    /// The iteration limit was reached.
+    MaxIterations,
+    /// Regularisation grew past its limit without a descent step.
+    RegularizationLimit,
+}
+
+impl StopReason {
+    /// Whether the stop means a (local) optimum.
+    pub fn converged(self) -> bool {
+        matches!(
+            self,
+            StopReason::SmallGradient | StopReason::SmallImprovement
+        )
+    }
+}
+
+/// A locally optimal policy `u = ū + L (x − x̄)` and its figures.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// Nominal states `x̄_0 ..= x̄_N`.
+    pub x: Vec<DVector<f64>>,
+    /// Nominal controls `ū_0 .. ū_{N−1}`.
+    pub u: Vec<DVector<f64>>,
+    /// Feedback gains `L_k` (m×n).
+    pub gains: Vec<DMatrix<f64>>,
+    /// Cost of the noise-free nominal trajectory.
+    pub cost: f64,
+    /// Predicted expected cost `s_0` of the closed-loop policy (equal to `cost` without noise).
+    pub expected_cost: f64,
+    /// Number of accepted iterations.
+    pub iterations: usize,
+    pub stop: StopReason,
+    pub solve_time: Duration,
+    /// Merit (expected cost) after each accepted iteration.
+    pub history: Vec<f64>,
+}
+
+/// A progress callback.
+pub type OnIteration = Box<dyn FnMut(&Progress) + Send>;
+
+/// The state of the solver after an accepted iteration.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    pub iteration: usize,
+    /// The merit (expected cost as the line search sees it) after the step.
+    pub merit: f64,
+    /// Regularisation in force.
+    pub mu: f64,
+    /// Accepted step length.
+    pub alpha: f64,
+}
+
+/// Everything that lives along one trajectory.
+struct Trajectory {
+    x: Vec<DVector<f64>>,
+    u: Vec<DVector<f64>>,
+    cost: f64,
+    lin: Vec<Linearization>,
+    /// The nonzeros of `lin`, for the backward pass's products.
+    sparse: Vec<SparseLinearization>,
+    derivs: Vec<CostDerivatives>,
+}
+
+impl Trajectory {
+    fn new(nx: usize, nu: usize, nw: usize, horizon: usize) -> Self {
+        Trajectory {
+            x: (0..=horizon).map(|_| DVector::zeros(nx)).collect(),
+            u: (0..horizon).map(|_| DVector::zeros(nu)).collect(),
+            cost: f64::INFINITY,
+            lin: (0..horizon)
+                .map(|_| Linearization::new(nx, nu, nw))
+                .collect(),
+            sparse: (0..horizon)
+                .map(|_| SparseLinearization::new(nx, nu, nw))
+                .collect(),
+            derivs: (0..=horizon)
+                .map(|_| CostDerivatives::new(nx, nu))
+                .collect(),
+        }
+    }
+}
+
+/// Why a solve could not start. The iterations themselves never fail: a step that diverges or
+/// does not descend is rejected and the regularisation raised, and the solve stops with
+/// [`StopReason::RegularizationLimit`] if nothing helps.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IlqgError {
+    /// The problem's dimensions differ from those the workspace was built for.
+    #[error(
+        "problem size (nx, nu, nw, N) = {got:?} differs from the solver's workspace {want:?}: build a new Ilqg"
+    )]
+    SizeMismatch {
+        got: (usize, usize, usize, usize),
+        want: (usize, usize, usize, usize),
+    },
+    /// The initial control sequence has the wrong length.
+    #[error("the initial guess has {got} controls, the horizon needs {want}")]
+    InitialGuessLength { got: usize, want: usize },
+    /// Rolling out the initial guess gave a non-finite state or cost: no nominal to linearise.
+    #[error(
+        "the initial control sequence makes the plant diverge (non-finite state at step {step} of {horizon}): start from a guess that keeps the plant finite"
+    )]
+    DivergingInitialGuess { step: usize, horizon: usize },
+    /// A warm start needs a previous solve of the same problem size.
+    #[error("no previous solution to warm-start from: call try_solve first")]
+    NoPreviousSolution,
+}
+
+/// Levenberg–Marquardt regularisation μ with Tassa's multiplicative schedule (Tassa, Erez &
+/// Todorov 2012): each rise doubles the factor by which μ grows, each fall halves it.
+#[derive(Debug, Clone, Copy)]
+struct Regularization {
+    mu: f64,
+    step: f64,
+}
+
+impl Regularization {
+    fn new(options: &IlqgOptions) -> Self {
+        Regularization {
+            mu: options.mu_init,
+            step: 1.0,
+        }
+    }
+
+    /// Raises μ; false when it passed `mu_max`.
+    fn increase(&mut self, options: &IlqgOptions) -> bool {
+        self.step = (self.step * 2.0).max(2.0);
+        self.mu = (self.mu * self.step).max(options.mu_min);
+        self.mu <= options.mu_max
+    }
+
+    /// Lowers μ, to exactly 0 below `mu_min` (pure Newton steps near the optimum).
+    fn decrease(&mut self, options: &IlqgOptions) {
+        self.step = (self.step / 2.0).min(0.5);
+        self.mu = if self.mu * self.step > options.mu_min {
+            self.mu * self.step
+        } else {
+            0.0
+        };
+    }
+}
+
+/// What one backward pass returns: the predicted expected cost `s_0` and the terms of the
+/// expected improvement of a step of length α, `−α (dv1 + α dv2)`.
+#[derive(Debug, Clone, Copy)]
+struct BackwardPass {
+    s0: f64,
+    dv1: f64,
+    dv2: f64,
+}
+
+/// An accepted step of the line search.
+#[derive(Debug, Clone, Copy)]
+struct Step {
+    alpha: f64,
+    before: f64,
+    after: f64,
+}
+
+/// Step lengths tried by the line search, longest first.
+const ALPHAS: [f64; 9] = [
+    1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125, 0.015625, 0.0078125, 0.001,
+];
+
+/// The ILQG solver with its preallocated workspace; reuse it for problems of the same size. No
+/// iteration allocates: every matrix an iteration touches lives here.
+pub struct Ilqg {
+    pub options: IlqgOptions,
+    /// Called after every accepted iteration (for progress display); must not block.
+    pub on_iteration: Option<OnIteration>,
+    nominal: Trajectory,
+    candidate: Trajectory,
+    ff: Vec<DVector<f64>>,
+    gains: Vec<DMatrix<f64>>,
+    bw: Backward,
+    /// `S_{k+1}` of the last backward pass, per step (for the merit).
+    value_hessians: Vec<DMatrix<f64>>,
+    noise_scratch: DMatrix<f64>,
+    dims: (usize, usize, usize, usize),
+    /// Whether `nominal` holds the result of a previous solve (for warm starts).
+    solved: bool,
+}
+
+impl Ilqg {
+    /// A solver for `problem`'s dimensions.
+    pub fn new(problem: &Problem, options: IlqgOptions) -> Self {
+        let (nx, nu, nw, h) = (
+            problem.dynamics.nx(),
+            problem.dynamics.nu(),
+            problem.dynamics.nw(),
+            problem.horizon,
+        );
+        assert!(nu <= MAX_QP, "at most {MAX_QP} controls");
+        Ilqg {
+            options,
+            on_iteration: None,
+            nominal: Trajectory::new(nx, nu, nw, h),
+            candidate: Trajectory::new(nx, nu, nw, h),
+            ff: (0..h).map(|_| DVector::zeros(nu)).collect(),
+            gains: (0..h).map(|_| DMatrix::zeros(nu, nx)).collect(),
+            bw: Backward::new(nx, nu),
+            value_hessians: (0..h).map(|_| DMatrix::zeros(nx, nx)).collect(),
+            noise_scratch: DMatrix::zeros(nx, nw),
+            dims: (nx, nu, nw, h),
+            solved: false,
+        }
+    }
+
+    /// Solves from the initial control sequence `u_init` (clamped into the limits).
+    ///
+    /// # Panics
+    /// When [`Ilqg::try_solve`] returns an error (a wrong size or a diverging initial guess).
+    pub fn solve(&mut self, problem: &Problem, u_init: &[DVector<f64>]) -> Solution {
+        self.try_solve(problem, u_init)
+            .unwrap_or_else(|e| panic!("ILQG cannot start: {e}"))
+    }
+
+    /// Solves from the initial control sequence `u_init` (clamped into the limits), or says why
+    /// it cannot start.
+    pub fn try_solve(
+        &mut self,
+        problem: &Problem,
+        u_init: &[DVector<f64>],
+    ) -> Result<Solution, IlqgError> {
+        let start = Instant::now();
+        self.check_size(problem)?;
+        let horizon = self.dims.3;
+        if u_init.len() != horizon {
+            return Err(IlqgError::InitialGuessLength {
+                got: u_init.len(),
+                want: horizon,
+            });
+        }
+        self.solved = false;
+        for k in 0..horizon {
+            self.nominal.u[k].copy_from(&u_init[k]);
+            problem.bounds.clamp(self.nominal.u[k].as_mut_slice());
+        }
+        self.nominal.x[0].copy_from_slice(&problem.x0);
+        if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0) {
+            return Err(IlqgError::DivergingInitialGuess { step, horizon });
+        }
+        Ok(self.iterate(problem, start))
+    }
+
+    /// Re-solves after the plan has advanced `shift` knots (receding-horizon replanning): the
+    /// previous solution is shifted, its last knot repeated, and rolled out from the new
+    /// `problem.x0` under its own feedback gains, `u_k = ū_{k+s} + L_{k+s} (x_k − x̄_{k+s})`
+    /// (the closed-loop policy of Eq. 9 keeps an unstable plant near the old nominal where an
+    /// open-loop replay would drift). The workspace is reused; nothing is allocated but the
+    /// returned copy of the solution.
+    pub fn resolve_shifted(
+        &mut self,
+        problem: &Problem,
+        shift: usize,
+    ) -> Result<Solution, IlqgError> {
+        let start = Instant::now();
+        self.check_size(problem)?;
+        if !self.solved {
+            return Err(IlqgError::NoPreviousSolution);
+        }
+        let horizon = self.dims.3;
+        let s = shift.min(horizon);
+        shift_knots(&mut self.nominal.u, s);
+        shift_knots(&mut self.gains, s);
+        shift_knots(&mut self.nominal.x, s);
+        for l in &mut self.ff {
+            l.fill(0.0);
+        }
+        self.solved = false;
+        self.candidate.x[0].copy_from_slice(&problem.x0);
+        let policy = Some((&self.nominal, &self.ff[..], &self.gains[..]));
+        if rollout(
+            problem,
+            &mut self.candidate,
+            policy,
+            Some(&problem.bounds),
+            0.0,
+        )
+        .is_ok()
+        {
+            std::mem::swap(&mut self.nominal, &mut self.candidate);
+        } else {
+            // The old gains do not hold the plant from here: replay the shifted controls.
+            self.nominal.x[0].copy_from_slice(&problem.x0);
+            if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0) {
+                return Err(IlqgError::DivergingInitialGuess { step, horizon });
+            }
+        }
+        Ok(self.iterate(problem, start))
+    }
+
+    fn check_size(&self, problem: &Problem) -> Result<(), IlqgError> {
+        let got = (
+            problem.dynamics.nx(),
+            problem.dynamics.nu(),
+            problem.dynamics.nw(),
+            problem.horizon,
+        );
+        if got != self.dims {
+            return Err(IlqgError::SizeMismatch {
+                got,
+                want: self.dims,
+            });
+        }
+        Ok(())
+    }
+
+    /// The ILQG iterations from the rolled-out nominal: backward pass, convergence tests, line
+    /// search, regularisation update, until a stop criterion holds.
+    fn iterate(&mut self, problem: &Problem, start: Instant) -> Solution {
+        let stochastic = self.options.stochastic && self.dims.2 > 0;
+        for g in &mut self.gains {
+            g.fill(0.0);
+        }
+        for l in &mut self.ff {
+            l.fill(0.0);
+        }
+        linearize(problem, &mut self.nominal);
+        let mut reg = Regularization::new(&self.options);
+        let mut iterations = 0;
+        let mut history = Vec::with_capacity(self.options.max_iterations);
+        let mut expected = self.nominal.cost;
+        let mut stop = StopReason::MaxIterations;
+        let mut finish_after_backward = false;
+
+        for _ in 0..self.options.max_iterations {
+            let Some(pass) = self.regularized_backward_pass(problem, &mut reg, stochastic) else {
+                stop = StopReason::RegularizationLimit;
+                break;
+            };
+            expected = pass.s0;
+            if finish_after_backward {
+                stop = StopReason::SmallImprovement;
+                break;
+            }
+            if self.feedforward_gradient() < self.options.gradient_tolerance {
+                stop = StopReason::SmallGradient;
+                break;
+            }
+            // The merit of the current nominal under the new gains, for a like-for-like comparison.
+            let merit_now = self.merit(problem, stochastic, false);
+            let trusted_mu = TRUSTED_MU * self.value_scale();
+            if self.predicted_converged(&pass, reg.mu, trusted_mu, merit_now) {
+                stop = StopReason::SmallImprovement;
+                break;
+            }
+            match self.line_search(problem, &pass, merit_now, stochastic) {
+                Some(step) => {
+                    std::mem::swap(&mut self.nominal, &mut self.candidate);
+                    linearize(problem, &mut self.nominal);
+                    iterations += 1;
+                    history.push(step.after);
+                    if let Some(cb) = self.on_iteration.as_mut() {
+                        cb(&Progress {
+                            iteration: iterations,
+                            merit: step.after,
+                            mu: reg.mu,
+                            alpha: step.alpha,
+                        });
+                    }
+                    self.update_regularization(&mut reg, step.alpha);
+                    // One more backward pass so that the gains and s_0 belong to this nominal.
+                    finish_after_backward = self.step_converged(&step, reg.mu, trusted_mu);
+                }
+                None => {
+                    if !reg.increase(&self.options) {
+                        stop = StopReason::RegularizationLimit;
+                        break;
+                    }
+                }
+            }
+        }
+        self.solved = true;
+        Solution {
+            x: self.nominal.x.clone(),
+            u: self.nominal.u.clone(),
+            gains: self.gains.clone(),
+            cost: self.nominal.cost,
+            expected_cost: if stochastic {
+                expected
+            } else {
+                self.nominal.cost
+            },
+            iterations,
+            stop,
+            solve_time: start.elapsed(),
+            history,
+        }
+    }
+
+    /// The current gains (valid after [`Ilqg::solve`]).
+    pub fn gains(&self) -> &[DMatrix<f64>] {
+        &self.gains
+    }
+}
+
+/// Moves every knot `s` places earlier and repeats the last knot into the `s` freed places
+/// (in place: no allocation).
+fn shift_knots<T: Clone>(knots: &mut [T], s: usize) {
+    let n = knots.len();
+    if s == 0 || n == 0 {
+        return;
+    }
+    let s = s.min(n - 1);
+    knots.rotate_left(s);
+    let (head, tail) = knots.split_at_mut(n - s);
+    for t in tail {
+        t.clone_from(&head[n - s - 1]);
+    }
+}

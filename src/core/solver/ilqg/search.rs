@@ -1,0 +1,129 @@
+//! The iteration's decisions: convergence tests, the regularisation schedule and the
+//! backtracking line search on the merit.
+
+use super::*;
+
+impl Ilqg {
+    /// The largest feedforward step relative to its control, `max |l_k| / (|ū_k| + 1)`: zero at
+    /// a first-order optimum (projected onto the limits, since clamped components get `l = 0`).
+    pub(super) fn feedforward_gradient(&self) -> f64 {
+        self.ff
+            .iter()
+            .zip(&self.nominal.u)
+            .flat_map(|(l, u)| {
+                l.iter()
+                    .zip(u.iter())
+                    .map(|(l, u)| l.abs() / (u.abs() + 1.0))
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Nothing left to gain at first order: the predicted improvement of an (almost) undamped
+    /// Newton step is negligible against the merit.
+    pub(super) fn predicted_converged(
+        &self,
+        pass: &BackwardPass,
+        mu: f64,
+        trusted_mu: f64,
+        merit: f64,
+    ) -> bool {
+        mu <= trusted_mu && -(pass.dv1 + pass.dv2) < self.options.tolerance * merit.abs()
+    }
+
+    /// A small improvement means convergence only after a long step with little
+    /// regularisation; a short, heavily damped step improves little anywhere.
+    pub(super) fn step_converged(&self, step: &Step, mu: f64, trusted_mu: f64) -> bool {
+        let trusted = step.alpha >= self.options.shrink_below_step && mu <= trusted_mu;
+        trusted
+            && (step.before - step.after) / step.after.abs().max(1e-300) < self.options.tolerance
+    }
+
+    /// After an accepted step of length α: a long step means the local model was trusted, so μ
+    /// falls (Tassa's schedule); only a short step helping means the quadratic model overshoots
+    /// (typically in the stiffness, whose effect is bilinear), and the next Newton step is damped.
+    pub(super) fn update_regularization(&self, reg: &mut Regularization, alpha: f64) {
+        if alpha >= self.options.shrink_below_step || !self.options.damp_short_steps {
+            reg.decrease(&self.options);
+        } else {
+            // No limit check here: a rejected step checks it.
+            let _ = reg.increase(&self.options);
+        }
+    }
+
+    /// Backtracking line search on the merit: rolls the policy `ū + α l + L (x − x̄)` out into
+    /// `candidate` for decreasing α and accepts the first that improves the merit by a positive
+    /// fraction of the predicted improvement `−α (dv1 + α dv2)` (Armijo-like).
+    pub(super) fn line_search(
+        &mut self,
+        problem: &Problem,
+        pass: &BackwardPass,
+        merit_now: f64,
+        stochastic: bool,
+    ) -> Option<Step> {
+        for alpha in ALPHAS {
+            self.candidate.x[0].copy_from_slice(&problem.x0);
+            let policy = Some((&self.nominal, &self.ff[..], &self.gains[..]));
+            if rollout(
+                problem,
+                &mut self.candidate,
+                policy,
+                Some(&problem.bounds),
+                alpha,
+            )
+            .is_err()
+            {
+                continue;
+            }
+            let merit_new = self.merit(problem, stochastic, true);
+            let predicted = -alpha * (pass.dv1 + alpha * pass.dv2);
+            let actual = merit_now - merit_new;
+            let ratio = if predicted > 0.0 {
+                actual / predicted
+            } else {
+                actual.signum()
+            };
+            if actual > 0.0 && ratio > 1e-4 {
+                return Some(Step {
+                    alpha,
+                    before: merit_now,
+                    after: merit_new,
+                });
+            }
+        }
+        None
+    }
+
+    /// The line-search merit of the nominal (or the candidate): its cost plus the noise cost
+    /// `Σ_k ½ Σ_i c_iᵀ S_{k+1} c_i` with the value Hessians `S` of the last backward pass frozen.
+    /// Its gradient is exactly the noise part of the backward pass's `Q_x`, `Q_u` (the `Cxᵀ S c`,
+    /// `Cuᵀ S c` terms), so an ILQG step is a descent direction for it. The fully propagated
+    /// expected cost ([`crate::core::solver::moments::expected_cost`]) also moves with the linearisation itself, which
+    /// ILQG's first-order step does not see (DESIGN §4), and makes a poor merit.
+    pub(super) fn merit(&mut self, problem: &Problem, stochastic: bool, candidate: bool) -> f64 {
+        let traj = if candidate {
+            &self.candidate
+        } else {
+            &self.nominal
+        };
+        if !stochastic {
+            return traj.cost;
+        }
+        let g = &mut self.noise_scratch;
+        let mut noise = 0.0;
+        for k in 0..problem.horizon {
+            problem
+                .dynamics
+                .noise_gain(k, traj.x[k].as_slice(), traj.u[k].as_slice(), g);
+            let s = &self.value_hessians[k];
+            for i in 0..g.ncols() {
+                let c = g.column(i);
+                let mut q = 0.0;
+                for a in 0..c.len() {
+                    q += c[a] * s.column(a).dot(&c);
+                }
+                noise += 0.5 * q;
+            }
+        }
+        traj.cost + noise
+    }
+}

@@ -1,0 +1,356 @@
+//! The derivatives of the moment step `z⁺ = F(z, u)` by forward-mode automatic differentiation
+//! through the discretised flow: first derivatives (`expand`, every iteration) and the
+//! costate-contracted second derivatives that the Newton model adds (`second_order`).
+
+use super::{MomentDynamics, MomentExpansion, costate_matrix, lift, unpack};
+use crate::core::dynamics::{DiscreteDynamics, Dynamics, NoiseKind};
+use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
+use nalgebra::DMatrix;
+use num_dual::{Dual, Dual64};
+
+impl MomentDynamics<'_> {
+    /// The first derivatives of the moment step at knot `k` into `e.a`, `e.b`, and what
+    /// [`MomentExpansion::curvature`] needs of them besides (`dA_j`, `dc_j`, `dCx_j`).
+    ///
+    /// `∂P⁺/∂(m, u)` needs the second derivatives of the flow (`∂A/∂v_j`): one nested-dual flow
+    /// evaluation per pair `(v_j, x_i)`, the state–state pairs once by symmetry.
+    pub fn expand(&self, k: usize, z: &[f64], u: &[f64], e: &mut MomentExpansion) {
+        let base = self.base();
+        let (n, m) = (base.nx(), base.nu());
+        base.linearize(k, &z[..n], u, &mut e.base);
+        unpack(n, &z[n..], &mut e.p);
+        e.a.fill(0.0);
+        e.b.fill(0.0);
+        e.a.view_mut((0, 0), (n, n)).copy_from(&e.base.a);
+        e.b.view_mut((0, 0), (n, m)).copy_from(&e.base.b);
+        covariance_transition(e);
+        flow_hessian(base, k, z, u, e);
+        covariance_sensitivity(base, z, u, e);
+    }
+
+    /// What the Newton model needs beyond [`MomentDynamics::expand`] (which must have run at the
+    /// same `(z, u)`), contracted with the costate `lam_next` of the next knot:
+    ///
+    /// * the third derivatives of the flow, only as `h3 = 2 Σ_{r,c} (Λ A P)_{rc}
+    ///   ∂³Φ_r/∂x_c∂v_a∂v_b` (the one place [`MomentExpansion::curvature`] uses them),
+    ///   contracted as each distinct triple is evaluated: no `n (n + m)²` tensor is stored or
+    ///   copied, and the backward pass's retries at higher μ reuse the `(n + m)²` contraction;
+    /// * `∂²Φ/∂u_a∂u_b` (the pairs that `expand`'s `dA_j` do not cover);
+    /// * for a noise gain nonlinear in the state, its second and third derivatives.
+    pub fn second_order(
+        &self,
+        k: usize,
+        z: &[f64],
+        u: &[f64],
+        lam_next: &[f64],
+        s: &mut MomentExpansion,
+    ) {
+        let base = self.base();
+        let n = base.nx();
+        s.h3_costate.copy_from_slice(lam_next);
+        // T = Λ A P, the weight of ∂A/∂v_a∂v_b in 2 tr(Λ ∂²A P Aᵀ) = 2 Σ ∂²A ∘ (Λ A P).
+        costate_matrix(n, &lam_next[n..], &mut s.lam);
+        s.t1.gemm(1.0, &s.lam, &s.base.a, 0.0);
+        s.t2.gemm(1.0, &s.t1, &s.p, 0.0);
+        flow_control_hessian(base, k, z, u, s);
+        flow_third_contracted(base, k, z, u, s);
+        if s.curved_model && base.nw() > 0 {
+            noise_gain_second_order(base, z, u, s);
+        }
+    }
+}
+
+/// `∂P⁺/∂P` along each symmetric basis matrix `E_ab = e_a e_bᵀ + e_b e_aᵀ` (`E_aa = e_a e_aᵀ`
+/// counted once as in `vech`): `A E Aᵀ = A_a A_bᵀ + A_b A_aᵀ` with `A_a` the a-th column, and
+/// the same for every `Cx_i`. `O(n²)` per entry instead of the sandwich's `O(n³)`.
+fn covariance_transition(s: &mut MomentExpansion) {
+    let (n, nw) = (s.n, s.nw);
+    let dependent = s.base.noise == NoiseKind::Dependent;
+    let mut f = 0;
+    for a in 0..n {
+        for b in a..n {
+            let mut e = 0;
+            for r in 0..n {
+                for c in r..n {
+                    let pair = |m: &DMatrix<f64>| {
+                        if a == b {
+                            m[(r, a)] * m[(c, a)]
+                        } else {
+                            m[(r, a)] * m[(c, b)] + m[(r, b)] * m[(c, a)]
+                        }
+                    };
+                    let mut v = pair(&s.base.a);
+                    if dependent {
+                        for i in 0..nw {
+                            v += pair(&s.base.cx[i]);
+                        }
+                    }
+                    s.a[(n + e, n + f)] = v;
+                    e += 1;
+                }
+            }
+            f += 1;
+        }
+    }
+}
+
+/// `dA_j = ∂A/∂(m,u)_j` from the second derivatives of the flow: column i of `dA_j` is
+/// `∂²Φ/∂v_j ∂x_i`, one nested-dual flow evaluation per pair. The pairs with both indices in the
+/// state are symmetric, so only `i ≤ j` is evaluated.
+fn flow_hessian(base: &DiscreteDynamics, k: usize, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+    let (n, m) = (base.nx(), base.nu());
+    let (mut xdd, mut udd) = lift::<Dual<Dual64>>(&z[..n], u);
+    let mut out = [Dual::from_re(Dual64::from(0.0)); MAX_NX];
+    for j in 0..n + m {
+        for i in 0..n {
+            if j < n && i < j {
+                for r in 0..n {
+                    let v = s.da[i][(r, j)];
+                    s.da[j][(r, i)] = v;
+                }
+                continue;
+            }
+            // Inner seed on v_j, outer seed on x_i: out.eps.eps = ∂²Φ/∂x_i ∂v_j.
+            seed_inner(&mut xdd, &mut udd, n, j, 1.0);
+            xdd[i].eps.re = 1.0;
+            base.flow(k, &xdd[..n], &udd[..m], &mut out[..n]);
+            xdd[i].eps.re = 0.0;
+            seed_inner(&mut xdd, &mut udd, n, j, 0.0);
+            for r in 0..n {
+                s.da[j][(r, i)] = out[r].eps.eps;
+            }
+        }
+    }
+}
+
+/// Sets the inner derivative seed of entry `j` of `v = (x, u)` of nested duals.
+fn seed_inner(x: &mut [Dual<Dual64>], u: &mut [Dual<Dual64>], n: usize, j: usize, value: f64) {
+    if j < n {
+        x[j].re.eps = value;
+    } else {
+        u[j - n].re.eps = value;
+    }
+}
+
+/// `∂P⁺/∂m_j` and `∂P⁺/∂u_j` into the covariance rows of `e.a`, `e.b`: `d(A P Aᵀ) = X + Xᵀ` with
+/// `X = dA (P Aᵀ)`, the same for each `Cx_i`, and `d(c cᵀ) = dc cᵀ + c dcᵀ` (`P Aᵀ` and
+/// `P Cx_iᵀ` do not depend on j).
+fn covariance_sensitivity(base: &DiscreteDynamics, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+    let (n, m, nw) = (base.nx(), base.nu(), base.nw());
+    let noisy = s.base.noise != NoiseKind::None;
+    // P Aᵀ = (A P)ᵀ, P being symmetric.
+    s.t1.gemm(1.0, &s.base.a, &s.p, 0.0);
+    s.t1.transpose_to(&mut s.atl);
+    let (mut xd, mut ud) = lift::<Dual64>(&z[..n], u);
+    let zero = Dual64::from(0.0);
+    let mut g = [zero; MAX_NX * MAX_NW];
+    let mut dgx = [zero; MAX_NX * MAX_NX * MAX_NW];
+    let mut dgu = [zero; MAX_NU * MAX_NX * MAX_NW];
+    s.curved_noise = false;
+    for j in 0..n + m {
+        s.t1.gemm(1.0, &s.da[j], &s.atl, 0.0);
+        s.next.fill(0.0);
+        if noisy {
+            let v = if j < n { &mut xd[j] } else { &mut ud[j - n] };
+            v.eps = 1.0;
+            base.noise_jacobian(&xd[..n], &ud[..m], &mut g, &mut dgx, &mut dgu);
+            let v = if j < n { &mut xd[j] } else { &mut ud[j - n] };
+            v.eps = 0.0;
+            for i in 0..nw {
+                noise_sensitivity(s, j, i, &g, &dgx);
+            }
+        }
+        let mut e = 0;
+        for r in 0..n {
+            for c in r..n {
+                let v = s.next[(r, c)] + s.t1[(r, c)] + s.t1[(c, r)];
+                if j < n {
+                    s.a[(n + e, j)] = v;
+                } else {
+                    s.b[(n + e, j - n)] = v;
+                }
+                e += 1;
+            }
+        }
+    }
+}
+
+/// Noise channel `i`'s part of `∂P⁺/∂v_j` (`g`, `dgx`: the noise gain and its state Jacobian
+/// with `v_j` seeded): `dc cᵀ + c dcᵀ` into `s.next`, and `dCx P Cxᵀ` into `s.t1` when the
+/// gain's state Jacobian varies (then `s.curved_noise`).
+fn noise_sensitivity(s: &mut MomentExpansion, j: usize, i: usize, g: &[Dual64], dgx: &[Dual64]) {
+    let (n, block) = (s.n, s.n * s.nw);
+    for r in 0..n {
+        s.dc[j][(r, i)] = g[i * n + r].eps;
+    }
+    for r in 0..n {
+        for c in 0..n {
+            s.next[(r, c)] +=
+                s.dc[j][(r, i)] * s.base.c[(c, i)] + s.base.c[(r, i)] * s.dc[j][(c, i)];
+        }
+    }
+    if s.base.noise != NoiseKind::Dependent {
+        return;
+    }
+    let mut any = false;
+    for c in 0..n {
+        for r in 0..n {
+            let v = dgx[c * block + i * n + r].eps;
+            any |= v != 0.0;
+            s.dcx[j][i][(r, c)] = v;
+        }
+    }
+    if any {
+        s.curved_noise = true;
+        // P Cx_iᵀ = (Cx_i P)ᵀ
+        s.t2.gemm(1.0, &s.base.cx[i], &s.p, 0.0);
+        s.t2.transpose_to(&mut s.t3);
+        s.t1.gemm(1.0, &s.dcx[j][i], &s.t3, 1.0);
+    }
+}
+
+/// `s.h3 = 2 Σ_{r,c} T_{rc} ∂³Φ_r/∂x_c∂v_a∂v_b` with `T = s.t2`, by triple-nested dual numbers
+/// (seeds: `x_c` outermost, `v_a`, `v_b`), each distinct triple once: the derivative is symmetric
+/// in its indices, so one evaluation per multiset `{x_c, v_a, v_b}` with a state index serves
+/// every ordered triple that permutes it (the canonical order: `a ≤ b`, and `c ≤ a` when `a` is
+/// a state).
+fn flow_third_contracted(
+    base: &DiscreteDynamics,
+    k: usize,
+    z: &[f64],
+    u: &[f64],
+    s: &mut MomentExpansion,
+) {
+    let (n, m) = (base.nx(), base.nu());
+    let nv = n + m;
+    let (mut x3, mut u3) = lift::<Dual<Dual<Dual64>>>(&z[..n], u);
+    let mut out = [Dual::from_re(Dual::from_re(Dual64::from(0.0))); MAX_NX];
+    s.h3.fill(0.0);
+    let mut d = [0.0; MAX_NX];
+    for a in 0..nv {
+        for b in a..nv {
+            for c in 0..n.min(a + 1) {
+                seed3(&mut x3, &mut u3, n, [c, a, b], 1.0);
+                base.flow(k, &x3[..n], &u3[..m], &mut out[..n]);
+                seed3(&mut x3, &mut u3, n, [c, a, b], 0.0);
+                for (dr, o) in d.iter_mut().zip(&out[..n]) {
+                    *dr = o.eps.eps.eps;
+                }
+                contract_triple(s, n, [c, a, b], &d[..n]);
+            }
+        }
+    }
+}
+
+/// Seeds (or clears) the three levels of a triple-nested dual: `x_c` outermost, then `v_a`, `v_b`.
+fn seed3(
+    x: &mut [Dual<Dual<Dual64>>],
+    u: &mut [Dual<Dual<Dual64>>],
+    n: usize,
+    [c, a, b]: [usize; 3],
+    value: f64,
+) {
+    x[c].eps = Dual::from_re(Dual64::from(value));
+    if a < n {
+        x[a].re.eps = Dual64::from(value);
+    } else {
+        u[a - n].re.eps = Dual64::from(value);
+    }
+    if b < n {
+        x[b].re.re.eps = value;
+    } else {
+        u[b - n].re.re.eps = value;
+    }
+}
+
+/// Adds `2 Σ_r T_{r c'} d_r` to `h3[a', b']` for every distinct ordering `(c', a', b')` of the
+/// triple whose `c'` is a state index (`d_r = ∂³Φ_r` along the triple, `T = s.t2`).
+fn contract_triple(s: &mut MomentExpansion, n: usize, [c, a, b]: [usize; 3], d: &[f64]) {
+    let orders = [
+        [c, a, b],
+        [c, b, a],
+        [a, c, b],
+        [a, b, c],
+        [b, c, a],
+        [b, a, c],
+    ];
+    for (i, o) in orders.iter().enumerate() {
+        if o[0] >= n || orders[..i].contains(o) {
+            continue;
+        }
+        let w: f64 = d
+            .iter()
+            .enumerate()
+            .map(|(r, dr)| s.t2[(r, o[0])] * dr)
+            .sum();
+        s.h3[(o[1], o[2])] += 2.0 * w;
+    }
+}
+
+/// `∂²Φ/∂u_a∂u_b` into `s.phi_uu` by nested duals, each unordered pair once.
+fn flow_control_hessian(
+    base: &DiscreteDynamics,
+    k: usize,
+    z: &[f64],
+    u: &[f64],
+    s: &mut MomentExpansion,
+) {
+    let (n, m) = (base.nx(), base.nu());
+    let (x2, mut u2) = lift::<Dual<Dual64>>(&z[..n], u);
+    let mut out = [Dual::from_re(Dual64::from(0.0)); MAX_NX];
+    for a in 0..m {
+        for b in a..m {
+            u2[a].re.eps = 1.0;
+            u2[b].eps.re = 1.0;
+            base.flow(k, &x2[..n], &u2[..m], &mut out[..n]);
+            u2[a].re.eps = 0.0;
+            u2[b].eps.re = 0.0;
+            for r in 0..n {
+                s.phi_uu[a][b][r] = out[r].eps.eps;
+                s.phi_uu[b][a][r] = out[r].eps.eps;
+            }
+        }
+    }
+}
+
+/// The second derivatives of the noise gain `c_i` and of its state Jacobian `Cx_i` over
+/// `v = (m, u)` (a gain nonlinear in the state: torque noise through `M⁻¹(q)`), by nested duals,
+/// each unordered pair once.
+fn noise_gain_second_order(base: &DiscreteDynamics, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+    let (n, m, nw) = (base.nx(), base.nu(), base.nw());
+    let nv = n + m;
+    let (mut x2, mut u2) = lift::<Dual<Dual64>>(&z[..n], u);
+    let zero = Dual::from_re(Dual64::from(0.0));
+    let mut g = [zero; MAX_NX * MAX_NW];
+    let mut dgx = [zero; MAX_NX * MAX_NX * MAX_NW];
+    let mut dgu = [zero; MAX_NU * MAX_NX * MAX_NW];
+    let block = n * nw;
+    for a in 0..nv {
+        for b in a..nv {
+            seed_inner(&mut x2, &mut u2, n, a, 1.0);
+            seed_outer(&mut x2, &mut u2, n, b, 1.0);
+            base.noise_jacobian(&x2[..n], &u2[..m], &mut g, &mut dgx, &mut dgu);
+            seed_inner(&mut x2, &mut u2, n, a, 0.0);
+            seed_outer(&mut x2, &mut u2, n, b, 0.0);
+            for pair in [a * nv + b, b * nv + a] {
+                for i in 0..nw {
+                    for r in 0..n {
+                        s.d2c[pair][(r, i)] = g[i * n + r].eps.eps;
+                        for j in 0..n {
+                            s.d2cx[pair][i][(r, j)] = dgx[j * block + i * n + r].eps.eps;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Sets the outer derivative seed of entry `j` of `v = (x, u)` of nested duals.
+fn seed_outer(x: &mut [Dual<Dual64>], u: &mut [Dual<Dual64>], n: usize, j: usize, value: f64) {
+    if j < n {
+        x[j].eps.re = value;
+    } else {
+        u[j - n].eps.re = value;
+    }
+}

@@ -1,0 +1,98 @@
+//! The predicted expected cost of the executed policy (`planning::evaluation::predicted_cost`:
+//! closed-loop covariance propagation of the plant augmented with the prediction error) against
+//! the solvers' own predictions where they exist and against the Monte Carlo where they do not.
+
+use std::path::Path;
+use vic::core::policy::Feedback;
+use vic::planning::evaluation::predicted_cost;
+use vic::planning::montecarlo::run_trials;
+use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
+use vic::planning::scenario::Scenario;
+
+fn planned(config: &str, extra: &[&str], method: Method) -> (Setup, PlanFile) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(config);
+    let overrides: Vec<String> = extra.iter().map(|s| s.to_string()).collect();
+    let s = Scenario::load(&path, &overrides).expect("scenario");
+    let p = plan(&s, method, None).expect("plan");
+    (setup(&s).expect("setup"), p)
+}
+
+/// The single joint of Fig. 2 without stiffness, planned for no delay.
+fn joint_feedback() -> (Setup, PlanFile) {
+    planned(
+        "single_joint_delay.toml",
+        &[
+            "task.delay_ms=0",
+            "actuator.stiffness_max=0",
+            "actuator.initial_stiffness=0",
+        ],
+        Method::Ilqg,
+    )
+}
+
+#[test]
+fn full_feedback_and_open_loop_reproduce_the_solvers_predictions() {
+    let (s, p) = joint_feedback();
+    let policy = p.policy(&s).unwrap();
+    let full = predicted_cost(&s, &policy, Feedback::Full).unwrap();
+    let zero = predicted_cost(&s, &policy, Feedback::Predicted { latency_steps: 0 }).unwrap();
+    eprintln!("full {full} vs ILQG s_0 {}", p.summary.expected_cost);
+    assert_eq!(full, zero);
+    let rel = (full - p.summary.expected_cost).abs() / p.summary.expected_cost;
+    assert!(
+        rel < 0.01,
+        "full feedback {full} vs ILQG {}",
+        p.summary.expected_cost
+    );
+    let (s, p) = planned(
+        "single_joint_delay.toml",
+        &["task.delay_ms=0"],
+        Method::Sooc,
+    );
+    let policy = p.policy(&s).unwrap();
+    let open = predicted_cost(&s, &policy, Feedback::OpenLoop).unwrap();
+    eprintln!(
+        "open loop {open} vs SOOC {}",
+        p.summary.open_loop_expected_cost
+    );
+    let rel = (open - p.summary.open_loop_expected_cost).abs() / p.summary.open_loop_expected_cost;
+    assert!(
+        rel < 0.01,
+        "open loop {open} vs {}",
+        p.summary.open_loop_expected_cost
+    );
+}
+
+#[test]
+fn the_predictor_prediction_agrees_with_monte_carlo_at_every_latency() {
+    let (s, p) = joint_feedback();
+    let policy = p.policy(&s).unwrap();
+    let n = 400;
+    let mut last = 0.0;
+    for steps in [0, 2, 5, 10, 15, 20, 30] {
+        let fb = Feedback::Predicted {
+            latency_steps: steps,
+        };
+        let predicted = predicted_cost(&s, &policy, fb).unwrap();
+        let trials = run_trials(&s, &policy, fb, n, 7);
+        let costs: Vec<f64> = trials.iter().map(|t| t.cost).collect();
+        let mean = costs.iter().sum::<f64>() / n as f64;
+        let var = costs.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let se = (var / n as f64).sqrt();
+        eprintln!(
+            "{:>3} ms: predicted {predicted:.2}, Monte Carlo {mean:.2} ± {se:.2}",
+            steps * 10
+        );
+        assert!(
+            (predicted - mean).abs() < 3.0 * se + 0.02 * mean,
+            "{steps} steps: predicted {predicted} vs Monte Carlo {mean} ± {se}"
+        );
+        assert!(
+            predicted >= last,
+            "the prediction error grows with the latency"
+        );
+        last = predicted;
+    }
+}
