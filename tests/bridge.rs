@@ -85,6 +85,7 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
     assert_eq!(across.trials, trials);
     assert_eq!(across.safe_hold_trials, 0, "commands arrived late across the link");
     for (a, b) in across.final_errors.iter().zip(&direct.final_errors) {
+        let (a, b) = (a.expect("diverged across the bridge"), b.expect("diverged on one host"));
         assert!(
             (a - b).abs() < 0.5,
             "final error across the bridge {a} mm, on one host {b} mm"

@@ -266,7 +266,6 @@ pub fn run(
             let events = publisher(&session, event_key(name))?;
             each_period(o.poll, stop, &rx, |inbound, s: &mut BridgeStats| {
                 let r = &mut s.received;
-                let e = &mut s.local_errors;
                 let ok = match inbound {
                     Inbound::Command(mut c) => {
                         c.header = restamped(c.header, o.restamp);
@@ -289,7 +288,7 @@ pub fn run(
                     }
                     _ => true,
                 };
-                *e += (!ok) as u64;
+                s.local_errors += (!ok) as u64;
             }, |s| {
                 let (sent, errors) = (&mut s.sent, &mut s.local_errors);
                 central.drain_states(|m| put(&state, m, &mut sent.state, errors));
