@@ -36,9 +36,12 @@ pub struct DemoArgs {
     /// stiffness).
     #[arg(long, value_name = "FILE")]
     feedback_plan: Option<PathBuf>,
-    /// Board spin before each deadline [µs] (0: sleep only).
-    #[arg(long, default_value_t = 0)]
-    spin_us: u64,
+    /// Board spin before each deadline [µs] (default: the board's, 100; 0 with --no-rt).
+    #[arg(long, value_name = "US")]
+    spin_us: Option<u64>,
+    /// Run the board without its real-time settings (no SCHED_FIFO, pinning or spin).
+    #[arg(long)]
+    no_rt: bool,
     #[command(flatten)]
     json: JsonArg,
 }
@@ -55,6 +58,7 @@ impl DemoArgs {
             stiffness_plan: self.stiffness_plan,
             feedback_plan: self.feedback_plan,
             spin_us: self.spin_us,
+            no_rt: self.no_rt,
             json: self.json.json,
         })
     }

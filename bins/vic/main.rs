@@ -4,12 +4,14 @@
 mod bench;
 #[cfg(feature = "zenoh")]
 mod bridge;
+mod convert;
 mod demo;
 mod experiment;
 mod identify;
 mod inject;
 mod monitor;
 mod plan;
+mod record;
 mod results;
 mod simulate;
 mod status;
@@ -89,6 +91,17 @@ enum Command {
     /// Example: vic bridge --side board --namespace lab1 --listen tcp/0.0.0.0:7447
     #[cfg(feature = "zenoh")]
     Bridge(bridge::BridgeArgs),
+    /// Record a running namespace to MCAP from outside the board: states (1 kHz), command
+    /// slices, control requests, disturbances and telemetry, each on its own JSON-schema channel
+    /// (Foxglove and PlotJuggler open it as it is). States it missed are counted and marked.
+    ///
+    /// Example: vic record --namespace lab1 --out run.mcap --duration 60
+    Record(record::RecordArgs),
+    /// Convert a board's MCAP recording (vic-board --record run.mcap) to the CSV log that
+    /// vic identify reads (gaps marked as in the board's own CSV).
+    ///
+    /// Example: vic convert run.mcap --csv run.csv
+    Convert(convert::ConvertArgs),
     /// Identify the joint's torque noise from a log, the paper's procedure (Sec. III-B): bin the
     /// torque error by velocity, fit its mean and standard deviation with polynomials, estimate
     /// (a, b) of e = (a + b q') η by maximum likelihood and test the residual η for normality
@@ -121,6 +134,8 @@ impl Command {
             #[cfg(feature = "zenoh")]
             Command::Bridge(a) => a.run(),
             Command::Identify(a) => a.run(),
+            Command::Record(a) => a.run(),
+            Command::Convert(a) => a.run(),
             Command::Bench(a) => a.run(),
             Command::Sweep(a) => a.run(),
         }

@@ -239,6 +239,8 @@ pub struct BoardStats {
     /// Ticks recorded and dropped by `--record` (None without a recording).
     pub recorded: Option<u64>,
     pub dropped: Option<u64>,
+    /// The real-time settings in force for the loop (filled in by the daemon that applied them).
+    pub realtime: Option<crate::rt::sched::RtSettings>,
 }
 
 /// [`Percentiles`] in JSON reports [µs]: the wire type serialises as it is.
@@ -380,6 +382,7 @@ pub fn run_board(
         command_age_us: hist.command_age.percentiles(),
         recorded: record.as_ref().map(|r| r.pushed()),
         dropped: record.as_ref().map(|r| r.dropped()),
+        realtime: None,
     }
 }
 

@@ -135,6 +135,148 @@ pub fn rt_budget() -> Option<(i64, i64)> {
     Some((read("sched_rt_runtime_us")?, read("sched_rt_period_us")?))
 }
 
+/// The real-time settings a board asks for by default (`vic-board` without `--no-rt`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RtRequest {
+    /// `SCHED_FIFO` priority of the loop (None: the normal scheduler).
+    pub fifo: Option<i32>,
+    /// The CPU to pin the loop to; with `auto_cpu`, None picks the last CPU of the process's
+    /// set when it has more than one.
+    pub cpu: Option<usize>,
+    pub auto_cpu: bool,
+    /// Spin before each deadline [µs].
+    pub spin_us: u64,
+}
+
+/// Priority asked for by default: cyclictest's customary `-p80`, the figure the loop is compared
+/// with (above the kernel's threaded interrupt handlers, at 50).
+pub const DEFAULT_FIFO_PRIORITY: i32 = 80;
+/// Spin before each deadline by default [µs]: what brings the wake-up p99 under cyclictest's on
+/// these machines (docs/BENCHMARKS.md), 10 % of one CPU at 1 kHz, far below the real-time
+/// throttling budget (95 %), so it can never trip it.
+pub const DEFAULT_SPIN_US: u64 = 100;
+
+impl RtRequest {
+    /// The defaults: `SCHED_FIFO` 80, a CPU of its own where there is more than one, 100 µs spin.
+    pub fn default_rt() -> RtRequest {
+        RtRequest {
+            fifo: Some(DEFAULT_FIFO_PRIORITY),
+            cpu: None,
+            auto_cpu: true,
+            spin_us: DEFAULT_SPIN_US,
+        }
+    }
+    /// `--no-rt`: the normal scheduler, no pinning, no spin.
+    pub fn none() -> RtRequest {
+        RtRequest {
+            fifo: None,
+            cpu: None,
+            auto_cpu: false,
+            spin_us: 0,
+        }
+    }
+}
+
+/// The settings in force for a loop, and what the OS refused.
+#[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub struct RtSettings {
+    /// Whether real-time settings were asked for (false with `--no-rt`).
+    pub requested: bool,
+    /// `SCHED_FIFO` priority in force (None: the normal scheduler).
+    pub fifo: Option<i32>,
+    /// `mlockall` in force.
+    pub memory_locked: bool,
+    /// The CPU the loop is pinned to.
+    pub cpu: Option<usize>,
+    /// Spin before each deadline [µs].
+    pub spin_us: u64,
+    /// Timer slack set to 1 ns.
+    pub timer_slack_1ns: bool,
+    /// What was asked for and refused, with the reason.
+    pub refused: Vec<String>,
+}
+
+impl RtSettings {
+    /// One line: what is in force, then what was refused.
+    pub fn describe(&self) -> String {
+        let mut parts = vec![match self.fifo {
+            Some(p) => format!("SCHED_FIFO {p}"),
+            None => "normal scheduler".to_string(),
+        }];
+        parts.push(
+            if self.memory_locked {
+                "memory locked"
+            } else {
+                "memory not locked"
+            }
+            .into(),
+        );
+        parts.push(match self.cpu {
+            Some(c) => format!("CPU {c}"),
+            None => "any CPU".to_string(),
+        });
+        parts.push(format!("spin {} µs", self.spin_us));
+        if self.timer_slack_1ns {
+            parts.push("timer slack 1 ns".into());
+        }
+        let mut line = parts.join(", ");
+        if !self.refused.is_empty() {
+            line.push_str("; refused: ");
+            line.push_str(&self.refused.join("; "));
+        }
+        line
+    }
+}
+
+/// The CPUs the calling thread may run on.
+pub fn allowed_cpus() -> Vec<usize> {
+    // SAFETY: a zeroed cpu_set_t is a valid empty set; sched_getaffinity writes into it.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    let size = std::mem::size_of::<libc::cpu_set_t>();
+    // SAFETY: `set` is a valid cpu_set_t of `size` bytes.
+    if unsafe { libc::sched_getaffinity(0, size, &mut set) } != 0 {
+        return Vec::new();
+    }
+    // SAFETY: CPU_ISSET reads the set within its size.
+    (0..8 * size)
+        .filter(|&c| unsafe { libc::CPU_ISSET(c, &set) })
+        .collect()
+}
+
+/// Applies `req` to the calling thread (the loop's): pins it, raises it to `SCHED_FIFO`. A
+/// refusal is recorded, not an error: the loop runs on with what it got. `memory_locked` and
+/// `timer_slack_1ns` say what the caller obtained before (process-wide).
+pub fn apply_realtime(req: &RtRequest, memory_locked: bool, timer_slack_1ns: bool) -> RtSettings {
+    let mut got = RtSettings {
+        requested: req.fifo.is_some() || req.auto_cpu || req.cpu.is_some(),
+        memory_locked,
+        spin_us: req.spin_us,
+        timer_slack_1ns,
+        ..RtSettings::default()
+    };
+    if got.requested && !memory_locked {
+        got.refused
+            .push("mlockall (page faults may add jitter)".into());
+    }
+    let cpu = req.cpu.or_else(|| {
+        let cpus = allowed_cpus();
+        (req.auto_cpu && cpus.len() > 1).then(|| cpus[cpus.len() - 1])
+    });
+    if let Some(c) = cpu {
+        match pin_to_cpu(c) {
+            Ok(()) => got.cpu = Some(c),
+            Err(e) => got.refused.push(format!("pinning: {e}")),
+        }
+    }
+    if let Some(p) = req.fifo {
+        match set_policy(SchedPolicy::Fifo(p)) {
+            Ok(()) => got.fifo = Some(p),
+            Err(e) => got.refused.push(format!("SCHED_FIFO {p}: {e}")),
+        }
+    }
+    got
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -159,6 +301,34 @@ mod tests {
         std::thread::spawn(|| {
             assert!(pin_to_cpu(0).is_ok());
             assert!(pin_to_cpu(1 << 20).is_err());
+        })
+        .join()
+        .unwrap();
+    }
+
+    #[test]
+    fn realtime_settings_report_what_the_os_granted() {
+        std::thread::spawn(|| {
+            let cpus_before = allowed_cpus().len();
+            let got = apply_realtime(&RtRequest::default_rt(), true, true);
+            assert!(got.requested);
+            // What is reported in force is what the thread has, and each refusal is listed.
+            assert_eq!(
+                got.fifo.is_some(),
+                policy() == SchedPolicy::Fifo(DEFAULT_FIFO_PRIORITY)
+            );
+            assert_eq!(
+                got.fifo.is_none(),
+                got.refused.iter().any(|r| r.contains("SCHED_FIFO"))
+            );
+            // Pinning to a CPU of the thread's own set is always permitted.
+            assert_eq!(got.cpu.is_some(), cpus_before > 1);
+            if let Some(c) = got.cpu {
+                assert_eq!(allowed_cpus(), vec![c]);
+            }
+            assert!(got.describe().contains("spin 100 µs"));
+            let none = apply_realtime(&RtRequest::none(), false, false);
+            assert!(!none.requested && none.refused.is_empty() && none.cpu.is_none());
         })
         .join()
         .unwrap();

@@ -27,12 +27,14 @@ pub struct BoardOptions {
     pub hold_stiffness: Option<f64>,
     /// SCHED_FIFO priority of the loop.
     pub fifo: Option<i32>,
-    /// The CPU the loop is pinned to.
+    /// The CPU the loop is pinned to (None: the last CPU when there are several, unless no_rt).
     pub cpu: Option<usize>,
+    /// The old behaviour: no SCHED_FIFO, no pinning (and no spin unless spin_us says so).
+    pub no_rt: bool,
     /// Run this long [s] (0: until SIGINT/SIGTERM).
     pub duration_s: f64,
     pub json: bool,
-    /// Record every tick to this CSV file.
+    /// Record every tick to this file (CSV or MCAP, by its extension).
     pub record: Option<PathBuf>,
     /// Capacity of the recording queue [ticks].
     pub record_queue: usize,
@@ -60,9 +62,7 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
             cleaned_dead_nodes, o.namespace
         );
     }
-    if !crate::rt::realtime::lock_memory() {
-        eprintln!("vic-board: warning: mlockall failed; page faults may add jitter");
-    }
+    let memory_locked = crate::rt::realtime::lock_memory();
     let loop_options = BoardLoopOptions {
         spin_ns: o.spin_us * 1000,
         max_ticks: (o.duration_s * o.rate_hz as f64) as u64,
@@ -73,7 +73,7 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
         None => None,
     };
     // After the recorder's writer thread exists: it must not inherit the real-time policy.
-    apply_scheduling(o.cpu, o.fifo);
+    let realtime = apply_scheduling(o, memory_locked);
     let mut stats = run_board(
         &ep,
         &mut board,
@@ -91,6 +91,7 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
         stats.recorded = Some(summary.written);
         stats.dropped = Some(summary.dropped);
     }
+    stats.realtime = Some(realtime);
     if o.json {
         print_json(&stats)
     } else {
@@ -129,25 +130,47 @@ fn start_recorder(
             o.namespace
         ),
         start_paused: false,
+        metadata: [
+            ("scenario", o.config.display().to_string()),
+            ("overrides", o.overrides.join(" ")),
+            ("rate_hz", o.rate_hz.to_string()),
+            ("namespace", o.namespace.clone()),
+            (
+                "command_line",
+                std::env::args().collect::<Vec<_>>().join(" "),
+            ),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect(),
+        period_ns: 1_000_000_000 / o.rate_hz,
     };
     Recorder::start(path, &options)
         .map_err(|e| format!("--record: {e}"))
         .input()
 }
 
-/// Pins the calling thread to `cpu` and raises it to SCHED_FIFO `fifo`; a refusal is a warning.
-fn apply_scheduling(cpu: Option<usize>, fifo: Option<i32>) {
-    use crate::rt::sched::{SchedPolicy, pin_to_cpu, set_policy};
-    if let Some(cpu) = cpu
-        && let Err(e) = pin_to_cpu(cpu)
-    {
-        eprintln!("vic-board: warning: cannot pin to CPU {cpu}: {e}");
-    }
-    if let Some(prio) = fifo
-        && let Err(e) = set_policy(SchedPolicy::Fifo(prio))
-    {
-        eprintln!("vic-board: warning: SCHED_FIFO {prio} refused ({e}); running unprivileged");
-    }
+/// Applies the real-time settings to the calling thread (the loop's) and says on stderr what
+/// is in force and what the OS refused (the loop runs on either way).
+fn apply_scheduling(o: &BoardOptions, memory_locked: bool) -> crate::rt::sched::RtSettings {
+    use crate::rt::sched::{RtRequest, apply_realtime};
+    let mut req = if o.no_rt {
+        RtRequest::none()
+    } else {
+        RtRequest::default_rt()
+    };
+    req.fifo = if o.no_rt { None } else { o.fifo };
+    req.cpu = o.cpu;
+    req.spin_us = o.spin_us;
+    let slack = crate::rt::realtime::set_timer_slack_1ns();
+    let got = apply_realtime(&req, memory_locked, slack);
+    let label = if got.refused.is_empty() {
+        "real-time"
+    } else {
+        "warning: real-time"
+    };
+    eprintln!("vic-board: {label}: {}", got.describe());
+    got
 }
 
 fn print_stats(stats: &BoardStats) {

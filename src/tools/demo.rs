@@ -35,8 +35,10 @@ pub struct DemoOptions {
     /// Plan files to use instead of planning.
     pub stiffness_plan: Option<PathBuf>,
     pub feedback_plan: Option<PathBuf>,
-    /// Board spin before each deadline [µs].
-    pub spin_us: u64,
+    /// Board spin before each deadline [µs] (None: the board's default).
+    pub spin_us: Option<u64>,
+    /// Start the board with `--no-rt`.
+    pub no_rt: bool,
     pub json: bool,
 }
 
@@ -223,10 +225,14 @@ fn scenario_args(cmd: &mut Command, o: &DemoOptions) {
 fn start_board(o: &DemoOptions, bin: &Path, namespace: &str) -> anyhow::Result<Child> {
     let mut cmd = Command::new(bin);
     scenario_args(&mut cmd, o);
-    cmd.args(["--namespace", namespace, "--json"])
-        .args(["--spin-us", &o.spin_us.to_string()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit());
+    cmd.args(["--namespace", namespace, "--json"]);
+    if let Some(spin) = o.spin_us {
+        cmd.args(["--spin-us", &spin.to_string()]);
+    }
+    if o.no_rt {
+        cmd.arg("--no-rt");
+    }
+    cmd.stdout(Stdio::piped()).stderr(Stdio::inherit());
     cmd.spawn()
         .map_err(|e| anyhow!("cannot start {}: {e}", bin.display()))
 }
@@ -347,6 +353,12 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
         num(&a["p50"]),
         num(&a["p99"]),
     );
+    // The board says which real-time settings were in force (vic-board's `realtime`).
+    if let Ok(rt) =
+        serde_json::from_value::<crate::rt::sched::RtSettings>(stats["realtime"].clone())
+    {
+        println!("board real-time settings: {}", rt.describe());
+    }
 }
 
 #[cfg(test)]
@@ -363,7 +375,8 @@ mod tests {
             plans_dir: None,
             stiffness_plan: None,
             feedback_plan: None,
-            spin_us: 0,
+            spin_us: None,
+            no_rt: false,
             json: true,
         }
     }

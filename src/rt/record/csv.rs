@@ -1,9 +1,61 @@
 //! The CSV rows of a recording: the nine columns `vic identify` reads, then the board's extra
 //! columns (prefixed `x_`, which the log reader ignores), one row per tick.
 
-use super::Sample;
+use super::{RecordOptions, Sample, Sink};
 use std::fmt::Write as _;
 use std::io::{self, Write};
+
+/// The CSV file of a recording: a banner, the header, one row per tick, comments for gaps.
+pub(super) struct CsvSink {
+    out: io::BufWriter<std::fs::File>,
+    line: String,
+    joints: usize,
+}
+
+impl CsvSink {
+    /// Writes the banner and the header to `file`.
+    pub(super) fn start(file: std::fs::File, opts: &RecordOptions) -> io::Result<CsvSink> {
+        let mut out = io::BufWriter::with_capacity(1 << 16, file);
+        writeln!(
+            out,
+            "# vic-board recording v1: {} joint(s), queue {} ticks{}{}",
+            opts.joints,
+            opts.capacity,
+            if opts.banner.is_empty() { "" } else { "; " },
+            opts.banner.replace('\n', " ")
+        )?;
+        out.write_all(header(opts.joints).as_bytes())?;
+        out.write_all(b"\n")?;
+        out.flush()?;
+        Ok(CsvSink {
+            out,
+            line: String::with_capacity(1024),
+            joints: opts.joints,
+        })
+    }
+}
+
+impl Sink for CsvSink {
+    fn sample(&mut self, s: &Sample, t0_ns: u64) -> io::Result<()> {
+        self.line.clear();
+        if !log_columns_finite(s) {
+            self.line.push_str("# non-finite: ");
+        }
+        format_row(&mut self.line, s, t0_ns, self.joints);
+        self.line.push('\n');
+        self.out.write_all(self.line.as_bytes())
+    }
+    fn gap(&mut self, n: u64, first: u64, _log_time_ns: u64) -> io::Result<()> {
+        gap_line(&mut self.out, n, first)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.out.flush()
+    }
+    fn finish(&mut self) -> io::Result<()> {
+        self.out.flush()?;
+        self.out.get_ref().sync_data()
+    }
+}
 
 /// The nine columns a log must contain (in any order), as `vic identify` reads them.
 pub const LOG_COLUMNS: [&str; 9] = [
@@ -51,7 +103,7 @@ pub fn header(joints: usize) -> String {
 }
 
 /// Appends the fields of `s` in the order of [`header`].
-pub(super) fn format_row(line: &mut String, s: &Sample, t0_ns: u64, joints: usize) {
+pub(crate) fn format_row(line: &mut String, s: &Sample, t0_ns: u64, joints: usize) {
     let t = s.deadline_ns.saturating_sub(t0_ns) as f64 * 1e-9;
     let _ = write!(
         line,
@@ -91,7 +143,7 @@ pub(super) fn format_row(line: &mut String, s: &Sample, t0_ns: u64, joints: usiz
 }
 
 /// Whether the nine log columns of `s` are finite (a plant fault makes them NaN).
-pub(super) fn log_columns_finite(s: &Sample) -> bool {
+pub(crate) fn log_columns_finite(s: &Sample) -> bool {
     [
         s.q[0],
         s.qd[0],
@@ -107,7 +159,7 @@ pub(super) fn log_columns_finite(s: &Sample) -> bool {
 }
 
 /// The comment line that marks `n` ticks lost from tick `first` on.
-pub(super) fn gap_line(out: &mut impl Write, n: u64, first: u64) -> io::Result<()> {
+pub(crate) fn gap_line(out: &mut impl Write, n: u64, first: u64) -> io::Result<()> {
     writeln!(
         out,
         "# gap: {n} ticks dropped (ticks {first} to {}): recording queue full",

@@ -1,9 +1,10 @@
-//! Recording every board tick to a CSV log, from a thread outside the 1 kHz loop.
+//! Recording every board tick to a CSV log or an MCAP file, from a thread outside the 1 kHz loop,
+//! and recording a whole namespace from another process ([`record_namespace`]).
 //!
 //! The loop holds a [`RecordProducer`]: [`RecordProducer::push`] copies one [`Sample`] into a
 //! bounded single-producer single-consumer ring buffer (`rtrb`, allocated once at start) and never
 //! allocates, locks or blocks. A writer thread owned by the [`Recorder`] pops the samples and
-//! writes them to the file through a `BufWriter`. When the queue is full the sample is dropped and
+//! writes them to the file (CSV or MCAP, chosen by the file's extension: [`RecordFormat`]). When the queue is full the sample is dropped and
 //! counted, never silently: the file marks the gap (see below), and [`Recorder::finish`] returns
 //! the ticks written and dropped.
 //!
@@ -31,15 +32,28 @@
 //! follows each gap (or at the end of the file when the run ended during a gap). A row whose
 //! nine log columns are not all finite (a plant fault) is written as a comment
 //! `# non-finite: <row>` so that the file stays readable.
+//!
+//! An MCAP recording (`.mcap`) holds the same fields per tick as JSON messages on the channel
+//! [`TICK_TOPIC`] and one message per gap on [`GAP_TOPIC`]; see [`mcap_file`].
 
 mod csv;
+mod error;
+mod external;
+pub mod mcap_file;
+mod read;
+mod schema;
 
 pub use csv::{EXTRA_COLUMN_PREFIX, LOG_COLUMNS, LOG_HEADER, header};
+pub use error::RecordError;
+pub use external::{ExternalOptions, ExternalSummary, TopicCount, record_namespace};
+pub use mcap_file::{GAP_TOPIC, TICK_TOPIC};
+pub use read::{BoardRecording, read_board_mcap, write_csv};
 
 use crate::rt::board::{Board, Outputs};
 use crate::rt::transport::MAX_JOINTS;
-use csv::{format_row, gap_line, log_columns_finite};
-use std::io::{self, Write};
+use csv::CsvSink;
+use mcap_file::McapSink;
+use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -149,6 +163,36 @@ impl RecordProducer {
     }
 }
 
+/// The file format of a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordFormat {
+    /// The CSV log of `vic identify` (`.csv`).
+    Csv,
+    /// MCAP with JSON-schema channels, lz4-compressed chunks (`.mcap`): what Foxglove,
+    /// PlotJuggler and rosbag2 open.
+    Mcap,
+}
+
+impl RecordFormat {
+    /// The format named by the extension of `path` (`.csv` or `.mcap`, any case).
+    pub fn from_path(path: &Path) -> Result<RecordFormat, RecordError> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("csv") => Ok(RecordFormat::Csv),
+            Some("mcap") => Ok(RecordFormat::Mcap),
+            _ => Err(RecordError::Format {
+                path: path.to_path_buf(),
+                message: "the file name must end in .csv or .mcap (the format is chosen by \
+                          the extension)"
+                    .into(),
+            }),
+        }
+    }
+}
+
 /// Options of a recording.
 #[derive(Debug, Clone)]
 pub struct RecordOptions {
@@ -160,6 +204,11 @@ pub struct RecordOptions {
     pub banner: String,
     /// Start with the writer paused (tests of the overflow marking).
     pub start_paused: bool,
+    /// Key-value pairs of the MCAP file's metadata record (scenario, command line, …); the CSV
+    /// has its banner instead.
+    pub metadata: std::collections::BTreeMap<String, String>,
+    /// The tick period [ns] (the MCAP file's metadata, and the log time of a trailing gap).
+    pub period_ns: u64,
 }
 
 impl Default for RecordOptions {
@@ -169,6 +218,8 @@ impl Default for RecordOptions {
             joints: 2,
             banner: String::new(),
             start_paused: false,
+            metadata: Default::default(),
+            period_ns: 1_000_000,
         }
     }
 }
@@ -205,8 +256,9 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Creates `path` (truncating it), writes the banner and the header, and starts the writer
-    /// thread. The queue is allocated here, once.
+    /// Creates `path` (truncating it) in the format of its extension ([`RecordFormat`]), writes
+    /// the file's header (the CSV's banner and column names, the MCAP's schemas, channels and
+    /// metadata), and starts the writer thread. The queue is allocated here, once.
     pub fn start(path: &Path, opts: &RecordOptions) -> io::Result<Recorder> {
         if opts.capacity == 0 || !(1..=MAX_JOINTS).contains(&opts.joints) {
             return Err(io::Error::new(
@@ -217,20 +269,14 @@ impl Recorder {
                 ),
             ));
         }
+        let format = RecordFormat::from_path(path)
+            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
         let file = std::fs::File::create(path)
             .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
-        let mut out = io::BufWriter::with_capacity(1 << 16, file);
-        writeln!(
-            out,
-            "# vic-board recording v1: {} joint(s), queue {} ticks{}{}",
-            opts.joints,
-            opts.capacity,
-            if opts.banner.is_empty() { "" } else { "; " },
-            opts.banner.replace('\n', " ")
-        )?;
-        out.write_all(header(opts.joints).as_bytes())?;
-        out.write_all(b"\n")?;
-        out.flush()?;
+        let sink: Box<dyn Sink> = match format {
+            RecordFormat::Csv => Box::new(CsvSink::start(file, opts)?),
+            RecordFormat::Mcap => Box::new(McapSink::start(file, opts).map_err(io::Error::other)?),
+        };
         let (tx, rx) = rtrb::RingBuffer::new(opts.capacity);
         let shared = Arc::new(Shared {
             done: AtomicBool::new(false),
@@ -240,10 +286,9 @@ impl Recorder {
         });
         let writer = {
             let shared = shared.clone();
-            let joints = opts.joints;
             std::thread::Builder::new()
                 .name("vic-record".into())
-                .spawn(move || write_loop(rx, out, &shared, joints))?
+                .spawn(move || write_loop(rx, sink, &shared))?
         };
         Ok(Recorder {
             producer: RecordProducer {
@@ -307,16 +352,27 @@ impl Drop for Recorder {
     }
 }
 
-/// The writer thread: pops samples, writes rows, marks gaps, flushes every 100 ms.
+/// Where the writer thread puts what it pops: one file format.
+trait Sink: Send {
+    /// Writes one tick; `t0_ns` is the deadline of the first tick written.
+    fn sample(&mut self, s: &Sample, t0_ns: u64) -> io::Result<()>;
+    /// Marks `n` ticks lost from tick `first` on, noticed at `log_time_ns`.
+    fn gap(&mut self, n: u64, first: u64, log_time_ns: u64) -> io::Result<()>;
+    /// Makes what was written so far readable (called every 100 ms).
+    fn flush(&mut self) -> io::Result<()>;
+    /// Completes the file and syncs it to disk.
+    fn finish(&mut self) -> io::Result<()>;
+}
+
+/// The writer thread: pops samples, writes them, marks gaps, flushes every 100 ms.
 fn write_loop(
     mut rx: rtrb::Consumer<Sample>,
-    mut out: io::BufWriter<std::fs::File>,
+    mut sink: Box<dyn Sink>,
     shared: &Shared,
-    joints: usize,
 ) -> io::Result<RecordSummary> {
     let mut summary = RecordSummary::default();
-    let mut line = String::with_capacity(1024);
     let mut t0_ns = None;
+    let mut last_deadline_ns = 0;
     let mut last_flush = std::time::Instant::now();
     loop {
         // Read `done` before draining: everything pushed before it was set is then visible.
@@ -339,36 +395,30 @@ fn write_loop(
             };
             let missing = s.tick.saturating_sub(expected).max(s.dropped_before);
             if missing > 0 {
-                gap_line(&mut out, missing, s.tick - missing)?;
+                sink.gap(missing, s.tick - missing, s.deadline_ns)?;
                 summary.dropped += missing;
                 summary.gaps += 1;
             }
-            line.clear();
-            if !log_columns_finite(&s) {
-                line.push_str("# non-finite: ");
-            }
-            format_row(&mut line, &s, t0, joints);
-            line.push('\n');
-            out.write_all(line.as_bytes())?;
+            sink.sample(&s, t0)?;
             if summary.written == 0 {
                 summary.first_tick = s.tick;
             }
             summary.written += 1;
             summary.last_tick = s.tick;
+            last_deadline_ns = s.deadline_ns;
         }
         if done {
             let trailing = shared.trailing_drops.load(Ordering::Relaxed);
             if trailing > 0 {
-                gap_line(&mut out, trailing, summary.last_tick + 1)?;
+                sink.gap(trailing, summary.last_tick + 1, last_deadline_ns)?;
                 summary.dropped += trailing;
                 summary.gaps += 1;
             }
-            out.flush()?;
-            out.get_ref().sync_data()?;
+            sink.finish()?;
             return Ok(summary);
         }
         if last_flush.elapsed() >= Duration::from_millis(100) {
-            out.flush()?;
+            sink.flush()?;
             last_flush = std::time::Instant::now();
         }
         if popped == 0 {

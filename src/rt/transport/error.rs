@@ -13,6 +13,22 @@ pub enum TransportError {
          stop it or use another --namespace"
     )]
     BoardAlreadyRunning { namespace: String, pid: u32 },
+    /// The private iceoryx2 directory is not safe to use.
+    #[error(
+        "iceoryx2 directory {path}: {reason}; remove it (or fix its owner and mode 700) and \
+         start again"
+    )]
+    UnsafeRoot { path: String, reason: String },
+    /// Another user owns one of the namespace's files.
+    #[error(
+        "namespace \"{namespace}\": {path} belongs to uid {owner}, not to you; another user's \
+         process holds this namespace: use another --namespace"
+    )]
+    ForeignFile {
+        namespace: String,
+        path: String,
+        owner: u32,
+    },
     /// Nothing answered: no board publishes telemetry in the namespace.
     #[error("no board in namespace \"{namespace}\"")]
     NoBoard { namespace: String },

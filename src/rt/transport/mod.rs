@@ -6,6 +6,7 @@
 //! - [`clock`]: the monotonic time base every process of the machine shares;
 //! - [`namespace`]: names, files and dead nodes of a namespace (iceoryx2's `global.prefix`, so
 //!   instances and parallel tests never see each other);
+//! - [`service`]: iceoryx2's `ipc` service with its global file in the private directory;
 //! - [`ports`]: one type per role ([`BoardPorts`], [`CentralPorts`], [`ToolPorts`]) with plain
 //!   `publish_*`, `latest_*` and `drain_*` methods; no caller touches an iceoryx2 builder.
 
@@ -14,11 +15,15 @@ pub mod error;
 pub mod namespace;
 pub mod ports;
 pub mod protocol;
+pub mod service;
 
 pub use clock::{monotonic_ns, process_session, session_seq};
 pub use error::TransportError;
 pub use namespace::{
-    DEFAULT_NAMESPACE, dead_nodes, namespace_files, prefix, remove_namespace, validate_namespace,
+    DEFAULT_NAMESPACE, check_namespace_owner, dead_nodes, ensure_root_dir, namespace_files, prefix,
+    remove_namespace, root_dir, validate_namespace,
 };
-pub use ports::{BoardObserver, BoardPorts, CentralPorts, STATE_BUFFER, ToolPorts, board_present};
+pub use ports::{
+    BoardObserver, BoardPorts, CentralPorts, RecorderPorts, STATE_BUFFER, ToolPorts, board_present,
+};
 pub use protocol::*;

@@ -2,8 +2,14 @@
 //! namespace, which becomes iceoryx2's `global.prefix`, so instances never see each other.
 //! This module checks names, finds the namespace's files and nodes, and removes what killed
 //! processes left behind.
+//!
+//! Two namespaces can never share a file: the prefix `vic_{ns}.` ends with a `.`, which no
+//! namespace contains, so `vic_a.` is not a prefix of `vic_a_b.`'s files. iceoryx2's own
+//! directory (services, nodes, the global management file) is a per-user directory,
+//! [`root_dir`], created 0700 and refused when another user owns it or can write into it.
 
 use super::error::TransportError;
+use super::service::Service as Ipc;
 use iceoryx2::prelude::*;
 
 /// The namespace used when none is given.
@@ -18,25 +24,115 @@ pub fn validate_namespace(ns: &str) -> Result<(), TransportError> {
     Ok(())
 }
 
-/// The iceoryx2 file prefix of a namespace.
+/// The iceoryx2 file prefix of a namespace: `vic_{ns}.` (the `.` is the delimiter that no
+/// namespace contains).
 pub fn prefix(ns: &str) -> String {
-    format!("vic_{ns}_")
+    format!("vic_{ns}.")
 }
 
-/// The iceoryx2 configuration of a namespace: the defaults with the namespace's prefix (no config
-/// file is looked up).
+/// The user's private iceoryx2 root directory: `/tmp/vic-{uid}/`.
+pub fn root_dir() -> std::path::PathBuf {
+    // SAFETY: geteuid(2) has no preconditions and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    std::path::PathBuf::from(format!("/tmp/vic-{uid}/"))
+}
+
+/// Creates the private root directory (0700) if it is missing and checks that it is safe: a
+/// directory (not a link), owned by this user, that nobody else may enter or write into.
+pub fn ensure_root_dir() -> Result<std::path::PathBuf, TransportError> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+    let dir = root_dir();
+    let unsafe_root = |reason: String| TransportError::UnsafeRoot {
+        path: dir.display().to_string(),
+        reason,
+    };
+    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(unsafe_root(format!("cannot create it: {e}"))),
+    }
+    let m = std::fs::symlink_metadata(&dir).map_err(|e| unsafe_root(e.to_string()))?;
+    // SAFETY: geteuid(2) has no preconditions and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    if !m.file_type().is_dir() {
+        return Err(unsafe_root("it is not a directory".into()));
+    }
+    if m.uid() != uid {
+        return Err(unsafe_root(format!(
+            "it belongs to uid {}, not to you (uid {uid})",
+            m.uid()
+        )));
+    }
+    if m.mode() & 0o077 != 0 {
+        return Err(unsafe_root(format!(
+            "its mode is {:o}: other users may enter it (it must be 700)",
+            m.mode() & 0o777
+        )));
+    }
+    Ok(dir)
+}
+
+/// The iceoryx2 configuration of a namespace: the defaults with the namespace's prefix and the
+/// user's private root directory (no config file is looked up).
 pub fn config(ns: &str) -> Result<Config, TransportError> {
     validate_namespace(ns)?;
     let mut cfg = Config::default();
     cfg.global.prefix = FileName::new(prefix(ns).as_bytes())
         .map_err(|e| TransportError::ipc(ns, "file prefix", e))?;
+    let root = root_dir();
+    let root = Path::new(root.to_string_lossy().as_bytes())
+        .map_err(|e| TransportError::ipc(ns, "root directory", e))?;
+    cfg.global.set_root_path(&root);
     Ok(cfg)
+}
+
+/// Refuses a namespace with a file another user owns (in `/dev/shm` or the root directory):
+/// such a file could be read or written by that user, or block the namespace.
+pub fn check_namespace_owner(ns: &str) -> Result<(), TransportError> {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid(2) has no preconditions and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    for path in namespace_paths(ns) {
+        if let Ok(m) = std::fs::symlink_metadata(&path)
+            && m.uid() != uid
+        {
+            return Err(TransportError::ForeignFile {
+                namespace: ns.to_string(),
+                path: path.display().to_string(),
+                owner: m.uid(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Every file of the namespace in `/dev/shm` and (recursively) in the root directory.
+fn namespace_paths(ns: &str) -> Vec<std::path::PathBuf> {
+    let prefix = prefix(ns);
+    let shm = std::path::Path::new("/dev/shm");
+    let mut found = Vec::new();
+    let mut dirs = vec![shm.to_path_buf(), root_dir()];
+    while let Some(dir) = dirs.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            let is_dir = e.file_type().map(|t| t.is_dir()).unwrap_or(false);
+            if is_dir && dir != shm {
+                dirs.push(e.path());
+            } else if !is_dir && name.starts_with(&prefix) {
+                found.push(e.path());
+            }
+        }
+    }
+    found
 }
 
 /// Nodes of killed processes in the namespace of `cfg`.
 pub(super) fn dead_nodes_in(cfg: &Config) -> usize {
     let mut n = 0;
-    let _ = Node::<ipc::Service>::list(cfg, |state| {
+    let _ = Node::<Ipc>::list(cfg, |state| {
         n += matches!(state, NodeState::Dead(_)) as usize;
         CallbackProgression::Continue
     });
@@ -51,7 +147,7 @@ pub fn dead_nodes(ns: &str) -> usize {
 /// Whether any node of the namespace is alive.
 pub(super) fn any_node_alive(cfg: &Config) -> bool {
     let mut alive = false;
-    let _ = Node::<ipc::Service>::list(cfg, |state| {
+    let _ = Node::<Ipc>::list(cfg, |state| {
         alive |= matches!(state, NodeState::Alive(_));
         CallbackProgression::Continue
     });
@@ -70,7 +166,7 @@ pub(super) fn live_nodes_named(
     use iceoryx2::node::NodeView;
     let mut alive = Vec::new();
     let mut dead = Vec::new();
-    Node::<ipc::Service>::list(cfg, |state| {
+    Node::<Ipc>::list(cfg, |state| {
         match state {
             NodeState::Alive(view) => {
                 if let Some(d) = view.details()
@@ -105,36 +201,18 @@ fn shm_files(ns: &str) -> impl Iterator<Item = std::fs::DirEntry> {
 /// Removes the shared-memory and node files a namespace left behind. Call it only when no
 /// process of the namespace runs any more. Returns how many files were removed.
 pub fn remove_namespace(ns: &str) -> usize {
-    let Ok(cfg) = config(ns) else {
+    if validate_namespace(ns).is_err() {
         return 0;
-    };
-    let prefix = prefix(ns);
-    let shm = std::path::Path::new("/dev/shm");
-    let mut removed = 0;
-    let mut dirs = vec![
-        shm.to_path_buf(),
-        std::path::PathBuf::from(cfg.global.root_path().to_string()),
-    ];
-    while let Some(dir) = dirs.pop() {
-        let Ok(entries) = std::fs::read_dir(&dir) else {
-            continue;
-        };
-        for e in entries.flatten() {
-            let path = e.path();
-            let name = e.file_name().to_string_lossy().to_string();
-            let is_dir = e.file_type().map(|t| t.is_dir()).unwrap_or(false);
-            if is_dir && dir != shm {
-                dirs.push(path);
-            } else if !is_dir && name.starts_with(&prefix) && std::fs::remove_file(&path).is_ok() {
-                removed += 1;
-            }
-        }
     }
-    removed
+    namespace_paths(ns)
+        .iter()
+        .filter(|p| std::fs::remove_file(p).is_ok())
+        .count()
 }
 
-/// Makes the namespace's files in `/dev/shm` owner-only. iceoryx2 creates its data segments 0600
-/// but its 16-byte `global_mgmt` file 0666; no other user may write any of them.
+/// Makes the namespace's files in `/dev/shm` owner-only. iceoryx2 creates them 0600 (its 0666
+/// global file lives in the private directory, [`super::service`]); this is a second line of
+/// defence against a client of the plain `ipc` service that created its own there.
 pub(super) fn restrict_namespace_files(ns: &str) {
     use std::os::unix::fs::PermissionsExt;
     for e in shm_files(ns) {
@@ -146,16 +224,32 @@ pub(super) fn restrict_namespace_files(ns: &str) {
     }
 }
 
-/// Files a namespace has in `/dev/shm` (for tests and `vic demo`'s final check).
+/// Files a namespace has in `/dev/shm` and in the private root directory (for tests and
+/// `vic demo`'s final check).
 pub fn namespace_files(ns: &str) -> Vec<String> {
-    shm_files(ns)
-        .map(|e| e.file_name().to_string_lossy().to_string())
+    namespace_paths(ns)
+        .iter()
+        .map(|p| p.display().to_string())
         .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn no_prefix_is_a_prefix_of_another_namespaces_files() {
+        // The delimiter is not in the grammar: whatever two valid names, one's prefix never
+        // starts another's file names.
+        let names = ["a", "a_b", "a-b", "ab", "a_", "vic", "vic_x"];
+        for a in names {
+            for b in names {
+                assert!(validate_namespace(a).is_ok() && validate_namespace(b).is_ok());
+                let file = format!("{}iceoryx2_x.details", prefix(b));
+                assert_eq!(file.starts_with(&prefix(a)), a == b, "{a} vs {b}");
+            }
+        }
+    }
 
     #[test]
     fn namespaces_are_checked() {

@@ -8,8 +8,11 @@
 
 use super::error::TransportError;
 use super::namespace::{any_node_alive, config, dead_nodes_in, live_nodes_named};
-use super::namespace::{remove_namespace, restrict_namespace_files};
+use super::namespace::{
+    check_namespace_owner, ensure_root_dir, remove_namespace, restrict_namespace_files,
+};
 use super::protocol::{BoardEvent, CommandSlice, Control, Disturbance, StateMsg, Telemetry};
+use super::service::Service as Ipc;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
@@ -73,11 +76,10 @@ pub const EVENT_SERVICE: &str = "vic/board-event";
 /// The board's node name: how a second board finds the first.
 const BOARD_NODE: &str = "vic-board";
 
-type Pub<T> = Publisher<ipc::Service, T, ()>;
-type Sub<T> = Subscriber<ipc::Service, T, ()>;
-type PubSubService<T> =
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
-type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+type Pub<T> = Publisher<Ipc, T, ()>;
+type Sub<T> = Subscriber<Ipc, T, ()>;
+type PubSubService<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>;
+type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
 
 /// One process's node in a namespace. Drop it after its ports (declare it last): the last process
 /// of a namespace to leave also removes the namespace's files, so that a clean shutdown leaves
@@ -85,7 +87,7 @@ type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Ser
 pub struct Session {
     namespace: String,
     config: Config,
-    node: Option<Node<ipc::Service>>,
+    node: Option<Node<Ipc>>,
     /// Dead nodes of the namespace whose resources were removed when this session opened.
     cleaned_dead_nodes: usize,
     /// Process ids of the other boards alive in the namespace when this session opened.
@@ -106,6 +108,10 @@ impl Session {
     fn open(ns: &str, node_name: &str) -> Result<Session, TransportError> {
         set_log_level(LogLevel::Error);
         let cfg = config(ns)?;
+        // The private directory first (iceoryx2 would create it with its own modes), then no
+        // file of the namespace may belong to someone else.
+        ensure_root_dir()?;
+        check_namespace_owner(ns)?;
         let name = NodeName::new(node_name).map_err(|e| TransportError::ipc(ns, "node name", e))?;
         // Dead nodes (killed processes) are counted before our node's creation, which already
         // removes some of their resources.
@@ -114,7 +120,7 @@ impl Session {
             .name(&name)
             .config(&cfg)
             .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
+            .create::<Ipc>()
             .map_err(|e| TransportError::ipc(ns, "cannot create a node", e))?;
         // The resources of the rest are removed here so that the services open cleanly.
         let (boards_alive, _) = live_nodes_named(ns, &cfg, BOARD_NODE, node.id())?;
@@ -129,7 +135,7 @@ impl Session {
         })
     }
 
-    fn node(&self) -> &Node<ipc::Service> {
+    fn node(&self) -> &Node<Ipc> {
         self.node
             .as_ref()
             .expect("the node lives as long as the session")
@@ -173,9 +179,13 @@ impl Session {
     }
 
     fn subscriber<T: Topic>(&self) -> Result<Sub<T>, TransportError> {
+        self.subscriber_with_buffer(T::BUFFER)
+    }
+
+    fn subscriber_with_buffer<T: Topic>(&self, buffer: usize) -> Result<Sub<T>, TransportError> {
         self.service::<T>()?
             .subscriber_builder()
-            .buffer_size(T::BUFFER)
+            .buffer_size(buffer)
             .create()
             .map_err(|e| match e {
                 SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
@@ -241,7 +251,7 @@ pub struct BoardPorts {
     commands: Sub<CommandSlice>,
     controls: Sub<Control>,
     disturbances: Sub<Disturbance>,
-    events: Notifier<ipc::Service>,
+    events: Notifier<Ipc>,
     session: Session,
 }
 
@@ -311,7 +321,7 @@ impl BoardPorts {
 pub struct BoardObserver {
     states: Sub<StateMsg>,
     telemetry: Sub<Telemetry>,
-    events: Listener<ipc::Service>,
+    events: Listener<Ipc>,
 }
 
 impl BoardObserver {
@@ -448,6 +458,56 @@ impl std::ops::Deref for ToolPorts {
     type Target = BoardObserver;
     fn deref(&self) -> &BoardObserver {
         &self.observer
+    }
+}
+
+/// A recorder's ports (`vic record`): it subscribes to every service of the namespace, with the
+/// largest buffer the services allow, and publishes nothing, so it cannot disturb the board.
+pub struct RecorderPorts {
+    states: Sub<StateMsg>,
+    telemetry: Sub<Telemetry>,
+    commands: Sub<CommandSlice>,
+    controls: Sub<Control>,
+    disturbances: Sub<Disturbance>,
+    session: Session,
+}
+
+impl RecorderPorts {
+    /// Connects a recorder to namespace `ns`.
+    pub fn open(ns: &str) -> Result<RecorderPorts, TransportError> {
+        let session = Session::open(ns, "vic-recorder")?;
+        Ok(RecorderPorts {
+            states: session.subscriber_with_buffer(STATE_BUFFER)?,
+            telemetry: session.subscriber_with_buffer(STATE_BUFFER)?,
+            commands: session.subscriber_with_buffer(STATE_BUFFER)?,
+            controls: session.subscriber_with_buffer(STATE_BUFFER)?,
+            disturbances: session.subscriber_with_buffer(STATE_BUFFER)?,
+            session,
+        })
+    }
+    /// The node this recorder holds in its namespace.
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+    /// Every state received since the last call, oldest first.
+    pub fn drain_states(&self, f: impl FnMut(&StateMsg)) -> usize {
+        drain(&self.states, f)
+    }
+    /// Every telemetry message received since the last call.
+    pub fn drain_telemetry(&self, f: impl FnMut(&Telemetry)) -> usize {
+        drain(&self.telemetry, f)
+    }
+    /// Every command slice received since the last call.
+    pub fn drain_commands(&self, f: impl FnMut(&CommandSlice)) -> usize {
+        drain(&self.commands, f)
+    }
+    /// Every control request received since the last call.
+    pub fn drain_controls(&self, f: impl FnMut(&Control)) -> usize {
+        drain(&self.controls, f)
+    }
+    /// Every disturbance received since the last call.
+    pub fn drain_disturbances(&self, f: impl FnMut(&Disturbance)) -> usize {
+        drain(&self.disturbances, f)
     }
 }
 

@@ -87,7 +87,7 @@ pub fn variants() -> Vec<Variant> {
         ),
         v(
             "spin-mlock",
-            "spin + mlockall (what vic-board --spin-us 100 does)",
+            "spin + mlockall (vic-board where SCHED_FIFO is refused and there is one CPU)",
             true,
             SPIN_US,
             true,
@@ -114,7 +114,7 @@ pub fn variants() -> Vec<Variant> {
         ),
         v(
             "fifo-spin",
-            "spin + SCHED_FIFO 80 + mlockall + pinned",
+            "spin + SCHED_FIFO 80 + mlockall + pinned (vic-board's default)",
             true,
             SPIN_US,
             true,

@@ -126,14 +126,66 @@ pub fn read_log<R: BufRead>(mut reader: R) -> Result<Vec<LogRow>, IdentifyError>
     Ok(rows)
 }
 
-/// Opens and reads a log file (see [`read_log`]).
+/// The first bytes of every MCAP file.
+const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+/// Opens and reads a log file: the CSV log (see [`read_log`]), or a board's MCAP recording
+/// (`vic-board --record FILE.mcap`, told by its magic bytes), whose joint 0 gives the same
+/// columns. Ticks whose nine values are not all finite are skipped, as the CSV recording
+/// writes them as comments.
 pub fn read_log_file(path: impl AsRef<Path>) -> Result<Vec<LogRow>, IdentifyError> {
     let path = path.as_ref();
-    let file = std::fs::File::open(path).map_err(|source| IdentifyError::Open {
+    let open_error = |source| IdentifyError::Open {
         path: path.to_owned(),
         source,
-    })?;
+    };
+    let mut file = std::fs::File::open(path).map_err(open_error)?;
+    let mut magic = [0u8; 8];
+    let is_mcap = match io::Read::read_exact(&mut file, &mut magic) {
+        Ok(()) => &magic == MCAP_MAGIC,
+        Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => false,
+        Err(e) => return Err(open_error(e)),
+    };
+    if is_mcap {
+        return Ok(rows_of_recording(&crate::rt::record::read_board_mcap(
+            path,
+        )?));
+    }
+    io::Seek::rewind(&mut file).map_err(open_error)?;
     read_log(io::BufReader::new(file))
+}
+
+/// Joint 0 of every tick of a board recording whose log columns are finite.
+fn rows_of_recording(rec: &crate::rt::record::BoardRecording) -> Vec<LogRow> {
+    let t0 = rec.samples.first().map_or(0, |s| s.deadline_ns);
+    rec.samples
+        .iter()
+        .map(|s| LogRow {
+            t: s.deadline_ns.saturating_sub(t0) as f64 * 1e-9,
+            q: s.q[0],
+            qd: s.qd[0],
+            qdd: s.qdd[0],
+            tau_ff: s.tau_ff[0],
+            stiffness: s.stiffness[0],
+            damping: s.damping[0],
+            q_d: s.q_d[0],
+            qd_d: s.qd_d[0],
+        })
+        .filter(|r| {
+            [
+                r.q,
+                r.qd,
+                r.qdd,
+                r.tau_ff,
+                r.stiffness,
+                r.damping,
+                r.q_d,
+                r.qd_d,
+            ]
+            .iter()
+            .all(|v| v.is_finite())
+        })
+        .collect()
 }
 
 /// Writes the header line [`LOG_HEADER`].

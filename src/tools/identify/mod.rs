@@ -119,6 +119,9 @@ impl LogRow {
 /// line number and the column name.
 #[derive(Debug, thiserror::Error)]
 pub enum IdentifyError {
+    /// A board's MCAP recording that cannot be read.
+    #[error(transparent)]
+    Recording(#[from] crate::rt::record::RecordError),
     #[error("{path}: cannot open: {source}")]
     Open { path: PathBuf, source: io::Error },
     #[error("line {line}: cannot read: {source}")]
