@@ -34,6 +34,33 @@ enum BenchCommand {
     ///
     /// Example: vic bench ipc --iterations 100000 --json
     Ipc(BenchIpcArgs),
+    /// One-way latency of a command and a state through two `vic bridge`s on loopback (Zenoh
+    /// TCP), beside the same ping-pong over shared memory and over bare Zenoh with the same
+    /// payload, all in the same run; the ratio to bare Zenoh.
+    ///
+    /// Example: vic bench bridge --iterations 20000 --json
+    #[cfg(feature = "zenoh")]
+    Bridge(BenchBridgeArgs),
+}
+
+#[cfg(feature = "zenoh")]
+#[derive(clap::Args)]
+#[command(mut_arg("json", |a| a.help(
+    "Print one JSON object: {shared_memory, zenoh, through_bridge: {p50_us, p99_us, max_us, n}, \
+     bridge: {p50_us, p99_us, zenoh_p50_us, zenoh_p99_us, ratio_p50, ratio_p99}}"
+)))]
+struct BenchBridgeArgs {
+    /// Round trips per channel (after 10 % more for warm-up).
+    #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u64).range(10..=10_000_000))]
+    iterations: u64,
+    /// The bridges' drain period of the local subscribers [µs].
+    #[arg(long, default_value_t = 250, value_parser = clap::value_parser!(u64).range(10..=100_000))]
+    poll_us: u64,
+    /// Loopback TCP port of the link (the bare Zenoh pair uses the next one).
+    #[arg(long, default_value_t = 17447)]
+    port: u16,
+    #[command(flatten)]
+    json: JsonArg,
 }
 
 #[derive(clap::Args)]
@@ -117,6 +144,15 @@ impl BenchArgs {
                 };
                 run_ipc(a.iterations, pair, a.json.json)
             }
+            #[cfg(feature = "zenoh")]
+            BenchCommand::Bridge(a) => vic::tools::bench_command::run_bridge(
+                &vic::tools::bench::bridge::Options {
+                    iterations: a.iterations,
+                    poll: std::time::Duration::from_micros(a.poll_us),
+                    port: a.port,
+                },
+                a.json.json,
+            ),
         }
     }
 }

@@ -2,6 +2,8 @@
 //! into `vic::tools`; errors end the process with exit code 2 (bad input) or 1 (a failure).
 
 mod bench;
+#[cfg(feature = "zenoh")]
+mod bridge;
 mod convert;
 mod demo;
 mod experiment;
@@ -82,6 +84,13 @@ enum Command {
     ///
     /// Example: vic monitor --namespace lab1
     Monitor(monitor::MonitorArgs),
+    /// One end of a namespace split across two hosts over Zenoh: beside the board
+    /// (`--side board`) or beside the central process (`--side central`). Messages cross as
+    /// their wire bytes with the sender's session, sequence number and time stamp.
+    ///
+    /// Example: vic bridge --side board --namespace lab1 --listen tcp/0.0.0.0:7447
+    #[cfg(feature = "zenoh")]
+    Bridge(bridge::BridgeArgs),
     /// Record a running namespace to MCAP from outside the board: states (1 kHz), command
     /// slices, control requests, disturbances and telemetry, each on its own JSON-schema channel
     /// (Foxglove and PlotJuggler open it as it is). States it missed are counted and marked.
@@ -122,6 +131,8 @@ impl Command {
             Command::Inject(a) => a.run(),
             Command::Status(a) => a.run(),
             Command::Monitor(a) => a.run(),
+            #[cfg(feature = "zenoh")]
+            Command::Bridge(a) => a.run(),
             Command::Identify(a) => a.run(),
             Command::Record(a) => a.run(),
             Command::Convert(a) => a.run(),

@@ -6,6 +6,8 @@
 //! [`board::BoardConfig`], a core plant and a policy.
 
 pub mod board;
+#[cfg(feature = "zenoh")]
+pub mod bridge;
 pub mod central;
 pub mod daemon;
 pub mod realtime;

@@ -88,3 +88,16 @@ pub fn run_ipc(iterations: u64, pair: PairRequest, json: bool) -> anyhow::Result
         Ok(())
     }
 }
+
+/// Two bridges on loopback against bare Zenoh and shared memory (`vic bench bridge`).
+#[cfg(feature = "zenoh")]
+pub fn run_bridge(opts: &crate::tools::bench::bridge::Options, json: bool) -> anyhow::Result<()> {
+    use crate::tools::bench::bridge;
+    let report = bridge::run(opts, progress(json)).runtime()?;
+    if json {
+        print_json(&report)
+    } else {
+        bridge::print(&report);
+        Ok(())
+    }
+}

@@ -15,6 +15,8 @@
 pub mod bench;
 pub mod bench_command;
 pub mod board_daemon;
+#[cfg(feature = "zenoh")]
+pub mod bridge_command;
 pub mod central_daemon;
 pub mod cli;
 pub mod demo;

@@ -360,6 +360,14 @@ impl BoardObserver {
         got
     }
 
+    /// Whether the board signalled an event since the last call, without blocking (a relay's
+    /// loop, e.g. the bridge, polls it).
+    pub fn take_event(&self) -> bool {
+        let mut got = false;
+        let _ = self.events.try_wait(|_| got = true);
+        got
+    }
+
     /// Waits up to `timeout` for telemetry from a board (woken by the board's events, no
     /// polling). `None`: no board answered.
     pub fn wait_for_telemetry(&self, timeout: Duration) -> Option<Telemetry> {

@@ -3,6 +3,8 @@
 //! ping-pong with the same payload ([`ipc`]). Each measures vic and its baseline in the same run
 //! and reports both distributions and their ratio.
 
+#[cfg(feature = "zenoh")]
+pub mod bridge;
 pub mod cyclictest;
 pub mod ipc;
 pub mod loop_bench;

@@ -1,0 +1,397 @@
+//! A namespace across two hosts: the board on one, the central process on the other, joined by
+//! Zenoh. One bridge runs on each host, beside the local daemon:
+//!
+//! ```text
+//!  host A                                         host B
+//!  board ⇄ iceoryx2 ⇄ bridge --side board ⇄ Zenoh ⇄ bridge --side central ⇄ iceoryx2 ⇄ central
+//! ```
+//!
+//! - towards the board: command slices, control requests (resets) and disturbances;
+//! - back: state, telemetry and the board's events.
+//!
+//! To the central process the bridge on host B *is* the board (it holds the board's ports, so a
+//! second board there is refused); to the board the bridge on host A is a central process and a
+//! tool. Messages cross as their bytes ([`wire`]) with the sender's session, sequence number
+//! and time stamp untouched, so the board validates them as it does local ones; the bridge only
+//! refuses what is not a message of this protocol (size, version) and counts it.
+//!
+//! **Time stamps.** The board checks a message's age against its own monotonic clock. Across
+//! hosts the two clocks differ by an unknown offset, so the bridge on the board's side re-stamps
+//! every message it forwards with its own receive time *only* when `restamp` is set; by default it
+//! keeps the sender's stamp, which is right on one machine (the two "hosts" of the test and the
+//! demo share a clock) and wrong across real hosts. Re-stamping trades the end-to-end age check
+//! for a link-local one: the age the board then sees is the time from the bridge to the board,
+//! and the link's own delay is bounded by the board's watchdog instead (a cut or slow link
+//! starves the board of fresh commands and it holds).
+//!
+//! **Wake-ups.** Zenoh delivers to callbacks, which hand each message to the bridge's thread
+//! through a channel: the thread sleeps in the channel until a message arrives or until the next
+//! drain of the local subscribers. iceoryx2 publish–subscribe has no wake-up unless the publisher
+//! notifies, and neither the board (1 kHz: a notification per tick would put a system call into
+//! its loop) nor the central process notifies per message, so the local side is drained every
+//! `poll` (default 250 µs), at absolute deadlines.
+
+pub mod wire;
+
+use crate::rt::transport::ports::Topic;
+use crate::rt::transport::protocol::{
+    BoardEvent, CommandSlice, Control, Disturbance, Header, StateMsg, Telemetry,
+};
+use crate::rt::transport::{BoardPorts, CentralPorts, ToolPorts, TransportError, monotonic_ns};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+use wire::{Malformed, Plain, decode, encode};
+use zenoh::Wait;
+
+/// Which daemon this bridge stands beside.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// Beside the board: forwards its state out, commands in.
+    Board,
+    /// Beside the central process: plays the board to it.
+    Central,
+}
+
+/// How this bridge reaches the other one.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Link {
+    /// Wait for the other bridge on this Zenoh endpoint (e.g. `tcp/0.0.0.0:7447`).
+    Listen(String),
+    /// Connect to the other bridge's endpoint (e.g. `tcp/robot.local:7447`).
+    Connect(String),
+}
+
+/// What a bridge is asked for.
+#[derive(Debug, Clone)]
+pub struct BridgeOptions {
+    /// The local iceoryx2 namespace.
+    pub namespace: String,
+    /// The name both bridges share: the key expressions are `vic/{link_name}/...`.
+    pub link_name: String,
+    pub side: Side,
+    pub link: Link,
+    /// Drain period of the local subscribers.
+    pub poll: Duration,
+    /// Re-stamp forwarded messages with the local receive time (across hosts whose clocks
+    /// differ); see the module documentation.
+    pub restamp: bool,
+}
+
+/// Messages counted per direction and kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct BridgeStats {
+    /// Forwarded from the local namespace to the link.
+    pub sent: Counts,
+    /// Forwarded from the link into the local namespace.
+    pub received: Counts,
+    /// Bytes from the link that were not a message of the expected size, or of this protocol
+    /// version (the board would refuse them; they are not forwarded).
+    pub malformed_size: u64,
+    pub malformed_version: u64,
+    /// Local publishes that failed (the local daemon gone, ports full).
+    pub local_errors: u64,
+}
+
+/// One count per kind of message.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Counts {
+    pub state: u64,
+    pub telemetry: u64,
+    pub event: u64,
+    pub command: u64,
+    pub control: u64,
+    pub disturbance: u64,
+}
+
+/// Why a bridge could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    #[error("zenoh: {what}: {message}")]
+    Zenoh { what: String, message: String },
+    #[error("--link-name {0:?}: use 1–32 characters of [A-Za-z0-9_-]")]
+    LinkName(String),
+}
+
+fn zenoh_error(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> BridgeError {
+    let what = what.into();
+    move |e| BridgeError::Zenoh {
+        what,
+        message: e.to_string(),
+    }
+}
+
+/// What arrives from the link, decoded.
+enum Inbound {
+    State(StateMsg),
+    Telemetry(Telemetry),
+    Event,
+    Command(CommandSlice),
+    Control(Control),
+    Disturbance(Disturbance),
+    Malformed(Malformed),
+}
+
+/// The key expression of a topic on a link: `vic/{link}/{service name without "vic/"}`.
+pub fn key<T: Topic>(link_name: &str) -> String {
+    let service = T::SERVICE.trim_start_matches("vic/");
+    format!("vic/{link_name}/{service}")
+}
+
+fn event_key(link_name: &str) -> String {
+    format!("vic/{link_name}/board-event")
+}
+
+fn check_link_name(name: &str) -> Result<(), BridgeError> {
+    let ok = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '-';
+    if name.is_empty() || name.len() > 32 || !name.chars().all(ok) {
+        return Err(BridgeError::LinkName(name.to_string()));
+    }
+    Ok(())
+}
+
+/// A Zenoh session for one end of the link: peer mode, no multicast scouting (the two bridges
+/// find each other by the endpoint they are given, nothing else on the network joins).
+fn open_session(link: &Link) -> Result<zenoh::Session, BridgeError> {
+    let mut config = zenoh::Config::default();
+    let (key, endpoint) = match link {
+        Link::Listen(e) => ("listen/endpoints", e),
+        Link::Connect(e) => ("connect/endpoints", e),
+    };
+    let set = |config: &mut zenoh::Config, k: &str, v: &str| {
+        config
+            .insert_json5(k, v)
+            .map_err(zenoh_error(format!("config {k} = {v}")))
+    };
+    set(&mut config, key, &serde_json::json!([endpoint]).to_string())?;
+    set(&mut config, "scouting/multicast/enabled", "false")?;
+    if matches!(link, Link::Connect(_)) {
+        // Keep retrying a link that is not up yet or was cut: the bridge outlives its peer.
+        set(&mut config, "connect/timeout_ms", "-1")?;
+        set(&mut config, "connect/exit_on_failure", "false")?;
+    }
+    zenoh::open(config)
+        .wait()
+        .map_err(zenoh_error(format!("opening the session on {endpoint}")))
+}
+
+/// Subscribes `key` and hands every sample, decoded as `T`, to `tx`.
+fn subscribe<T: Plain>(
+    session: &zenoh::Session,
+    key: String,
+    tx: &mpsc::Sender<Inbound>,
+    wrap: fn(T) -> Inbound,
+) -> Result<zenoh::pubsub::Subscriber<()>, BridgeError> {
+    let tx = tx.clone();
+    session
+        .declare_subscriber(key.clone())
+        .callback(move |sample| {
+            let bytes = sample.payload().to_bytes();
+            let _ = tx.send(match decode::<T>(&bytes) {
+                Ok(m) => wrap(m),
+                Err(e) => Inbound::Malformed(e),
+            });
+        })
+        .wait()
+        .map_err(zenoh_error(format!("subscribing {key}")))
+}
+
+type ZPub = zenoh::pubsub::Publisher<'static>;
+
+fn publisher(session: &zenoh::Session, key: String) -> Result<ZPub, BridgeError> {
+    session
+        .declare_publisher(key.clone())
+        // Control traffic: a late sample is worth less than the next one, never block the
+        // bridge behind a congested link.
+        .congestion_control(zenoh::qos::CongestionControl::Drop)
+        .priority(zenoh::qos::Priority::RealTime)
+        .express(true)
+        .wait()
+        .map_err(zenoh_error(format!("declaring {key}")))
+}
+
+fn put<T: Plain>(p: &ZPub, m: &T, stats: &mut u64, errors: &mut u64) {
+    match p.put(encode(m).to_vec()).wait() {
+        Ok(()) => *stats += 1,
+        Err(_) => *errors += 1,
+    }
+}
+
+/// The header as forwarded to the board: the sender's, or re-stamped with the local time.
+fn restamped(mut h: Header, restamp: bool) -> Header {
+    if restamp {
+        h.time_ns = monotonic_ns();
+    }
+    h
+}
+
+fn count_malformed(s: &mut BridgeStats, m: Malformed) {
+    match m {
+        Malformed::Size { .. } => s.malformed_size += 1,
+        Malformed::Version(_) => s.malformed_version += 1,
+    }
+}
+
+/// Runs a bridge until `stop` is set; `report` is called about once a second with the counts.
+pub fn run(
+    o: &BridgeOptions,
+    stop: &AtomicBool,
+    mut report: impl FnMut(&BridgeStats),
+) -> Result<BridgeStats, BridgeError> {
+    check_link_name(&o.link_name)?;
+    let session = open_session(&o.link)?;
+    let (tx, rx) = mpsc::channel();
+    let mut stats = BridgeStats::default();
+    let name = &o.link_name;
+    let mut next_report = Instant::now() + Duration::from_secs(1);
+    let mut tick = |stats: &BridgeStats| {
+        if Instant::now() >= next_report {
+            report(stats);
+            next_report += Duration::from_secs(1);
+        }
+    };
+    match o.side {
+        Side::Board => {
+            let central = CentralPorts::open(&o.namespace)?;
+            let tool = ToolPorts::open(&o.namespace)?;
+            let _subs = (
+                subscribe::<CommandSlice>(&session, key::<CommandSlice>(name), &tx, Inbound::Command)?,
+                subscribe::<Control>(&session, key::<Control>(name), &tx, Inbound::Control)?,
+                subscribe::<Disturbance>(&session, key::<Disturbance>(name), &tx, Inbound::Disturbance)?,
+            );
+            let state = publisher(&session, key::<StateMsg>(name))?;
+            let telemetry = publisher(&session, key::<Telemetry>(name))?;
+            let events = publisher(&session, event_key(name))?;
+            each_period(o.poll, stop, &rx, |inbound, s: &mut BridgeStats| {
+                let r = &mut s.received;
+                let ok = match inbound {
+                    Inbound::Command(mut c) => {
+                        c.header = restamped(c.header, o.restamp);
+                        r.command += 1;
+                        central.publish_command(&c).is_ok()
+                    }
+                    Inbound::Control(mut c) => {
+                        c.header = restamped(c.header, o.restamp);
+                        r.control += 1;
+                        central.publish_control(&c).is_ok()
+                    }
+                    Inbound::Disturbance(mut d) => {
+                        d.header = restamped(d.header, o.restamp);
+                        r.disturbance += 1;
+                        tool.publish_disturbance(&d).is_ok()
+                    }
+                    Inbound::Malformed(m) => {
+                        count_malformed(s, m);
+                        true
+                    }
+                    _ => true,
+                };
+                s.local_errors += (!ok) as u64;
+            }, |s| {
+                let (sent, errors) = (&mut s.sent, &mut s.local_errors);
+                central.drain_states(|m| put(&state, m, &mut sent.state, errors));
+                if let Some(t) = central.latest_telemetry() {
+                    put(&telemetry, &t, &mut sent.telemetry, errors);
+                }
+                if central.take_event() {
+                    match events.put(Vec::<u8>::new()).wait() {
+                        Ok(()) => sent.event += 1,
+                        Err(_) => *errors += 1,
+                    }
+                }
+                tick(s);
+            }, &mut stats);
+        }
+        Side::Central => {
+            let board = BoardPorts::open(&o.namespace)?;
+            let _subs = (
+                subscribe::<StateMsg>(&session, key::<StateMsg>(name), &tx, Inbound::State)?,
+                subscribe::<Telemetry>(&session, key::<Telemetry>(name), &tx, Inbound::Telemetry)?,
+                session
+                    .declare_subscriber(event_key(name))
+                    .callback({
+                        let tx = tx.clone();
+                        move |_| {
+                            let _ = tx.send(Inbound::Event);
+                        }
+                    })
+                    .wait()
+                    .map_err(zenoh_error("subscribing the board's events"))?,
+            );
+            let commands = publisher(&session, key::<CommandSlice>(name))?;
+            let controls = publisher(&session, key::<Control>(name))?;
+            let disturbances = publisher(&session, key::<Disturbance>(name))?;
+            each_period(o.poll, stop, &rx, |inbound, s: &mut BridgeStats| {
+                let r = &mut s.received;
+                let ok = match inbound {
+                    Inbound::State(m) => {
+                        r.state += 1;
+                        board.publish_state(&m).is_ok()
+                    }
+                    Inbound::Telemetry(t) => {
+                        r.telemetry += 1;
+                        let ok = board.publish_telemetry(&t).is_ok();
+                        board.notify(BoardEvent::Telemetry);
+                        ok
+                    }
+                    Inbound::Event => {
+                        r.event += 1;
+                        board.notify(BoardEvent::Applied);
+                        true
+                    }
+                    Inbound::Malformed(m) => {
+                        count_malformed(s, m);
+                        true
+                    }
+                    _ => true,
+                };
+                s.local_errors += (!ok) as u64;
+            }, |s| {
+                let (sent, errors) = (&mut s.sent, &mut s.local_errors);
+                board.drain_commands(|m| put(&commands, m, &mut sent.command, errors));
+                board.drain_controls(|m| put(&controls, m, &mut sent.control, errors));
+                board.drain_disturbances(|m| put(&disturbances, m, &mut sent.disturbance, errors));
+                tick(s);
+            }, &mut stats);
+        }
+    }
+    drop(tx);
+    let _ = session.close().wait();
+    Ok(stats)
+}
+
+/// The bridge's loop: forwards what arrives from the link as it arrives (`inbound`), and drains
+/// the local side (`drain`) at every absolute deadline `poll` apart, until `stop`.
+fn each_period(
+    poll: Duration,
+    stop: &AtomicBool,
+    rx: &mpsc::Receiver<Inbound>,
+    mut inbound: impl FnMut(Inbound, &mut BridgeStats),
+    mut drain: impl FnMut(&mut BridgeStats),
+    stats: &mut BridgeStats,
+) {
+    let mut deadline = Instant::now() + poll;
+    while !stop.load(Ordering::Relaxed) {
+        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok(m) => {
+                // Everything that arrived meanwhile goes on at once, before the next drain.
+                inbound(m, stats);
+                while let Ok(m) = rx.try_recv() {
+                    inbound(m, stats);
+                }
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            drain(stats);
+            // Absolute deadlines; a late drain skips the periods it missed.
+            while deadline <= now {
+                deadline += poll;
+            }
+        }
+    }
+}

@@ -1,0 +1,307 @@
+//! `vic bench bridge`: the one-way latency of a command and a state through two bridges on
+//! loopback, beside the same ping–pong over shared memory (one namespace, no bridge) and over
+//! bare Zenoh (two sessions, the same payload size, no iceoryx2), all measured in the same run.
+//!
+//! One-way latency is half the round trip of a command answered by a state: the echo thread
+//! plays the board (it answers each command with a state of the same sequence number), the
+//! measuring thread plays the central process. Both spin on their subscribers, so the figures
+//! are the transport's and the bridges', not a reader's poll period.
+
+use crate::rt::bridge::{self, BridgeOptions, Link, Side};
+use crate::rt::transport::protocol::{CommandSlice, Header, StateMsg};
+use crate::rt::transport::{BoardPorts, CentralPorts, monotonic_ns, remove_namespace};
+use hdrhistogram::Histogram;
+use serde::Serialize;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Round trips per channel (after 10 % more for warm-up).
+    pub iterations: u64,
+    /// The bridges' drain period.
+    pub poll: Duration,
+    /// Loopback TCP port of the link (the bare Zenoh pair uses the next one).
+    pub port: u16,
+}
+
+/// One channel's one-way latency [µs].
+#[derive(Debug, Clone, Serialize)]
+pub struct Latency {
+    pub p50_us: f64,
+    pub p99_us: f64,
+    pub max_us: f64,
+    pub n: u64,
+}
+
+/// The report; `bridge` is the object the issue's scripts read.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub iterations: u64,
+    pub poll_us: f64,
+    pub payload_bytes: usize,
+    pub shared_memory: Latency,
+    pub zenoh: Latency,
+    pub through_bridge: Latency,
+    pub bridge: Ratios,
+}
+
+/// The bridge against bare Zenoh.
+#[derive(Debug, Clone, Serialize)]
+pub struct Ratios {
+    pub p50_us: f64,
+    pub p99_us: f64,
+    pub zenoh_p50_us: f64,
+    pub zenoh_p99_us: f64,
+    pub ratio_p50: f64,
+    pub ratio_p99: f64,
+}
+
+/// Why the benchmark could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error(transparent)]
+    Bridge(#[from] bridge::BridgeError),
+    #[error(transparent)]
+    Transport(#[from] crate::rt::transport::TransportError),
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    #[error("no answer within 2 s on the {0} channel (round trip {1})")]
+    Timeout(&'static str, u64),
+}
+
+fn latency(h: &Histogram<u64>) -> Latency {
+    // Recorded in nanoseconds of one-way time.
+    let us = |v: u64| v as f64 / 1000.0;
+    Latency {
+        p50_us: us(h.value_at_quantile(0.5)),
+        p99_us: us(h.value_at_quantile(0.99)),
+        max_us: us(h.max()),
+        n: h.len(),
+    }
+}
+
+fn histogram() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, 10_000_000_000, 3).expect("valid bounds")
+}
+
+/// The echo: answers every command in `ns` with a state of the same sequence number, spinning,
+/// until `stop`.
+fn echo(ns: String, stop: Arc<AtomicBool>, ready: Arc<AtomicBool>) -> Result<(), BenchError> {
+    let board = BoardPorts::open(&ns)?;
+    ready.store(true, Ordering::Release);
+    while !stop.load(Ordering::Relaxed) {
+        board.drain_commands(|c| {
+            let s = StateMsg {
+                header: Header::new(c.header.seq, monotonic_ns()),
+                ..Default::default()
+            };
+            let _ = board.publish_state(&s);
+        });
+        std::hint::spin_loop();
+    }
+    Ok(())
+}
+
+/// Ping–pong from a central process in `ns` (the echo answers somewhere behind it).
+fn ping_pong(ns: &str, iterations: u64, channel: &'static str) -> Result<Histogram<u64>, BenchError> {
+    let central = CentralPorts::open(ns)?;
+    let mut h = histogram();
+    let warm = iterations / 10;
+    for i in 1..=warm + iterations {
+        let c = CommandSlice {
+            header: Header::new(i, monotonic_ns()),
+            ..Default::default()
+        };
+        let t = Instant::now();
+        central.publish_command(&c)?;
+        let mut answered = false;
+        while !answered {
+            central.drain_states(|s| answered |= s.header.seq == i);
+            if t.elapsed() > Duration::from_secs(2) {
+                return Err(BenchError::Timeout(channel, i));
+            }
+            std::hint::spin_loop();
+        }
+        if i > warm {
+            let _ = h.record((t.elapsed().as_nanos() / 2) as u64);
+        }
+    }
+    Ok(h)
+}
+
+/// Runs the echo in a thread beside `f`, stops it after.
+fn with_echo<T>(ns: &str, f: impl FnOnce() -> Result<T, BenchError>) -> Result<T, BenchError> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let ready = Arc::new(AtomicBool::new(false));
+    let echo = {
+        let (ns, stop, ready) = (ns.to_string(), stop.clone(), ready.clone());
+        std::thread::spawn(move || echo(ns, stop, ready))
+    };
+    while !ready.load(Ordering::Acquire) && !echo.is_finished() {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let result = if echo.is_finished() {
+        Err(BenchError::Timeout("echo start", 0))
+    } else {
+        f()
+    };
+    stop.store(true, Ordering::Relaxed);
+    let echoed = echo.join().expect("the echo thread does not panic");
+    let value = result?;
+    echoed?;
+    Ok(value)
+}
+
+fn unique(tag: &str) -> String {
+    format!("{tag}{}x{}", std::process::id(), monotonic_ns() % 1_000_000)
+}
+
+/// Bare Zenoh: two sessions on loopback, a ping answered by a pong of the state's size.
+fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> {
+    let z = |e: zenoh::Error| BenchError::Zenoh(e.to_string());
+    let endpoint = format!(r#"["tcp/127.0.0.1:{port}"]"#);
+    let session = |key: &str| -> Result<zenoh::Session, BenchError> {
+        let mut c = zenoh::Config::default();
+        c.insert_json5(key, &endpoint).map_err(z)?;
+        c.insert_json5("scouting/multicast/enabled", "false")
+            .map_err(z)?;
+        zenoh::open(c).wait().map_err(z)
+    };
+    let a = session("listen/endpoints")?;
+    let b = session("connect/endpoints")?;
+    let pong = b.declare_publisher("vicbench/pong").express(true).wait().map_err(z)?;
+    let _echo = b
+        .declare_subscriber("vicbench/ping")
+        .callback(move |s| {
+            let _ = pong.put(s.payload().to_bytes().to_vec()).wait();
+        })
+        .wait()
+        .map_err(z)?;
+    let answers = a.declare_subscriber("vicbench/pong").wait().map_err(z)?;
+    let ping = a.declare_publisher("vicbench/ping").express(true).wait().map_err(z)?;
+    // Let the two sessions learn each other's subscribers.
+    let payload = vec![0u8; size_of::<StateMsg>()];
+    let t0 = Instant::now();
+    loop {
+        ping.put(payload.clone()).wait().map_err(z)?;
+        if answers.recv_timeout(Duration::from_millis(100)).map_err(z)?.is_some() {
+            break;
+        }
+        if t0.elapsed() > Duration::from_secs(5) {
+            return Err(BenchError::Timeout("zenoh", 0));
+        }
+    }
+    let mut h = histogram();
+    let warm = iterations / 10;
+    for i in 0..warm + iterations {
+        let t = Instant::now();
+        ping.put(payload.clone()).wait().map_err(z)?;
+        if answers.recv_timeout(Duration::from_secs(2)).map_err(z)?.is_none() {
+            return Err(BenchError::Timeout("zenoh", i));
+        }
+        if i >= warm {
+            let _ = h.record((t.elapsed().as_nanos() / 2) as u64);
+        }
+    }
+    let _ = a.close().wait();
+    let _ = b.close().wait();
+    Ok(h)
+}
+
+/// Two bridges in threads, the echo behind the board-side one, the ping–pong in front of the
+/// central-side one.
+fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
+    let (host_a, host_b) = (unique("bba"), unique("bbb"));
+    let endpoint = format!("tcp/127.0.0.1:{}", o.port);
+    let stop = Arc::new(AtomicBool::new(false));
+    let spawn = |side, ns: &str, link| {
+        let options = BridgeOptions {
+            namespace: ns.to_string(),
+            link_name: format!("bench{}", std::process::id()),
+            side,
+            link,
+            poll: o.poll,
+            restamp: false,
+        };
+        let stop = stop.clone();
+        std::thread::spawn(move || bridge::run(&options, &stop, |_| {}))
+    };
+    let result = with_echo(&host_a, || {
+        let a = spawn(Side::Board, &host_a, Link::Listen(endpoint.clone()));
+        let b = spawn(Side::Central, &host_b, Link::Connect(endpoint.clone()));
+        // The link is up when a first round trip comes back.
+        let t0 = Instant::now();
+        let h = loop {
+            match ping_pong(&host_b, 10, "bridge") {
+                Ok(_) => break ping_pong(&host_b, o.iterations, "bridge"),
+                Err(_) if t0.elapsed() < Duration::from_secs(10) => continue,
+                Err(e) => break Err(e),
+            }
+        };
+        stop.store(true, Ordering::Relaxed);
+        for t in [a, b] {
+            t.join().expect("a bridge thread does not panic")?;
+        }
+        h
+    });
+    remove_namespace(&host_a);
+    remove_namespace(&host_b);
+    result
+}
+
+/// Runs the three channels in turn.
+pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchError> {
+    progress("shared memory (one namespace, no bridge)");
+    let direct_ns = unique("bbd");
+    let direct = with_echo(&direct_ns, || ping_pong(&direct_ns, o.iterations, "shared memory"));
+    remove_namespace(&direct_ns);
+    let direct = direct?;
+    progress("bare Zenoh on loopback");
+    let zenoh = bare_zenoh(o.port + 1, o.iterations)?;
+    progress("through two bridges on loopback");
+    let bridged = through_bridges(o)?;
+    let (z, b) = (latency(&zenoh), latency(&bridged));
+    Ok(Report {
+        iterations: o.iterations,
+        poll_us: o.poll.as_secs_f64() * 1e6,
+        payload_bytes: size_of::<StateMsg>(),
+        shared_memory: latency(&direct),
+        bridge: Ratios {
+            p50_us: b.p50_us,
+            p99_us: b.p99_us,
+            zenoh_p50_us: z.p50_us,
+            zenoh_p99_us: z.p99_us,
+            ratio_p50: b.p50_us / z.p50_us,
+            ratio_p99: b.p99_us / z.p99_us,
+        },
+        zenoh: z,
+        through_bridge: b,
+    })
+}
+
+/// The report as a table.
+pub fn print(r: &Report) {
+    println!(
+        "one-way latency, {} round trips each, payload {} B, bridge drain period {:.0} µs",
+        r.iterations, r.payload_bytes, r.poll_us
+    );
+    println!("{:<34} {:>9} {:>9} {:>9}", "channel", "p50 µs", "p99 µs", "max µs");
+    for (name, l) in [
+        ("shared memory (no bridge)", &r.shared_memory),
+        ("bare Zenoh (loopback TCP)", &r.zenoh),
+        ("through two bridges", &r.through_bridge),
+    ] {
+        println!(
+            "{name:<34} {:>9.1} {:>9.1} {:>9.1}",
+            l.p50_us, l.p99_us, l.max_us
+        );
+    }
+    println!(
+        "bridge / bare Zenoh: p50 {:.2}×, p99 {:.2}×",
+        r.bridge.ratio_p50, r.bridge.ratio_p99
+    );
+}
