@@ -21,7 +21,15 @@ fn bridge(d: &mut Daemons, side: &str, ns: &str, link: &str, endpoint: [&str; 2]
         d.namespaces.push(ns.to_string());
     }
     let child = Command::new(env!("CARGO_BIN_EXE_vic"))
-        .args(["bridge", "--side", side, "--namespace", ns, "--link-name", link])
+        .args([
+            "bridge",
+            "--side",
+            side,
+            "--namespace",
+            ns,
+            "--link-name",
+            link,
+        ])
         .args(endpoint)
         .args(["--json"])
         .stdout(Stdio::piped())
@@ -83,9 +91,15 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
     let direct = run_planner(&alone, &sooc, "stiffness", trials, false);
     eprintln!("across the bridge: {across:?}\none host: {direct:?}");
     assert_eq!(across.trials, trials);
-    assert_eq!(across.safe_hold_trials, 0, "commands arrived late across the link");
+    assert_eq!(
+        across.safe_hold_trials, 0,
+        "commands arrived late across the link"
+    );
     for (a, b) in across.final_errors.iter().zip(&direct.final_errors) {
-        let (a, b) = (a.expect("diverged across the bridge"), b.expect("diverged on one host"));
+        let (a, b) = (
+            a.expect("diverged across the bridge"),
+            b.expect("diverged on one host"),
+        );
         assert!(
             (a - b).abs() < 0.5,
             "final error across the bridge {a} mm, on one host {b} mm"
@@ -102,13 +116,16 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
     let out = d.signal_and_wait(board_side, libc::SIGKILL);
     assert!(!out.status.success());
     assert!(
-        wait_for(&host_a, Duration::from_secs(2), |s| s["mode"] == "safe-hold"),
+        wait_for(&host_a, Duration::from_secs(2), |s| s["mode"]
+            == "safe-hold"),
         "the board did not hold after the link was cut"
     );
     eprintln!("safe hold seen {:?} after the cut", cut.elapsed());
     // A new board-side bridge resumes the link: host B sees the board's clock move on again
     // (its last telemetry from before the cut stays readable, so compare ticks).
-    let before = status(&host_b).and_then(|s| s["tick"].as_u64()).unwrap_or(0);
+    let before = status(&host_b)
+        .and_then(|s| s["tick"].as_u64())
+        .unwrap_or(0);
     bridge(&mut d, "board", &host_a, &link, ["--listen", &endpoint]);
     assert!(
         wait_for(&host_b, Duration::from_secs(10), |s| s["tick"]

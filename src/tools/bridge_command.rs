@@ -55,8 +55,20 @@ fn line(s: &BridgeStats) -> String {
         "out: state {} telemetry {} event {} command {} control {} disturbance {} | \
          in: state {} telemetry {} event {} command {} control {} disturbance {} | \
          malformed: size {} version {} | local errors {}",
-        o.state, o.telemetry, o.event, o.command, o.control, o.disturbance,
-        i.state, i.telemetry, i.event, i.command, i.control, i.disturbance,
-        s.malformed_size, s.malformed_version, s.local_errors
+        o.state,
+        o.telemetry,
+        o.event,
+        o.command,
+        o.control,
+        o.disturbance,
+        i.state,
+        i.telemetry,
+        i.event,
+        i.command,
+        i.control,
+        i.disturbance,
+        s.malformed_size,
+        s.malformed_version,
+        s.local_errors
     )
 }

@@ -257,52 +257,69 @@ pub fn run(
             let central = CentralPorts::open(&o.namespace)?;
             let tool = ToolPorts::open(&o.namespace)?;
             let _subs = (
-                subscribe::<CommandSlice>(&session, key::<CommandSlice>(name), &tx, Inbound::Command)?,
+                subscribe::<CommandSlice>(
+                    &session,
+                    key::<CommandSlice>(name),
+                    &tx,
+                    Inbound::Command,
+                )?,
                 subscribe::<Control>(&session, key::<Control>(name), &tx, Inbound::Control)?,
-                subscribe::<Disturbance>(&session, key::<Disturbance>(name), &tx, Inbound::Disturbance)?,
+                subscribe::<Disturbance>(
+                    &session,
+                    key::<Disturbance>(name),
+                    &tx,
+                    Inbound::Disturbance,
+                )?,
             );
             let state = publisher(&session, key::<StateMsg>(name))?;
             let telemetry = publisher(&session, key::<Telemetry>(name))?;
             let events = publisher(&session, event_key(name))?;
-            each_period(o.poll, stop, &rx, |inbound, s: &mut BridgeStats| {
-                let r = &mut s.received;
-                let ok = match inbound {
-                    Inbound::Command(mut c) => {
-                        c.header = restamped(c.header, o.restamp);
-                        r.command += 1;
-                        central.publish_command(&c).is_ok()
+            each_period(
+                o.poll,
+                stop,
+                &rx,
+                |inbound, s: &mut BridgeStats| {
+                    let r = &mut s.received;
+                    let ok = match inbound {
+                        Inbound::Command(mut c) => {
+                            c.header = restamped(c.header, o.restamp);
+                            r.command += 1;
+                            central.publish_command(&c).is_ok()
+                        }
+                        Inbound::Control(mut c) => {
+                            c.header = restamped(c.header, o.restamp);
+                            r.control += 1;
+                            central.publish_control(&c).is_ok()
+                        }
+                        Inbound::Disturbance(mut d) => {
+                            d.header = restamped(d.header, o.restamp);
+                            r.disturbance += 1;
+                            tool.publish_disturbance(&d).is_ok()
+                        }
+                        Inbound::Malformed(m) => {
+                            count_malformed(s, m);
+                            true
+                        }
+                        _ => true,
+                    };
+                    s.local_errors += (!ok) as u64;
+                },
+                |s| {
+                    let (sent, errors) = (&mut s.sent, &mut s.local_errors);
+                    central.drain_states(|m| put(&state, m, &mut sent.state, errors));
+                    if let Some(t) = central.latest_telemetry() {
+                        put(&telemetry, &t, &mut sent.telemetry, errors);
                     }
-                    Inbound::Control(mut c) => {
-                        c.header = restamped(c.header, o.restamp);
-                        r.control += 1;
-                        central.publish_control(&c).is_ok()
+                    if central.take_event() {
+                        match events.put(Vec::<u8>::new()).wait() {
+                            Ok(()) => sent.event += 1,
+                            Err(_) => *errors += 1,
+                        }
                     }
-                    Inbound::Disturbance(mut d) => {
-                        d.header = restamped(d.header, o.restamp);
-                        r.disturbance += 1;
-                        tool.publish_disturbance(&d).is_ok()
-                    }
-                    Inbound::Malformed(m) => {
-                        count_malformed(s, m);
-                        true
-                    }
-                    _ => true,
-                };
-                s.local_errors += (!ok) as u64;
-            }, |s| {
-                let (sent, errors) = (&mut s.sent, &mut s.local_errors);
-                central.drain_states(|m| put(&state, m, &mut sent.state, errors));
-                if let Some(t) = central.latest_telemetry() {
-                    put(&telemetry, &t, &mut sent.telemetry, errors);
-                }
-                if central.take_event() {
-                    match events.put(Vec::<u8>::new()).wait() {
-                        Ok(()) => sent.event += 1,
-                        Err(_) => *errors += 1,
-                    }
-                }
-                tick(s);
-            }, &mut stats);
+                    tick(s);
+                },
+                &mut stats,
+            );
         }
         Side::Central => {
             let board = BoardPorts::open(&o.namespace)?;
@@ -323,38 +340,47 @@ pub fn run(
             let commands = publisher(&session, key::<CommandSlice>(name))?;
             let controls = publisher(&session, key::<Control>(name))?;
             let disturbances = publisher(&session, key::<Disturbance>(name))?;
-            each_period(o.poll, stop, &rx, |inbound, s: &mut BridgeStats| {
-                let r = &mut s.received;
-                let ok = match inbound {
-                    Inbound::State(m) => {
-                        r.state += 1;
-                        board.publish_state(&m).is_ok()
-                    }
-                    Inbound::Telemetry(t) => {
-                        r.telemetry += 1;
-                        let ok = board.publish_telemetry(&t).is_ok();
-                        board.notify(BoardEvent::Telemetry);
-                        ok
-                    }
-                    Inbound::Event => {
-                        r.event += 1;
-                        board.notify(BoardEvent::Applied);
-                        true
-                    }
-                    Inbound::Malformed(m) => {
-                        count_malformed(s, m);
-                        true
-                    }
-                    _ => true,
-                };
-                s.local_errors += (!ok) as u64;
-            }, |s| {
-                let (sent, errors) = (&mut s.sent, &mut s.local_errors);
-                board.drain_commands(|m| put(&commands, m, &mut sent.command, errors));
-                board.drain_controls(|m| put(&controls, m, &mut sent.control, errors));
-                board.drain_disturbances(|m| put(&disturbances, m, &mut sent.disturbance, errors));
-                tick(s);
-            }, &mut stats);
+            each_period(
+                o.poll,
+                stop,
+                &rx,
+                |inbound, s: &mut BridgeStats| {
+                    let r = &mut s.received;
+                    let ok = match inbound {
+                        Inbound::State(m) => {
+                            r.state += 1;
+                            board.publish_state(&m).is_ok()
+                        }
+                        Inbound::Telemetry(t) => {
+                            r.telemetry += 1;
+                            let ok = board.publish_telemetry(&t).is_ok();
+                            board.notify(BoardEvent::Telemetry);
+                            ok
+                        }
+                        Inbound::Event => {
+                            r.event += 1;
+                            board.notify(BoardEvent::Applied);
+                            true
+                        }
+                        Inbound::Malformed(m) => {
+                            count_malformed(s, m);
+                            true
+                        }
+                        _ => true,
+                    };
+                    s.local_errors += (!ok) as u64;
+                },
+                |s| {
+                    let (sent, errors) = (&mut s.sent, &mut s.local_errors);
+                    board.drain_commands(|m| put(&commands, m, &mut sent.command, errors));
+                    board.drain_controls(|m| put(&controls, m, &mut sent.control, errors));
+                    board.drain_disturbances(|m| {
+                        put(&disturbances, m, &mut sent.disturbance, errors)
+                    });
+                    tick(s);
+                },
+                &mut stats,
+            );
         }
     }
     drop(tx);

@@ -107,7 +107,11 @@ fn echo(ns: String, stop: Arc<AtomicBool>, ready: Arc<AtomicBool>) -> Result<(),
 }
 
 /// Ping–pong from a central process in `ns` (the echo answers somewhere behind it).
-fn ping_pong(ns: &str, iterations: u64, channel: &'static str) -> Result<Histogram<u64>, BenchError> {
+fn ping_pong(
+    ns: &str,
+    iterations: u64,
+    channel: &'static str,
+) -> Result<Histogram<u64>, BenchError> {
     let central = CentralPorts::open(ns)?;
     let mut h = histogram();
     let warm = iterations / 10;
@@ -173,7 +177,11 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
     };
     let a = session("listen/endpoints")?;
     let b = session("connect/endpoints")?;
-    let pong = b.declare_publisher("vicbench/pong").express(true).wait().map_err(z)?;
+    let pong = b
+        .declare_publisher("vicbench/pong")
+        .express(true)
+        .wait()
+        .map_err(z)?;
     let _echo = b
         .declare_subscriber("vicbench/ping")
         .callback(move |s| {
@@ -182,13 +190,21 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
         .wait()
         .map_err(z)?;
     let answers = a.declare_subscriber("vicbench/pong").wait().map_err(z)?;
-    let ping = a.declare_publisher("vicbench/ping").express(true).wait().map_err(z)?;
+    let ping = a
+        .declare_publisher("vicbench/ping")
+        .express(true)
+        .wait()
+        .map_err(z)?;
     // Let the two sessions learn each other's subscribers.
     let payload = vec![0u8; size_of::<StateMsg>()];
     let t0 = Instant::now();
     loop {
         ping.put(payload.clone()).wait().map_err(z)?;
-        if answers.recv_timeout(Duration::from_millis(100)).map_err(z)?.is_some() {
+        if answers
+            .recv_timeout(Duration::from_millis(100))
+            .map_err(z)?
+            .is_some()
+        {
             break;
         }
         if t0.elapsed() > Duration::from_secs(5) {
@@ -200,7 +216,11 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
     for i in 0..warm + iterations {
         let t = Instant::now();
         ping.put(payload.clone()).wait().map_err(z)?;
-        if answers.recv_timeout(Duration::from_secs(2)).map_err(z)?.is_none() {
+        if answers
+            .recv_timeout(Duration::from_secs(2))
+            .map_err(z)?
+            .is_none()
+        {
             return Err(BenchError::Timeout("zenoh", i));
         }
         if i >= warm {
@@ -257,7 +277,9 @@ fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
 pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchError> {
     progress("shared memory (one namespace, no bridge)");
     let direct_ns = unique("bbd");
-    let direct = with_echo(&direct_ns, || ping_pong(&direct_ns, o.iterations, "shared memory"));
+    let direct = with_echo(&direct_ns, || {
+        ping_pong(&direct_ns, o.iterations, "shared memory")
+    });
     remove_namespace(&direct_ns);
     let direct = direct?;
     progress("bare Zenoh on loopback");
@@ -289,7 +311,10 @@ pub fn print(r: &Report) {
         "one-way latency, {} round trips each, payload {} B, bridge drain period {:.0} µs",
         r.iterations, r.payload_bytes, r.poll_us
     );
-    println!("{:<34} {:>9} {:>9} {:>9}", "channel", "p50 µs", "p99 µs", "max µs");
+    println!(
+        "{:<34} {:>9} {:>9} {:>9}",
+        "channel", "p50 µs", "p99 µs", "max µs"
+    );
     for (name, l) in [
         ("shared memory (no bridge)", &r.shared_memory),
         ("bare Zenoh (loopback TCP)", &r.zenoh),
