@@ -18,7 +18,8 @@ impl Progress {
     pub fn spinner() -> Self {
         let bar = ProgressBar::new_spinner();
         bar.set_style(
-            ProgressStyle::with_template("{spinner} [{elapsed}] {msg}").expect("valid template"),
+            ProgressStyle::with_template("{spinner} [{elapsed}] {wide_msg}")
+                .expect("valid template"),
         );
         bar.enable_steady_tick(Duration::from_millis(120));
         Progress { bar }
@@ -28,7 +29,7 @@ impl Progress {
     pub fn steps(what: &str, steps: u64) -> Self {
         let bar = ProgressBar::new(steps);
         bar.set_style(
-            ProgressStyle::with_template("{prefix} [{elapsed}] {bar:24} {pos}/{len} {msg}")
+            ProgressStyle::with_template("{prefix} [{elapsed}] {bar:24} {pos}/{len} {wide_msg}")
                 .expect("valid template"),
         );
         bar.set_prefix(what.to_string());

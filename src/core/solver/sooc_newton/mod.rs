@@ -165,11 +165,17 @@ pub struct SoocProblem<'a> {
     pub horizon: usize,
 }
 
+/// A callback for accepted steps; it receives the same report as ILQG's progress.
+pub type Observer = std::sync::Arc<dyn Fn(&crate::core::solver::ilqg::Progress) + Send + Sync>;
+
 /// The solver with its preallocated workspace, sized for one problem size; reuse it across solves
 /// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`] allocates nothing per
 /// iteration).
 pub struct SoocSolver {
     pub options: SoocOptions,
+    /// Told of every accepted step (iteration, `J`, relative μ, step length): progress for
+    /// long solves. Not called otherwise, so it costs nothing when unset.
+    pub observer: Option<Observer>,
     n: usize,
     nu: usize,
     horizon: usize,
@@ -197,6 +203,7 @@ impl SoocSolver {
         let nz = n + super::sooc::vech_len(n);
         SoocSolver {
             options,
+            observer: None,
             n,
             nu: m,
             horizon,
@@ -338,6 +345,14 @@ impl SoocSolver {
                     cost = c;
                     iterations += 1;
                     history.push(c);
+                    if let Some(observe) = &self.observer {
+                        observe(&crate::core::solver::ilqg::Progress {
+                            iteration: iterations,
+                            merit: c,
+                            mu: damping.mu,
+                            alpha,
+                        });
+                    }
                     model.needs_expansion = true;
                     // A full step: trust the model more.
                     if alpha >= 0.5 {
