@@ -345,14 +345,7 @@ impl SoocSolver {
                     cost = c;
                     iterations += 1;
                     history.push(c);
-                    if let Some(observe) = &self.observer {
-                        observe(&crate::core::solver::ilqg::Progress {
-                            iteration: iterations,
-                            merit: c,
-                            mu: damping.mu,
-                            alpha,
-                        });
-                    }
+                    self.notify(iterations, c, damping.mu, alpha);
                     model.needs_expansion = true;
                     // A full step: trust the model more.
                     if alpha >= 0.5 {
@@ -380,6 +373,18 @@ impl SoocSolver {
             solve_time: start.elapsed(),
             history,
         })
+    }
+
+    /// Tells the observer, if any, of an accepted step.
+    fn notify(&self, iteration: usize, merit: f64, mu: f64, alpha: f64) {
+        if let Some(observe) = &self.observer {
+            observe(&crate::core::solver::ilqg::Progress {
+                iteration,
+                merit,
+                mu,
+                alpha,
+            });
+        }
     }
 
     /// Clamps the controls, clears the gains and rolls the start out: its cost.
