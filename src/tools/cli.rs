@@ -222,8 +222,8 @@ mod tests {
         let e = e.context("starting the board");
         assert_eq!(exit_code(&e), 2);
         assert_eq!(exit_code(&anyhow!("no board")), 1);
-        let r: Result<(), String> = Err("bad key".into());
-        assert_eq!(exit_code(&r.clone().input().unwrap_err()), 2);
+        let r: Result<(), &str> = Err("bad key");
+        assert_eq!(exit_code(&r.input().unwrap_err()), 2);
         assert_eq!(exit_code(&r.runtime().unwrap_err()), 1);
     }
 

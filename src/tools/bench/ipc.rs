@@ -8,7 +8,7 @@
 //! One-way latency = receive time − publish time stamp (one clock, two threads); round trip =
 //! answer received − state published.
 
-use super::{Dist, ratio};
+use super::{BenchError, Dist, ratio};
 use crate::rt::realtime::{LatencyHistogram, Periodic, set_timer_slack_1ns};
 use crate::rt::transport::{
     BoardPorts, CentralPorts, CommandSlice, Disturbance, DisturbanceKind, Header, StateMsg,
@@ -46,7 +46,7 @@ pub struct Channels {
 /// One side of a ping-pong, whatever carries it.
 trait Side {
     /// Sends `(seq, now)`.
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String>;
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()>;
     /// Polls once: the newest `(seq, publish stamp, receive time)`, if any; the receive time is
     /// taken as soon as the message is in hand.
     fn poll(&mut self) -> Option<(u64, u64, u64)>;
@@ -56,12 +56,12 @@ struct VicBoard(BoardPorts);
 struct VicPlanner(CentralPorts);
 
 impl Side for VicBoard {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
         let s = StateMsg {
             header: Header::new(seq, time_ns),
             ..Default::default()
         };
-        self.0.publish_state(&s).map_err(|e| e.to_string())
+        Ok(self.0.publish_state(&s)?)
     }
     fn poll(&mut self) -> Option<(u64, u64, u64)> {
         let mut last = None;
@@ -72,12 +72,12 @@ impl Side for VicBoard {
 }
 
 impl Side for VicPlanner {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
         let c = CommandSlice {
             header: Header::new(seq, time_ns),
             ..Default::default()
         };
-        self.0.publish_command(&c).map_err(|e| e.to_string())
+        Ok(self.0.publish_command(&c)?)
     }
     fn poll(&mut self) -> Option<(u64, u64, u64)> {
         let mut last = None;
@@ -98,52 +98,53 @@ struct Bare<const OUT: usize, const IN: usize> {
 }
 
 impl<const OUT: usize, const IN: usize> Bare<OUT, IN> {
-    fn open(ns: &str, out: &str, input: &str) -> Result<Self, String> {
+    fn open(ns: &str, out: &str, input: &str) -> Result<Self> {
         set_log_level(LogLevel::Error);
-        let cfg = crate::rt::transport::namespace::config(ns).map_err(|e| e.to_string())?;
+        let cfg = crate::rt::transport::namespace::config(ns)?;
         let node = NodeBuilder::new()
             .config(&cfg)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| format!("node: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx("node", e))?;
+        let name = |n: &str| ServiceName::new(n).map_err(|e| BenchError::iceoryx(n, e));
         let svc_out = node
-            .service_builder(&ServiceName::new(out).map_err(|e| format!("{e:?}"))?)
+            .service_builder(&name(out)?)
             .publish_subscribe::<Bytes<OUT>>()
             .open_or_create()
-            .map_err(|e| format!("service {out}: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx(format!("service {out}"), e))?;
         let svc_in = node
-            .service_builder(&ServiceName::new(input).map_err(|e| format!("{e:?}"))?)
+            .service_builder(&name(input)?)
             .publish_subscribe::<Bytes<IN>>()
             .open_or_create()
-            .map_err(|e| format!("service {input}: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx(format!("service {input}"), e))?;
         Ok(Bare {
             publisher: svc_out
                 .publisher_builder()
                 .create()
-                .map_err(|e| format!("publisher: {e:?}"))?,
+                .map_err(|e| BenchError::iceoryx("publisher", e))?,
             subscriber: svc_in
                 .subscriber_builder()
                 .create()
-                .map_err(|e| format!("subscriber: {e:?}"))?,
+                .map_err(|e| BenchError::iceoryx("subscriber", e))?,
             _node: node,
         })
     }
 }
 
 impl<const OUT: usize, const IN: usize> Side for Bare<OUT, IN> {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
         let mut b = [0u8; OUT];
         b[..8].copy_from_slice(&seq.to_le_bytes());
         b[8..16].copy_from_slice(&time_ns.to_le_bytes());
         let sample = self
             .publisher
             .loan_uninit()
-            .map_err(|e| format!("loan: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx("loan", e))?;
         sample
             .write_payload(b)
             .send()
             .map(|_| ())
-            .map_err(|e| format!("send: {e:?}"))
+            .map_err(|e| BenchError::iceoryx("send", e))
     }
     fn poll(&mut self) -> Option<(u64, u64, u64)> {
         let s = self.subscriber.receive().ok()??;
@@ -160,11 +161,11 @@ fn ping_pong<P: Side, Q: Side>(
     iterations: u64,
     make_pinger: impl FnOnce() -> Result<P> + Send + 'static,
     make_ponger: impl FnOnce() -> Result<Q> + Send + 'static,
-) -> Result<Channels, String> {
+) -> Result<Channels> {
     let barrier = Arc::new(Barrier::new(2));
     let last = WARM_UP + iterations;
     let b = barrier.clone();
-    let ponger = std::thread::spawn(move || -> Result<LatencyHistogram, String> {
+    let ponger = std::thread::spawn(move || -> Result<LatencyHistogram> {
         let side = make_ponger();
         b.wait();
         let mut side = side?;
@@ -184,7 +185,7 @@ fn ping_pong<P: Side, Q: Side>(
                 _ => {
                     std::hint::spin_loop();
                     if monotonic_ns() - idle_since > RESEND_NS * MAX_RESENDS {
-                        return Err("the ping side went quiet".into());
+                        return Err(BenchError::Quiet);
                     }
                 }
             }
@@ -194,7 +195,7 @@ fn ping_pong<P: Side, Q: Side>(
     let pinger = {
         let b = barrier;
         std::thread::spawn(
-            move || -> Result<(LatencyHistogram, LatencyHistogram, u64), String> {
+            move || -> Result<(LatencyHistogram, LatencyHistogram, u64)> {
                 let side = make_pinger();
                 b.wait();
                 let mut side = side?;
@@ -220,7 +221,7 @@ fn ping_pong<P: Side, Q: Side>(
                         if now - sent > RESEND_NS {
                             resends += 1;
                             if resends > MAX_RESENDS {
-                                return Err(format!("no answer to ping {seq}"));
+                                return Err(BenchError::NoAnswer(seq));
                             }
                             sent = now;
                             side.send(seq, now)?;
@@ -231,12 +232,8 @@ fn ping_pong<P: Side, Q: Side>(
             },
         )
     };
-    let pinged = pinger
-        .join()
-        .map_err(|_| "the ping thread panicked".to_string())?;
-    let ponged = ponger
-        .join()
-        .map_err(|_| "the pong thread panicked".to_string())?;
+    let pinged = pinger.join().map_err(|_| BenchError::Panicked("ping"))?;
+    let ponged = ponger.join().map_err(|_| BenchError::Panicked("pong"))?;
     let (command, rtt, resends) = pinged?;
     let state = ponged?;
     Ok(Channels {
@@ -247,7 +244,7 @@ fn ping_pong<P: Side, Q: Side>(
     })
 }
 
-type Result<T, E = String> = std::result::Result<T, E>;
+type Result<T, E = BenchError> = std::result::Result<T, E>;
 
 /// vic's channels: [`BoardPorts`] and [`CentralPorts`], the real message types.
 pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
@@ -255,16 +252,8 @@ pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
     let (a, b) = (ns.clone(), ns.clone());
     let r = ping_pong(
         iterations,
-        move || {
-            BoardPorts::open(&a)
-                .map(VicBoard)
-                .map_err(|e| e.to_string())
-        },
-        move || {
-            CentralPorts::open(&b)
-                .map(VicPlanner)
-                .map_err(|e| e.to_string())
-        },
+        move || Ok(BoardPorts::open(&a).map(VicBoard)?),
+        move || Ok(CentralPorts::open(&b).map(VicPlanner)?),
     );
     remove_namespace(&ns);
     r
@@ -338,13 +327,15 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
     guard.children.push(
         board
             .spawn()
-            .map_err(|e| format!("cannot start {}: {e}", o.board_bin.display()))?,
+            .map_err(|e| BenchError::io(format!("cannot start {}", o.board_bin.display()), e))?,
     );
-    let tool = ToolPorts::open(&ns).map_err(|e| e.to_string())?;
+    let tool = ToolPorts::open(&ns)?;
     let t0 = std::time::Instant::now();
     while tool.latest_state().is_none() {
         if t0.elapsed() > Duration::from_secs(10) {
-            return Err("vic-board published no state within 10 s".into());
+            return Err(BenchError::Timeout(
+                "vic-board published no state within 10 s",
+            ));
         }
         std::thread::sleep(Duration::from_millis(2));
     }
@@ -364,7 +355,7 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
     guard.children.push(
         planner
             .spawn()
-            .map_err(|e| format!("cannot start {}: {e}", o.planner_bin.display()))?,
+            .map_err(|e| BenchError::io(format!("cannot start {}", o.planner_bin.display()), e))?,
     );
     set_timer_slack_1ns();
     let mut age = LatencyHistogram::new();
@@ -417,15 +408,19 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
             match p.try_wait() {
                 Ok(Some(status)) => break status,
                 Ok(None) => {}
-                Err(e) => return Err(format!("vic-planner: {e}")),
+                Err(e) => return Err(BenchError::io("vic-planner", e)),
             }
             if std::time::Instant::now() > deadline {
-                return Err("vic-planner did not finish in time".into());
+                return Err(BenchError::Timeout("vic-planner did not finish in time"));
             }
         }
     };
     if !planner_status.success() {
-        return Err(format!("vic-planner failed ({planner_status})"));
+        return Err(BenchError::Failed {
+            command: "vic-planner".into(),
+            status: planner_status,
+            stderr: String::new(),
+        });
     }
     guard.children.pop();
     let mut board = guard.children.pop().expect("the board");
@@ -437,8 +432,8 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
     }
     drop(tool);
     drop(guard);
-    let stats: serde_json::Value = serde_json::from_str(stdout.trim())
-        .map_err(|e| format!("vic-board printed no statistics: {e}"))?;
+    let stats: serde_json::Value =
+        serde_json::from_str(stdout.trim()).map_err(BenchError::Statistics)?;
     let ca = &stats["command_age_us"];
     let f = |k: &str| ca[k].as_f64().unwrap_or(f64::NAN);
     Ok(Pair {

@@ -6,8 +6,11 @@
 #[cfg(feature = "zenoh")]
 pub mod bridge;
 pub mod cyclictest;
+pub mod error;
 pub mod ipc;
 pub mod loop_bench;
+
+pub use error::{BenchError, HistogramError};
 
 use crate::rt::realtime::LatencyHistogram;
 use serde::{Deserialize, Serialize};
