@@ -52,40 +52,44 @@ trait Side {
     fn poll(&mut self) -> Option<(u64, u64, u64)>;
 }
 
-struct VicBoard(BoardPorts);
-struct VicPlanner(CentralPorts);
+/// A side of vic's own channels: `$ports` publishes `$out` messages with `$publish` and drains
+/// the other side's with `$drain`, the sequence number and stamp in the shared header.
+macro_rules! vic_side {
+    ($name:ident, $ports:ty, $out:ident, $publish:ident, $drain:ident) => {
+        struct $name($ports);
 
-impl Side for VicBoard {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
-        let s = StateMsg {
-            header: Header::new(seq, time_ns),
-            ..Default::default()
-        };
-        Ok(self.0.publish_state(&s)?)
-    }
-    fn poll(&mut self) -> Option<(u64, u64, u64)> {
-        let mut last = None;
-        self.0
-            .drain_commands(|c| last = Some((c.header.seq, c.header.time_ns, monotonic_ns())));
-        last
-    }
+        impl Side for $name {
+            fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
+                let m = $out {
+                    header: Header::new(seq, time_ns),
+                    ..Default::default()
+                };
+                Ok(self.0.$publish(&m)?)
+            }
+            fn poll(&mut self) -> Option<(u64, u64, u64)> {
+                let mut last = None;
+                self.0
+                    .$drain(|m| last = Some((m.header.seq, m.header.time_ns, monotonic_ns())));
+                last
+            }
+        }
+    };
 }
 
-impl Side for VicPlanner {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
-        let c = CommandSlice {
-            header: Header::new(seq, time_ns),
-            ..Default::default()
-        };
-        Ok(self.0.publish_command(&c)?)
-    }
-    fn poll(&mut self) -> Option<(u64, u64, u64)> {
-        let mut last = None;
-        self.0
-            .drain_states(|s| last = Some((s.header.seq, s.header.time_ns, monotonic_ns())));
-        last
-    }
-}
+vic_side!(
+    VicBoard,
+    BoardPorts,
+    StateMsg,
+    publish_state,
+    drain_commands
+);
+vic_side!(
+    VicPlanner,
+    CentralPorts,
+    CommandSlice,
+    publish_command,
+    drain_states
+);
 
 type Bytes<const N: usize> = [u8; N];
 
