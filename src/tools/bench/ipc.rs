@@ -16,6 +16,7 @@ use crate::rt::transport::{
 };
 use iceoryx2::prelude::*;
 use serde::Serialize;
+use std::ffi::OsStr;
 use std::path::PathBuf;
 use std::sync::{Arc, Barrier};
 use std::time::Duration;
@@ -315,24 +316,11 @@ pub struct Pair {
 /// torque pulse every 100 ms and records the state age, the pulse-to-effect delay and the board's
 /// statistics.
 pub fn run_pair(o: &PairOptions) -> Result<Pair> {
-    use std::process::{Command, Stdio};
     let ns = super::unique_namespace("bp");
     let mut guard = crate::rt::daemon::Children::new(&ns);
-    let mut board = Command::new(&o.board_bin);
-    board
-        .arg("--config")
-        .arg(&o.config)
-        .args(["--namespace", &ns, "--json"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit());
-    for s in &o.overrides {
-        board.args(["--set", s]);
-    }
-    guard.children.push(
-        board
-            .spawn()
-            .map_err(|e| BenchError::io(format!("cannot start {}", o.board_bin.display()), e))?,
-    );
+    guard
+        .children
+        .push(spawn_daemon(o, &o.board_bin, &ns, &[])?);
     let tool = ToolPorts::open(&ns)?;
     let t0 = std::time::Instant::now();
     while tool.latest_state().is_none() {
@@ -343,82 +331,22 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
         }
         std::thread::sleep(Duration::from_millis(2));
     }
-    let mut planner = Command::new(&o.planner_bin);
-    planner
-        .arg("--config")
-        .arg(&o.config)
-        .arg("--plan")
-        .arg(&o.plan)
-        .args(["--strategy", "stiffness", "--namespace", &ns, "--json"])
-        .args(["--trials", &o.trials.to_string()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit());
-    for s in &o.overrides {
-        planner.args(["--set", s]);
-    }
-    guard.children.push(
-        planner
-            .spawn()
-            .map_err(|e| BenchError::io(format!("cannot start {}", o.planner_bin.display()), e))?,
-    );
-    set_timer_slack_1ns();
-    let mut age = LatencyHistogram::new();
-    let mut effect = LatencyHistogram::new();
-    let mut observed = LatencyHistogram::new();
-    let mut periodic = Periodic::new(1_000_000, 0);
-    let mut pulse_seq = 0u64;
-    let mut pending: Option<(u64, u64)> = None;
+    let trials = o.trials.to_string();
+    let planner_args: [&OsStr; 6] = [
+        "--plan".as_ref(),
+        o.plan.as_os_str(),
+        "--strategy".as_ref(),
+        "stiffness".as_ref(),
+        "--trials".as_ref(),
+        trials.as_ref(),
+    ];
+    guard
+        .children
+        .push(spawn_daemon(o, &o.planner_bin, &ns, &planner_args)?);
+    let mut probe = Probe::default();
     let deadline = std::time::Instant::now() + Duration::from_secs(20 + 5 * o.trials);
-    let mut tick = 0u64;
-    let planner_status = loop {
-        let wake = periodic.wait();
-        tick += 1;
-        let mut newest: Option<StateMsg> = None;
-        let now = {
-            tool.drain_states(|s| {
-                if let Some((seq, t_inject)) = pending
-                    && s.disturbance_seq >= seq
-                {
-                    effect.record(s.header.time_ns.saturating_sub(t_inject));
-                    observed.record(monotonic_ns().saturating_sub(t_inject));
-                    pending = None;
-                }
-                newest = Some(*s);
-            });
-            monotonic_ns()
-        };
-        if let Some(s) = newest {
-            age.record(now.saturating_sub(s.header.time_ns));
-        }
-        if tick.is_multiple_of(100) && pending.is_none() {
-            // At a phase spread over the period (379 µs steps), not on the board's deadlines.
-            pulse_seq += 1;
-            crate::rt::realtime::sleep_until(wake.deadline_ns + (pulse_seq * 379_000) % 900_000, 0);
-            let t = monotonic_ns();
-            let d = Disturbance {
-                header: Header::new(pulse_seq, t),
-                kind: DisturbanceKind::Pulse as u32,
-                torque: [0.05, 0.0],
-                duration_ns: 1_000_000,
-                value: 0.0,
-                ..Default::default()
-            };
-            if tool.publish_disturbance(&d).is_ok() {
-                pending = Some((pulse_seq, t));
-            }
-        }
-        if tick.is_multiple_of(50) {
-            let p = guard.children.last_mut().expect("the planner");
-            match p.try_wait() {
-                Ok(Some(status)) => break status,
-                Ok(None) => {}
-                Err(e) => return Err(BenchError::io("vic-planner", e)),
-            }
-            if std::time::Instant::now() > deadline {
-                return Err(BenchError::Timeout("vic-planner did not finish in time"));
-            }
-        }
-    };
+    let planner = guard.children.last_mut().expect("the planner");
+    let planner_status = probe.until_exit(&tool, planner, deadline)?;
     if !planner_status.success() {
         return Err(BenchError::Failed {
             command: "vic-planner".into(),
@@ -438,23 +366,134 @@ pub fn run_pair(o: &PairOptions) -> Result<Pair> {
     drop(guard);
     let stats: serde_json::Value =
         serde_json::from_str(stdout.trim()).map_err(BenchError::Statistics)?;
-    let ca = &stats["command_age_us"];
-    let f = |k: &str| ca[k].as_f64().unwrap_or(f64::NAN);
-    Ok(Pair {
-        state_age_us: Dist::from_histogram(&age),
-        command_age_us: Dist {
-            p50_us: f("p50"),
-            p99_us: f("p99"),
-            p999_us: f("p999"),
-            max_us: f("max"),
-            count: ca["count"].as_u64().unwrap_or(0),
-        },
-        pulse_to_effect_us: Dist::from_histogram(&effect),
-        pulse_to_observed_us: Dist::from_histogram(&observed),
-        pulses: effect.count(),
-        board: stats,
-        trials: o.trials,
-    })
+    Ok(probe.pair(stats, o.trials))
+}
+
+/// Starts `binary` (the board or the planner) on the pair's scenario in namespace `ns`, with
+/// `--json` and the extra `args`; its statistics come back on a pipe.
+fn spawn_daemon(
+    o: &PairOptions,
+    binary: &std::path::Path,
+    ns: &str,
+    args: &[&OsStr],
+) -> Result<std::process::Child> {
+    use std::process::{Command, Stdio};
+    let mut command = Command::new(binary);
+    command
+        .arg("--config")
+        .arg(&o.config)
+        .args(args)
+        .args(["--namespace", ns, "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    for s in &o.overrides {
+        command.args(["--set", s]);
+    }
+    command
+        .spawn()
+        .map_err(|e| BenchError::io(format!("cannot start {}", binary.display()), e))
+}
+
+/// What the measuring tool of the pair records at 1 kHz.
+#[derive(Default)]
+struct Probe {
+    age: LatencyHistogram,
+    effect: LatencyHistogram,
+    observed: LatencyHistogram,
+}
+
+impl Probe {
+    /// Polls the states at 1 kHz on whole-millisecond deadlines and injects a pulse every 100 ms
+    /// until `planner` exits (its status), or fails at `deadline`.
+    fn until_exit(
+        &mut self,
+        tool: &ToolPorts,
+        planner: &mut std::process::Child,
+        deadline: std::time::Instant,
+    ) -> Result<std::process::ExitStatus> {
+        set_timer_slack_1ns();
+        let mut periodic = Periodic::new(1_000_000, 0);
+        let mut pulse_seq = 0u64;
+        let mut pending: Option<(u64, u64)> = None;
+        let mut tick = 0u64;
+        loop {
+            let wake = periodic.wait();
+            tick += 1;
+            self.drain(tool, &mut pending);
+            if tick.is_multiple_of(100) && pending.is_none() {
+                // At a phase spread over the period (379 µs steps), not on the board's deadlines.
+                pulse_seq += 1;
+                let phase = (pulse_seq * 379_000) % 900_000;
+                crate::rt::realtime::sleep_until(wake.deadline_ns + phase, 0);
+                let t = monotonic_ns();
+                let d = Disturbance {
+                    header: Header::new(pulse_seq, t),
+                    kind: DisturbanceKind::Pulse as u32,
+                    torque: [0.05, 0.0],
+                    duration_ns: 1_000_000,
+                    value: 0.0,
+                    ..Default::default()
+                };
+                if tool.publish_disturbance(&d).is_ok() {
+                    pending = Some((pulse_seq, t));
+                }
+            }
+            if tick.is_multiple_of(50) {
+                if let Some(status) = planner
+                    .try_wait()
+                    .map_err(|e| BenchError::io("vic-planner", e))?
+                {
+                    return Ok(status);
+                }
+                if std::time::Instant::now() > deadline {
+                    return Err(BenchError::Timeout("vic-planner did not finish in time"));
+                }
+            }
+        }
+    }
+
+    /// Takes the states that arrived: the age of the newest, and the delays of the pulse
+    /// `pending` (its sequence number and publish time) once a state carries it.
+    fn drain(&mut self, tool: &ToolPorts, pending: &mut Option<(u64, u64)>) {
+        let mut newest: Option<StateMsg> = None;
+        tool.drain_states(|s| {
+            if let Some((seq, t_inject)) = *pending
+                && s.disturbance_seq >= seq
+            {
+                self.effect
+                    .record(s.header.time_ns.saturating_sub(t_inject));
+                self.observed
+                    .record(monotonic_ns().saturating_sub(t_inject));
+                *pending = None;
+            }
+            newest = Some(*s);
+        });
+        let now = monotonic_ns();
+        if let Some(s) = newest {
+            self.age.record(now.saturating_sub(s.header.time_ns));
+        }
+    }
+
+    /// The figures, with the board's own statistics `stats`.
+    fn pair(&self, stats: serde_json::Value, trials: u64) -> Pair {
+        let ca = &stats["command_age_us"];
+        let f = |k: &str| ca[k].as_f64().unwrap_or(f64::NAN);
+        Pair {
+            state_age_us: Dist::from_histogram(&self.age),
+            command_age_us: Dist {
+                p50_us: f("p50"),
+                p99_us: f("p99"),
+                p999_us: f("p999"),
+                max_us: f("max"),
+                count: ca["count"].as_u64().unwrap_or(0),
+            },
+            pulse_to_effect_us: Dist::from_histogram(&self.effect),
+            pulse_to_observed_us: Dist::from_histogram(&self.observed),
+            pulses: self.effect.count(),
+            board: stats,
+            trials,
+        }
+    }
 }
 
 /// Options of `vic bench ipc`.
