@@ -4,6 +4,7 @@
 //! No timing thresholds: these machines are noisy.
 
 use std::process::Command;
+use vic::tools::bench::HistogramError;
 use vic::tools::bench::cyclictest::parse;
 use vic::tools::bench::{Dist, percentile_of_buckets, ratio};
 
@@ -52,12 +53,31 @@ fn cyclictest_histogram_parses_into_the_right_percentiles() {
 
 #[test]
 fn broken_cyclictest_output_is_an_error() {
-    assert!(parse("").is_err(), "no total");
-    assert!(parse("000001 000002\n# Max Latencies: 00003\n").is_err());
+    assert_eq!(parse(""), Err(HistogramError::Missing("Total")));
+    assert_eq!(
+        parse("000001 000002\n# Max Latencies: 00003\n"),
+        Err(HistogramError::Missing("Total"))
+    );
     let wrong_total = HIST.replace("# Total: 000000020", "# Total: 000000021");
-    assert!(parse(&wrong_total).unwrap_err().contains("buckets"));
+    assert_eq!(
+        parse(&wrong_total),
+        Err(HistogramError::Total {
+            in_buckets: 20,
+            total: 21
+        })
+    );
     let garbage = HIST.replace("000004 000005", "000004 abc");
-    assert!(parse(&garbage).unwrap_err().contains("line"));
+    let e = parse(&garbage).unwrap_err();
+    assert!(
+        matches!(&e, HistogramError::Number { line: 6, token, .. } if token == "abc"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("line 6"), "{e}");
+    let short = HIST.replace("000004 000005", "000004");
+    assert!(matches!(
+        parse(&short),
+        Err(HistogramError::Row { line: 6, .. })
+    ));
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! its report (JSON or a table). The measuring is [`crate::tools::bench`]'s.
 
 use crate::tools::bench::{cyclictest, ipc, loop_bench};
-use crate::tools::cli::{Classify, input_error, print_json, sibling_binary};
+use crate::tools::cli::{Classify, input_error, print_report, sibling_binary};
 use anyhow::anyhow;
 use std::path::PathBuf;
 
@@ -41,12 +41,7 @@ pub fn run_loop(
         )));
     }
     let report = loop_bench::run(opts, progress(json)).runtime()?;
-    if json {
-        print_json(&report)
-    } else {
-        loop_bench::print(&report);
-        Ok(())
-    }
+    print_report(&report, json, loop_bench::print)
 }
 
 /// The running pair of `vic bench ipc` as the user gave it (the binaries are found here).
@@ -81,12 +76,7 @@ pub fn run_ipc(iterations: u64, pair: PairRequest, json: bool) -> anyhow::Result
         })
     };
     let report = ipc::run(&ipc::Options { iterations, pair }, progress(json)).runtime()?;
-    if json {
-        print_json(&report)
-    } else {
-        ipc::print(&report);
-        Ok(())
-    }
+    print_report(&report, json, ipc::print)
 }
 
 /// Two bridges on loopback against bare Zenoh and shared memory (`vic bench bridge`).
@@ -94,10 +84,5 @@ pub fn run_ipc(iterations: u64, pair: PairRequest, json: bool) -> anyhow::Result
 pub fn run_bridge(opts: &crate::tools::bench::bridge::Options, json: bool) -> anyhow::Result<()> {
     use crate::tools::bench::bridge;
     let report = bridge::run(opts, progress(json)).runtime()?;
-    if json {
-        print_json(&report)
-    } else {
-        bridge::print(&report);
-        Ok(())
-    }
+    print_report(&report, json, bridge::print)
 }

@@ -148,6 +148,20 @@ pub fn print_json(value: &impl serde::Serialize) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A command's result: one line of JSON with `--json`, else the readable report `table` prints.
+pub fn print_report<T: serde::Serialize>(
+    value: &T,
+    json: bool,
+    table: impl FnOnce(&T),
+) -> anyhow::Result<()> {
+    if json {
+        print_json(value)
+    } else {
+        table(value);
+        Ok(())
+    }
+}
+
 /// A whole number of time steps of `dt_ms` in `ms`, else an input error naming `flag`.
 pub fn whole_steps(flag: &str, ms: f64, dt_ms: f64) -> anyhow::Result<usize> {
     let steps = ms / dt_ms;
@@ -222,8 +236,8 @@ mod tests {
         let e = e.context("starting the board");
         assert_eq!(exit_code(&e), 2);
         assert_eq!(exit_code(&anyhow!("no board")), 1);
-        let r: Result<(), String> = Err("bad key".into());
-        assert_eq!(exit_code(&r.clone().input().unwrap_err()), 2);
+        let r: Result<(), &str> = Err("bad key");
+        assert_eq!(exit_code(&r.input().unwrap_err()), 2);
         assert_eq!(exit_code(&r.runtime().unwrap_err()), 1);
     }
 

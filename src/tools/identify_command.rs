@@ -3,7 +3,7 @@
 
 use crate::core::model::Plant;
 use crate::planning::scenario::Scenario;
-use crate::tools::cli::{Classify, input_error, print_json};
+use crate::tools::cli::{Classify, input_error, print_report};
 use crate::tools::identify::{
     IdentifyError, IdentifyOptions, JointParams, identify, read_log_file,
 };
@@ -30,12 +30,7 @@ pub fn run(
     let report = identify(&rows, &joint, options)
         .map_err(|e| format!("{}: {e}", log.display()))
         .input()?;
-    if json {
-        print_json(&report)
-    } else {
-        println!("{report}");
-        Ok(())
-    }
+    print_report(&report, json, |r| println!("{r}"))
 }
 
 /// The inertia, mass, centre of mass and gravity of the single joint of the scenario at `path`.

@@ -1,10 +1,10 @@
 //! From a scenario and a plan to what the real-time layer runs: the board's configuration and the
 //! central controller's [`Track`]. The real-time layer never sees a scenario file.
 
-use crate::planning::plan::{PlanFile, Setup};
+use crate::planning::plan::{PlanError, PlanFile, Setup};
 use crate::planning::scenario::Scenario;
 use crate::rt::board::BoardConfig;
-use crate::rt::central::Track;
+use crate::rt::central::{Track, TrackError};
 use crate::rt::transport::MAX_JOINTS;
 
 /// The board of a scenario at `period_ns`: its `[board]` limits, its stiffness and torque
@@ -43,14 +43,24 @@ pub fn board_config(s: &Scenario, period_ns: u64) -> BoardConfig {
     }
 }
 
+/// Why a plan file cannot be played on the board of a scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum LaunchError {
+    /// The plan does not fit the scenario (steps, dimensions).
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    /// The policy cannot run on the real-time board (actuator, reference length).
+    #[error(transparent)]
+    Track(#[from] TrackError),
+}
+
 /// The track the central controller plays back for `plan` on the scenario set up as `setup`.
-pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, String> {
-    Track::new(
-        plan.policy(setup).map_err(|e| e.to_string())?,
+pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, LaunchError> {
+    Ok(Track::new(
+        plan.policy(setup)?,
         setup.dynamics.clone(),
         &setup.x0,
-    )
-    .map_err(|e| e.to_string())
+    )?)
 }
 
 #[cfg(test)]

@@ -39,6 +39,35 @@ pub struct ArmModel {
     pub noise: Noise,
 }
 
+/// Why the parts of an [`ArmModel`] do not fit together; each names the key of the scenario file
+/// that is wrong (`[section] key`), so that the planning layer can report the right line.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    #[error("motor_inertia has {entries} entries, the plant has {dof} joints")]
+    MotorInertiaCount { entries: usize, dof: usize },
+    #[error("motor_inertia must be positive")]
+    MotorInertiaNotPositive,
+    #[error(
+        "force fields act on the hand of the two-link arm; a single joint takes field kind = \"none\""
+    )]
+    FieldOnSingleJoint,
+    #[error("noise component {component} is out of range for a {nx}-dimensional state")]
+    NoiseComponent { component: usize, nx: usize },
+}
+
+impl ModelError {
+    /// The `(section, key)` of the scenario file that holds the value in error.
+    pub fn key(&self) -> (&'static str, &'static str) {
+        match self {
+            Self::MotorInertiaCount { .. } | Self::MotorInertiaNotPositive => {
+                ("actuator", "motor_inertia")
+            }
+            Self::FieldOnSingleJoint => ("field", "kind"),
+            Self::NoiseComponent { .. } => ("noise", "component"),
+        }
+    }
+}
+
 impl ArmModel {
     /// Builds a model, checking that its parts fit together.
     pub fn new(
@@ -46,25 +75,21 @@ impl ArmModel {
         actuator: Actuator,
         field: Field,
         noise: Noise,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, ModelError> {
         let dof = plant.dof();
         if let Actuator::Vsa { motor_inertia } = &actuator {
             if motor_inertia.len() != dof {
-                return Err(format!(
-                    "motor_inertia has {} entries, the plant has {dof} joints",
-                    motor_inertia.len()
-                ));
+                return Err(ModelError::MotorInertiaCount {
+                    entries: motor_inertia.len(),
+                    dof,
+                });
             }
             if motor_inertia.iter().any(|b| b.is_nan() || *b <= 0.0) {
-                return Err("motor_inertia must be positive".into());
+                return Err(ModelError::MotorInertiaNotPositive);
             }
         }
         if dof == 1 && !matches!(field, Field::None) {
-            return Err(
-                "force fields act on the hand of the two-link arm; a single joint takes \
-                 field kind = \"none\""
-                    .into(),
-            );
+            return Err(ModelError::FieldOnSingleJoint);
         }
         let model = ArmModel {
             plant,
@@ -75,10 +100,10 @@ impl ArmModel {
         if let Noise::StateProportional { component, .. } = noise
             && component >= model.nx()
         {
-            return Err(format!(
-                "noise component {component} is out of range for a {}-dimensional state",
-                model.nx()
-            ));
+            return Err(ModelError::NoiseComponent {
+                component,
+                nx: model.nx(),
+            });
         }
         Ok(model)
     }
@@ -131,15 +156,9 @@ impl ArmModel {
             rhs[i] = tau[i] - bias[i];
         }
         if !self.field.is_none() {
-            // Jᵀ(q) D: the hand force mapped to joint torques.
-            let jac = self.plant.jacobian(q);
-            let v = [
-                jac[0][0] * qd[0] + jac[0][1] * qd[1],
-                jac[1][0] * qd[0] + jac[1][1] * qd[1],
-            ];
-            let force = self.field.force(self.plant.hand_position(q), v);
-            for (i, r) in rhs.iter_mut().enumerate().take(n) {
-                *r += jac[0][i] * force[0] + jac[1][i] * force[1];
+            let field = self.field_torque(q, qd);
+            for (r, t) in rhs.iter_mut().zip(field).take(n) {
+                *r += t;
             }
         }
         let mut qdd = [S::zero(); 2];
@@ -198,16 +217,70 @@ impl ArmModel {
             }
         }
         if !self.field.is_none() {
-            let jac = self.plant.jacobian(q);
-            let v = [
-                jac[0][0] * qd[0] + jac[0][1] * qd[1],
-                jac[1][0] * qd[0] + jac[1][1] * qd[1],
-            ];
-            let force = self.field.force(self.plant.hand_position(q), v);
-            for (i, t) in tau.iter_mut().enumerate().take(n) {
-                *t -= jac[0][i] * force[0] + jac[1][i] * force[1];
+            for (t, f) in tau.iter_mut().zip(self.field_torque(q, qd)).take(n) {
+                *t -= f;
             }
         }
         tau
+    }
+
+    /// `Jᵀ(q) D(x, v)`: the field's hand force mapped to joint torques (Eq. 2's external term),
+    /// with the hand velocity `v = J(q) q'`.
+    fn field_torque<S: Scalar>(&self, q: &[S], qd: &[S]) -> [S; 2] {
+        let jac = self.plant.jacobian(q);
+        let v = [
+            jac[0][0] * qd[0] + jac[0][1] * qd[1],
+            jac[1][0] * qd[0] + jac[1][1] * qd[1],
+        ];
+        let force = self.field.force(self.plant.hand_position(q), v);
+        [
+            jac[0][0] * force[0] + jac[1][0] * force[1],
+            jac[0][1] * force[0] + jac[1][1] * force[1],
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn joint() -> Plant {
+        Plant::SingleJoint(SingleJoint {
+            inertia: 0.1,
+            mass: 1.0,
+            com: 0.1,
+            length: 0.3,
+            gravity: 9.81,
+            viscosity: 0.05,
+        })
+    }
+
+    #[test]
+    fn parts_that_do_not_fit_name_the_key_at_fault() {
+        let vsa = |b: Vec<f64>| Actuator::Vsa { motor_inertia: b };
+        let noise = Noise::None;
+        let e = ArmModel::new(joint(), vsa(vec![1.0, 2.0]), Field::None, noise).unwrap_err();
+        assert_eq!(e, ModelError::MotorInertiaCount { entries: 2, dof: 1 });
+        assert_eq!(e.key(), ("actuator", "motor_inertia"));
+        let e = ArmModel::new(joint(), vsa(vec![0.0]), Field::None, noise).unwrap_err();
+        assert_eq!(e, ModelError::MotorInertiaNotPositive);
+        let divergent = Field::Divergent { beta: 40.0 };
+        let e = ArmModel::new(joint(), Actuator::Torque, divergent, noise).unwrap_err();
+        assert_eq!(e.key(), ("field", "kind"));
+        // A torque-driven joint has the state (q, q'): component 2 does not exist.
+        let state = |component| Noise::StateProportional {
+            sigma: 0.1,
+            component,
+        };
+        let e = ArmModel::new(joint(), Actuator::Torque, Field::None, state(2)).unwrap_err();
+        assert_eq!(
+            e,
+            ModelError::NoiseComponent {
+                component: 2,
+                nx: 2
+            }
+        );
+        assert_eq!(e.key(), ("noise", "component"));
+        assert!(ArmModel::new(joint(), Actuator::Torque, Field::None, state(1)).is_ok());
     }
 }

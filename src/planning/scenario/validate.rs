@@ -29,8 +29,10 @@ pub(super) fn validate(
     let field = field(raw.field.ok_or_else(|| check.missing_section("field"))?);
     let raw_noise = raw.noise.ok_or_else(|| check.missing_section("noise"))?;
     let noise = noise(raw_noise, actuator.nx(dof), dof, &check)?;
-    let model = ArmModel::new(plant, actuator, field, noise)
-        .map_err(|m| check.invalid("field", "kind", m))?;
+    let model = ArmModel::new(plant, actuator, field, noise).map_err(|e| {
+        let (section, key) = e.key();
+        check.invalid(section, key, e.to_string())
+    })?;
     let raw_cost = raw.cost.ok_or_else(|| check.missing_section("cost"))?;
     let weights = weights(raw_cost, &model, &check)?;
     let task = task(

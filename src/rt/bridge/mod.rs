@@ -179,40 +179,7 @@ fn open_session(link: &Link) -> Result<zenoh::Session, BridgeError> {
         .map_err(zenoh_error(format!("opening the session on {endpoint}")))
 }
 
-/// Subscribes `key` and hands every sample, decoded as `T`, to `tx`.
-fn subscribe<T: Plain>(
-    session: &zenoh::Session,
-    key: String,
-    tx: &mpsc::Sender<Inbound>,
-    wrap: fn(T) -> Inbound,
-) -> Result<zenoh::pubsub::Subscriber<()>, BridgeError> {
-    let tx = tx.clone();
-    session
-        .declare_subscriber(key.clone())
-        .callback(move |sample| {
-            let bytes = sample.payload().to_bytes();
-            let _ = tx.send(match decode::<T>(&bytes) {
-                Ok(m) => wrap(m),
-                Err(e) => Inbound::Malformed(e),
-            });
-        })
-        .wait()
-        .map_err(zenoh_error(format!("subscribing {key}")))
-}
-
 type ZPub = zenoh::pubsub::Publisher<'static>;
-
-fn publisher(session: &zenoh::Session, key: String) -> Result<ZPub, BridgeError> {
-    session
-        .declare_publisher(key.clone())
-        // Control traffic: a late sample is worth less than the next one, never block the
-        // bridge behind a congested link.
-        .congestion_control(zenoh::qos::CongestionControl::Drop)
-        .priority(zenoh::qos::Priority::RealTime)
-        .express(true)
-        .wait()
-        .map_err(zenoh_error(format!("declaring {key}")))
-}
 
 fn put<T: Plain>(p: &ZPub, m: &T, stats: &mut u64, errors: &mut u64) {
     match p.put(encode(m).to_vec()).wait() {
@@ -229,13 +196,6 @@ fn restamped(mut h: Header, restamp: bool) -> Header {
     h
 }
 
-fn count_malformed(s: &mut BridgeStats, m: Malformed) {
-    match m {
-        Malformed::Size { .. } => s.malformed_size += 1,
-        Malformed::Version(_) => s.malformed_version += 1,
-    }
-}
-
 /// Runs a bridge until `stop` is set; `report` is called about once a second with the counts.
 pub fn run(
     o: &BridgeOptions,
@@ -246,7 +206,6 @@ pub fn run(
     let session = open_session(&o.link)?;
     let (tx, rx) = mpsc::channel();
     let mut stats = BridgeStats::default();
-    let name = &o.link_name;
     let mut next_report = Instant::now() + Duration::from_secs(1);
     let mut tick = |stats: &BridgeStats| {
         if Instant::now() >= next_report {
@@ -254,171 +213,235 @@ pub fn run(
             next_report += Duration::from_secs(1);
         }
     };
+    let link = LinkEnd {
+        session: &session,
+        tx: &tx,
+        name: &o.link_name,
+    };
+    let looper = Looper {
+        poll: o.poll,
+        stop,
+        rx: &rx,
+    };
     match o.side {
-        Side::Board => {
-            let central = CentralPorts::open(&o.namespace)?;
-            let tool = ToolPorts::open(&o.namespace)?;
-            let _subs = (
-                subscribe::<CommandSlice>(
-                    &session,
-                    key::<CommandSlice>(name),
-                    &tx,
-                    Inbound::Command,
-                )?,
-                subscribe::<Control>(&session, key::<Control>(name), &tx, Inbound::Control)?,
-                subscribe::<Disturbance>(
-                    &session,
-                    key::<Disturbance>(name),
-                    &tx,
-                    Inbound::Disturbance,
-                )?,
-            );
-            let state = publisher(&session, key::<StateMsg>(name))?;
-            let telemetry = publisher(&session, key::<Telemetry>(name))?;
-            let events = publisher(&session, event_key(name))?;
-            each_period(
-                o.poll,
-                stop,
-                &rx,
-                |inbound, s: &mut BridgeStats| {
-                    let r = &mut s.received;
-                    let ok = match inbound {
-                        Inbound::Command(mut c) => {
-                            c.header = restamped(c.header, o.restamp);
-                            r.command += 1;
-                            central.publish_command(&c).is_ok()
-                        }
-                        Inbound::Control(mut c) => {
-                            c.header = restamped(c.header, o.restamp);
-                            r.control += 1;
-                            central.publish_control(&c).is_ok()
-                        }
-                        Inbound::Disturbance(mut d) => {
-                            d.header = restamped(d.header, o.restamp);
-                            r.disturbance += 1;
-                            tool.publish_disturbance(&d).is_ok()
-                        }
-                        Inbound::Malformed(m) => {
-                            count_malformed(s, m);
-                            true
-                        }
-                        _ => true,
-                    };
-                    s.local_errors += (!ok) as u64;
-                },
-                |s| {
-                    let (sent, errors) = (&mut s.sent, &mut s.local_errors);
-                    central.drain_states(|m| put(&state, m, &mut sent.state, errors));
-                    if let Some(t) = central.latest_telemetry() {
-                        put(&telemetry, &t, &mut sent.telemetry, errors);
-                    }
-                    if central.take_event() {
-                        match events.put(Vec::<u8>::new()).wait() {
-                            Ok(()) => sent.event += 1,
-                            Err(_) => *errors += 1,
-                        }
-                    }
-                    tick(s);
-                },
-                &mut stats,
-            );
-        }
-        Side::Central => {
-            let board = BoardPorts::open(&o.namespace)?;
-            let _subs = (
-                subscribe::<StateMsg>(&session, key::<StateMsg>(name), &tx, Inbound::State)?,
-                subscribe::<Telemetry>(&session, key::<Telemetry>(name), &tx, Inbound::Telemetry)?,
-                session
-                    .declare_subscriber(event_key(name))
-                    .callback({
-                        let tx = tx.clone();
-                        move |_| {
-                            let _ = tx.send(Inbound::Event);
-                        }
-                    })
-                    .wait()
-                    .map_err(zenoh_error("subscribing the board's events"))?,
-            );
-            let commands = publisher(&session, key::<CommandSlice>(name))?;
-            let controls = publisher(&session, key::<Control>(name))?;
-            let disturbances = publisher(&session, key::<Disturbance>(name))?;
-            each_period(
-                o.poll,
-                stop,
-                &rx,
-                |inbound, s: &mut BridgeStats| {
-                    let r = &mut s.received;
-                    let ok = match inbound {
-                        Inbound::State(m) => {
-                            r.state += 1;
-                            board.publish_state(&m).is_ok()
-                        }
-                        Inbound::Telemetry(t) => {
-                            r.telemetry += 1;
-                            let ok = board.publish_telemetry(&t).is_ok();
-                            board.notify(BoardEvent::Telemetry);
-                            ok
-                        }
-                        Inbound::Event => {
-                            r.event += 1;
-                            board.notify(BoardEvent::Applied);
-                            true
-                        }
-                        Inbound::Malformed(m) => {
-                            count_malformed(s, m);
-                            true
-                        }
-                        _ => true,
-                    };
-                    s.local_errors += (!ok) as u64;
-                },
-                |s| {
-                    let (sent, errors) = (&mut s.sent, &mut s.local_errors);
-                    board.drain_commands(|m| put(&commands, m, &mut sent.command, errors));
-                    board.drain_controls(|m| put(&controls, m, &mut sent.control, errors));
-                    board.drain_disturbances(|m| {
-                        put(&disturbances, m, &mut sent.disturbance, errors)
-                    });
-                    tick(s);
-                },
-                &mut stats,
-            );
-        }
+        Side::Board => board_side(o, &link, &looper, &mut tick, &mut stats)?,
+        Side::Central => central_side(&o.namespace, &link, &looper, &mut tick, &mut stats)?,
     }
     drop(tx);
     let _ = session.close().wait();
     Ok(stats)
 }
 
-/// The bridge's loop: forwards what arrives from the link as it arrives (`inbound`), and drains
-/// the local side (`drain`) at every absolute deadline `poll` apart, until `stop`.
-fn each_period(
-    poll: Duration,
-    stop: &AtomicBool,
-    rx: &mpsc::Receiver<Inbound>,
-    mut inbound: impl FnMut(Inbound, &mut BridgeStats),
-    mut drain: impl FnMut(&mut BridgeStats),
+/// This bridge's end of the Zenoh link: its session, the channel its subscriptions feed, and the
+/// link's name in the key expressions.
+struct LinkEnd<'a> {
+    session: &'a zenoh::Session,
+    tx: &'a mpsc::Sender<Inbound>,
+    name: &'a str,
+}
+
+impl LinkEnd<'_> {
+    /// Subscribes topic `T` and hands every sample, decoded, to the bridge's thread.
+    fn subscribe<T: Plain + Topic>(
+        &self,
+        wrap: fn(T) -> Inbound,
+    ) -> Result<zenoh::pubsub::Subscriber<()>, BridgeError> {
+        let tx = self.tx.clone();
+        let key = key::<T>(self.name);
+        self.session
+            .declare_subscriber(key.clone())
+            .callback(move |sample| {
+                let bytes = sample.payload().to_bytes();
+                let _ = tx.send(match decode::<T>(&bytes) {
+                    Ok(m) => wrap(m),
+                    Err(e) => Inbound::Malformed(e),
+                });
+            })
+            .wait()
+            .map_err(zenoh_error(format!("subscribing {key}")))
+    }
+
+    /// The publisher of topic `T` on the link.
+    fn publisher<T: Topic>(&self) -> Result<ZPub, BridgeError> {
+        self.declare_publisher(key::<T>(self.name))
+    }
+
+    fn declare_publisher(&self, key: String) -> Result<ZPub, BridgeError> {
+        self.session
+            .declare_publisher(key.clone())
+            // Control traffic: a late sample is worth less than the next one, never block the
+            // bridge behind a congested link.
+            .congestion_control(zenoh::qos::CongestionControl::Drop)
+            .priority(zenoh::qos::Priority::RealTime)
+            .express(true)
+            .wait()
+            .map_err(zenoh_error(format!("declaring {key}")))
+    }
+}
+
+/// The bridge beside the board: commands, controls and disturbances from the link into the
+/// namespace (as a central process and a tool); state, telemetry and events out.
+fn board_side(
+    o: &BridgeOptions,
+    link: &LinkEnd,
+    looper: &Looper,
+    tick: &mut impl FnMut(&BridgeStats),
     stats: &mut BridgeStats,
-) {
-    let mut deadline = Instant::now() + poll;
-    while !stop.load(Ordering::Relaxed) {
-        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-            Ok(m) => {
-                // Everything that arrived meanwhile goes on at once, before the next drain.
-                inbound(m, stats);
-                while let Ok(m) = rx.try_recv() {
-                    inbound(m, stats);
+) -> Result<(), BridgeError> {
+    let central = CentralPorts::open(&o.namespace)?;
+    let tool = ToolPorts::open(&o.namespace)?;
+    let _subs = (
+        link.subscribe::<CommandSlice>(Inbound::Command)?,
+        link.subscribe::<Control>(Inbound::Control)?,
+        link.subscribe::<Disturbance>(Inbound::Disturbance)?,
+    );
+    let state = link.publisher::<StateMsg>()?;
+    let telemetry = link.publisher::<Telemetry>()?;
+    let events = link.declare_publisher(event_key(link.name))?;
+    looper.run(
+        |inbound, r: &mut Counts| match inbound {
+            Inbound::Command(mut c) => {
+                c.header = restamped(c.header, o.restamp);
+                r.command += 1;
+                central.publish_command(&c).is_ok()
+            }
+            Inbound::Control(mut c) => {
+                c.header = restamped(c.header, o.restamp);
+                r.control += 1;
+                central.publish_control(&c).is_ok()
+            }
+            Inbound::Disturbance(mut d) => {
+                d.header = restamped(d.header, o.restamp);
+                r.disturbance += 1;
+                tool.publish_disturbance(&d).is_ok()
+            }
+            _ => true,
+        },
+        |s| {
+            let (sent, errors) = (&mut s.sent, &mut s.local_errors);
+            central.drain_states(|m| put(&state, m, &mut sent.state, errors));
+            if let Some(t) = central.latest_telemetry() {
+                put(&telemetry, &t, &mut sent.telemetry, errors);
+            }
+            if central.take_event() {
+                match events.put(Vec::<u8>::new()).wait() {
+                    Ok(()) => sent.event += 1,
+                    Err(_) => *errors += 1,
                 }
             }
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            Err(mpsc::RecvTimeoutError::Disconnected) => break,
-        }
-        let now = Instant::now();
-        if now >= deadline {
-            drain(stats);
-            // Absolute deadlines; a late drain skips the periods it missed.
-            while deadline <= now {
-                deadline += poll;
+            tick(s);
+        },
+        stats,
+    );
+    Ok(())
+}
+
+/// The bridge beside the central process, playing the board to it: state, telemetry and events
+/// from the link into the namespace; commands, controls and disturbances out.
+fn central_side(
+    namespace: &str,
+    link: &LinkEnd,
+    looper: &Looper,
+    tick: &mut impl FnMut(&BridgeStats),
+    stats: &mut BridgeStats,
+) -> Result<(), BridgeError> {
+    let board = BoardPorts::open(namespace)?;
+    let _subs = (
+        link.subscribe::<StateMsg>(Inbound::State)?,
+        link.subscribe::<Telemetry>(Inbound::Telemetry)?,
+        link.session
+            .declare_subscriber(event_key(link.name))
+            .callback({
+                let tx = link.tx.clone();
+                move |_| {
+                    let _ = tx.send(Inbound::Event);
+                }
+            })
+            .wait()
+            .map_err(zenoh_error("subscribing the board's events"))?,
+    );
+    let commands = link.publisher::<CommandSlice>()?;
+    let controls = link.publisher::<Control>()?;
+    let disturbances = link.publisher::<Disturbance>()?;
+    looper.run(
+        |inbound, r: &mut Counts| match inbound {
+            Inbound::State(m) => {
+                r.state += 1;
+                board.publish_state(&m).is_ok()
+            }
+            Inbound::Telemetry(t) => {
+                r.telemetry += 1;
+                let ok = board.publish_telemetry(&t).is_ok();
+                board.notify(BoardEvent::Telemetry);
+                ok
+            }
+            Inbound::Event => {
+                r.event += 1;
+                board.notify(BoardEvent::Applied);
+                true
+            }
+            _ => true,
+        },
+        |s| {
+            let (sent, errors) = (&mut s.sent, &mut s.local_errors);
+            board.drain_commands(|m| put(&commands, m, &mut sent.command, errors));
+            board.drain_controls(|m| put(&controls, m, &mut sent.control, errors));
+            board.drain_disturbances(|m| put(&disturbances, m, &mut sent.disturbance, errors));
+            tick(s);
+        },
+        stats,
+    );
+    Ok(())
+}
+
+/// The bridge's loop, the same on both sides.
+struct Looper<'a> {
+    /// Drain period of the local subscribers.
+    poll: Duration,
+    stop: &'a AtomicBool,
+    /// What the link's callbacks decoded.
+    rx: &'a mpsc::Receiver<Inbound>,
+}
+
+impl Looper<'_> {
+    /// Forwards what arrives from the link as it arrives (`forward`: publishes it locally, counts
+    /// it in the received counts, says whether the local publish worked) and drains the local
+    /// side (`drain`) at every absolute deadline `poll` apart, until `stop`. What did not decode
+    /// is counted here, once for both sides, and never forwarded.
+    fn run(
+        &self,
+        mut forward: impl FnMut(Inbound, &mut Counts) -> bool,
+        mut drain: impl FnMut(&mut BridgeStats),
+        stats: &mut BridgeStats,
+    ) {
+        let mut inbound = |m: Inbound, s: &mut BridgeStats| match m {
+            Inbound::Malformed(Malformed::Size { .. }) => s.malformed_size += 1,
+            Inbound::Malformed(Malformed::Version(_)) => s.malformed_version += 1,
+            m => s.local_errors += (!forward(m, &mut s.received)) as u64,
+        };
+        let mut deadline = Instant::now() + self.poll;
+        while !self.stop.load(Ordering::Relaxed) {
+            match self
+                .rx
+                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            {
+                Ok(m) => {
+                    // Everything that arrived meanwhile goes on at once, before the next drain.
+                    inbound(m, stats);
+                    while let Ok(m) = self.rx.try_recv() {
+                        inbound(m, stats);
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                drain(stats);
+                // Absolute deadlines; a late drain skips the periods it missed.
+                while deadline <= now {
+                    deadline += self.poll;
+                }
             }
         }
     }

@@ -30,9 +30,26 @@ pub struct BoardRecording {
     pub other_messages: u64,
 }
 
-fn array(v: &[Option<f64>], name: &str, joints: usize) -> Result<[f64; MAX_JOINTS], String> {
+/// A per-joint array of a tick message whose length is not the recording's number of joints.
+#[derive(Debug, thiserror::Error)]
+#[error("`{field}` has {entries} entries, not {joints}")]
+struct JointCount {
+    field: &'static str,
+    entries: usize,
+    joints: usize,
+}
+
+fn array(
+    v: &[Option<f64>],
+    field: &'static str,
+    joints: usize,
+) -> Result<[f64; MAX_JOINTS], JointCount> {
     if v.len() != joints {
-        return Err(format!("`{name}` has {} entries, not {joints}", v.len()));
+        return Err(JointCount {
+            field,
+            entries: v.len(),
+            joints,
+        });
     }
     let mut a = [0.0; MAX_JOINTS];
     for (x, y) in a.iter_mut().zip(v) {
@@ -41,7 +58,7 @@ fn array(v: &[Option<f64>], name: &str, joints: usize) -> Result<[f64; MAX_JOINT
     Ok(a)
 }
 
-fn sample_of(m: &TickMsg<Vec<Option<f64>>>, joints: usize) -> Result<Sample, String> {
+fn sample_of(m: &TickMsg<Vec<Option<f64>>>, joints: usize) -> Result<Sample, JointCount> {
     Ok(Sample {
         tick: m.tick,
         dropped_before: m.dropped_before,
@@ -111,7 +128,8 @@ pub fn read_board_mcap(path: &Path) -> Result<BoardRecording, RecordError> {
                         return Err(bad(format!("{} joints", rec.joints)));
                     }
                 }
-                rec.samples.push(sample_of(&m, rec.joints).map_err(bad)?);
+                rec.samples
+                    .push(sample_of(&m, rec.joints).map_err(|e| bad(e.to_string()))?);
             }
             GAP_TOPIC => {
                 let g: GapMsg =

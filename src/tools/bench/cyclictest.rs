@@ -2,6 +2,7 @@
 //! for the same duration as the board loop, its latency histogram parsed into a [`Dist`].
 
 use super::Dist;
+use super::error::{BenchError, HistogramError};
 use std::path::{Path, PathBuf};
 
 /// How to install the baseline, for messages.
@@ -90,23 +91,28 @@ impl Histogram {
 /// Parses the text cyclictest writes with `-h N --histfile=F`: lines `LATENCY COUNT…` then
 /// `# Total:`, `# Min Latencies:`, `# Avg Latencies:`, `# Max Latencies:` and `# Histogram
 /// Overflows:` (one column per thread; they are summed, the maximum is the largest).
-pub fn parse(text: &str) -> Result<Histogram, String> {
+pub fn parse(text: &str) -> Result<Histogram, HistogramError> {
     let mut counts: Vec<u64> = Vec::new();
     let (mut total, mut min, mut avg, mut max, mut overflows) = (None, None, None, None, None);
-    let nums = |rest: &str| -> Result<Vec<u64>, String> {
-        rest.split_whitespace()
-            .map(|t| t.parse::<u64>().map_err(|e| format!("\"{t}\": {e}")))
-            .collect()
-    };
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();
-        let err = |e: String| format!("cyclictest histogram, line {}: {e}", i + 1);
+        let nums = |rest: &str| -> Result<Vec<u64>, HistogramError> {
+            rest.split_whitespace()
+                .map(|t| {
+                    t.parse::<u64>().map_err(|source| HistogramError::Number {
+                        line: i + 1,
+                        token: t.to_string(),
+                        source,
+                    })
+                })
+                .collect()
+        };
         if let Some(rest) = line.strip_prefix('#') {
             let Some((key, value)) = rest.split_once(':') else {
                 continue;
             };
             let key = key.trim();
-            let v = || nums(value).map_err(err);
+            let v = || nums(value);
             match key {
                 "Total" => total = Some(v()?.iter().sum::<u64>()),
                 "Min Latencies" => min = v()?.into_iter().min(),
@@ -120,23 +126,28 @@ pub fn parse(text: &str) -> Result<Histogram, String> {
         if line.is_empty() {
             continue;
         }
-        let v = nums(line).map_err(err)?;
+        let v = nums(line)?;
         if v.len() < 2 {
-            return Err(err(format!("expected `LATENCY COUNT`, got \"{line}\"")));
+            return Err(HistogramError::Row {
+                line: i + 1,
+                text: line.to_string(),
+            });
         }
         let at = v[0] as usize;
         if at > 10_000_000 {
-            return Err(err(format!("latency {at} µs is out of range")));
+            return Err(HistogramError::Latency {
+                line: i + 1,
+                latency_us: at,
+            });
         }
         if counts.len() <= at {
             counts.resize(at + 1, 0);
         }
         counts[at] += v[1..].iter().sum::<u64>();
     }
-    let missing = |what: &str| format!("cyclictest histogram: no `# {what}:` line");
     let h = Histogram {
-        total: total.ok_or_else(|| missing("Total"))?,
-        max_us: max.ok_or_else(|| missing("Max Latencies"))? as f64,
+        total: total.ok_or(HistogramError::Missing("Total"))?,
+        max_us: max.ok_or(HistogramError::Missing("Max Latencies"))? as f64,
         min_us: min.unwrap_or(0) as f64,
         avg_us: avg.unwrap_or(0) as f64,
         overflows: overflows.unwrap_or(0),
@@ -144,10 +155,10 @@ pub fn parse(text: &str) -> Result<Histogram, String> {
     };
     let in_buckets: u64 = h.counts.iter().sum();
     if in_buckets != h.total {
-        return Err(format!(
-            "cyclictest histogram: the buckets hold {in_buckets} samples, `# Total:` says {}",
-            h.total
-        ));
+        return Err(HistogramError::Total {
+            in_buckets,
+            total: h.total,
+        });
     }
     Ok(h)
 }
@@ -162,7 +173,7 @@ pub struct Run {
 }
 
 /// Runs cyclictest with `opts` and parses its histogram.
-pub fn run(binary: &Path, opts: &Options) -> Result<Run, String> {
+pub fn run(binary: &Path, opts: &Options) -> Result<Run, BenchError> {
     let histfile = std::env::temp_dir().join(format!(
         "vic-cyclictest-{}-{}.hist",
         std::process::id(),
@@ -176,19 +187,19 @@ pub fn run(binary: &Path, opts: &Options) -> Result<Run, String> {
         .args(&args)
         .stdin(std::process::Stdio::null())
         .output()
-        .map_err(|e| format!("cannot run {command}: {e}"))?;
+        .map_err(|e| BenchError::io(format!("cannot run {command}"), e))?;
     let wall = crate::rt::transport::monotonic_ns() - t0;
     let cpu = crate::rt::sched::children_cpu_ns().saturating_sub(cpu0);
     let text = std::fs::read_to_string(&histfile);
     let _ = std::fs::remove_file(&histfile);
     if !out.status.success() {
-        return Err(format!(
-            "{command} failed ({}): {}",
-            out.status,
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
+        return Err(BenchError::Failed {
+            command,
+            status: out.status,
+            stderr: String::from_utf8_lossy(&out.stderr).trim().to_string(),
+        });
     }
-    let text = text.map_err(|e| format!("{command} wrote no histogram: {e}"))?;
+    let text = text.map_err(|e| BenchError::io(format!("{command} wrote no histogram"), e))?;
     Ok(Run {
         histogram: parse(&text)?,
         cpu_percent: 100.0 * cpu as f64 / wall.max(1) as f64,

@@ -1,24 +1,23 @@
 //! `vic bench ipc`: latency of the state and command channels against a bare iceoryx2
 //! publish/subscribe ping-pong with the same payload sizes, both as two busy-polling threads of
 //! this process (the same way for vic and the baseline, so the ratio is fair), then the
-//! end-to-end figures of the running `vic-board` + `vic-planner` pair.
+//! end-to-end figures of the running `vic-board` + `vic-planner` pair ([`super::pair`]).
 //!
 //! Ping-pong: the "board" thread publishes a state (time-stamped on the monotonic clock), the
 //! "planner" thread receives it and answers with a command slice, the board thread receives that.
 //! One-way latency = receive time − publish time stamp (one clock, two threads); round trip =
 //! answer received − state published.
 
-use super::{Dist, ratio};
-use crate::rt::realtime::{LatencyHistogram, Periodic, set_timer_slack_1ns};
+pub use super::pair::{Pair, PairOptions, run_pair};
+
+use super::{BenchError, Dist, ratio};
+use crate::rt::realtime::LatencyHistogram;
 use crate::rt::transport::{
-    BoardPorts, CentralPorts, CommandSlice, Disturbance, DisturbanceKind, Header, StateMsg,
-    ToolPorts, monotonic_ns, remove_namespace,
+    BoardPorts, CentralPorts, CommandSlice, Header, StateMsg, monotonic_ns, remove_namespace,
 };
 use iceoryx2::prelude::*;
 use serde::Serialize;
-use std::path::PathBuf;
 use std::sync::{Arc, Barrier};
-use std::time::Duration;
 
 /// Bytes of the state message (the ping payload).
 pub const STATE_BYTES: usize = std::mem::size_of::<StateMsg>();
@@ -46,46 +45,50 @@ pub struct Channels {
 /// One side of a ping-pong, whatever carries it.
 trait Side {
     /// Sends `(seq, now)`.
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String>;
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()>;
     /// Polls once: the newest `(seq, publish stamp, receive time)`, if any; the receive time is
     /// taken as soon as the message is in hand.
     fn poll(&mut self) -> Option<(u64, u64, u64)>;
 }
 
-struct VicBoard(BoardPorts);
-struct VicPlanner(CentralPorts);
+/// A side of vic's own channels: `$ports` publishes `$out` messages with `$publish` and drains
+/// the other side's with `$drain`, the sequence number and stamp in the shared header.
+macro_rules! vic_side {
+    ($name:ident, $ports:ty, $out:ident, $publish:ident, $drain:ident) => {
+        struct $name($ports);
 
-impl Side for VicBoard {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
-        let s = StateMsg {
-            header: Header::new(seq, time_ns),
-            ..Default::default()
-        };
-        self.0.publish_state(&s).map_err(|e| e.to_string())
-    }
-    fn poll(&mut self) -> Option<(u64, u64, u64)> {
-        let mut last = None;
-        self.0
-            .drain_commands(|c| last = Some((c.header.seq, c.header.time_ns, monotonic_ns())));
-        last
-    }
+        impl Side for $name {
+            fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
+                let m = $out {
+                    header: Header::new(seq, time_ns),
+                    ..Default::default()
+                };
+                Ok(self.0.$publish(&m)?)
+            }
+            fn poll(&mut self) -> Option<(u64, u64, u64)> {
+                let mut last = None;
+                self.0
+                    .$drain(|m| last = Some((m.header.seq, m.header.time_ns, monotonic_ns())));
+                last
+            }
+        }
+    };
 }
 
-impl Side for VicPlanner {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
-        let c = CommandSlice {
-            header: Header::new(seq, time_ns),
-            ..Default::default()
-        };
-        self.0.publish_command(&c).map_err(|e| e.to_string())
-    }
-    fn poll(&mut self) -> Option<(u64, u64, u64)> {
-        let mut last = None;
-        self.0
-            .drain_states(|s| last = Some((s.header.seq, s.header.time_ns, monotonic_ns())));
-        last
-    }
-}
+vic_side!(
+    VicBoard,
+    BoardPorts,
+    StateMsg,
+    publish_state,
+    drain_commands
+);
+vic_side!(
+    VicPlanner,
+    CentralPorts,
+    CommandSlice,
+    publish_command,
+    drain_states
+);
 
 type Bytes<const N: usize> = [u8; N];
 
@@ -98,52 +101,53 @@ struct Bare<const OUT: usize, const IN: usize> {
 }
 
 impl<const OUT: usize, const IN: usize> Bare<OUT, IN> {
-    fn open(ns: &str, out: &str, input: &str) -> Result<Self, String> {
+    fn open(ns: &str, out: &str, input: &str) -> Result<Self> {
         set_log_level(LogLevel::Error);
-        let cfg = crate::rt::transport::namespace::config(ns).map_err(|e| e.to_string())?;
+        let cfg = crate::rt::transport::namespace::config(ns)?;
         let node = NodeBuilder::new()
             .config(&cfg)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| format!("node: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx("node", e))?;
+        let name = |n: &str| ServiceName::new(n).map_err(|e| BenchError::iceoryx(n, e));
         let svc_out = node
-            .service_builder(&ServiceName::new(out).map_err(|e| format!("{e:?}"))?)
+            .service_builder(&name(out)?)
             .publish_subscribe::<Bytes<OUT>>()
             .open_or_create()
-            .map_err(|e| format!("service {out}: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx(format!("service {out}"), e))?;
         let svc_in = node
-            .service_builder(&ServiceName::new(input).map_err(|e| format!("{e:?}"))?)
+            .service_builder(&name(input)?)
             .publish_subscribe::<Bytes<IN>>()
             .open_or_create()
-            .map_err(|e| format!("service {input}: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx(format!("service {input}"), e))?;
         Ok(Bare {
             publisher: svc_out
                 .publisher_builder()
                 .create()
-                .map_err(|e| format!("publisher: {e:?}"))?,
+                .map_err(|e| BenchError::iceoryx("publisher", e))?,
             subscriber: svc_in
                 .subscriber_builder()
                 .create()
-                .map_err(|e| format!("subscriber: {e:?}"))?,
+                .map_err(|e| BenchError::iceoryx("subscriber", e))?,
             _node: node,
         })
     }
 }
 
 impl<const OUT: usize, const IN: usize> Side for Bare<OUT, IN> {
-    fn send(&mut self, seq: u64, time_ns: u64) -> Result<(), String> {
+    fn send(&mut self, seq: u64, time_ns: u64) -> Result<()> {
         let mut b = [0u8; OUT];
         b[..8].copy_from_slice(&seq.to_le_bytes());
         b[8..16].copy_from_slice(&time_ns.to_le_bytes());
         let sample = self
             .publisher
             .loan_uninit()
-            .map_err(|e| format!("loan: {e:?}"))?;
+            .map_err(|e| BenchError::iceoryx("loan", e))?;
         sample
             .write_payload(b)
             .send()
             .map(|_| ())
-            .map_err(|e| format!("send: {e:?}"))
+            .map_err(|e| BenchError::iceoryx("send", e))
     }
     fn poll(&mut self) -> Option<(u64, u64, u64)> {
         let s = self.subscriber.receive().ok()??;
@@ -160,11 +164,11 @@ fn ping_pong<P: Side, Q: Side>(
     iterations: u64,
     make_pinger: impl FnOnce() -> Result<P> + Send + 'static,
     make_ponger: impl FnOnce() -> Result<Q> + Send + 'static,
-) -> Result<Channels, String> {
+) -> Result<Channels> {
     let barrier = Arc::new(Barrier::new(2));
     let last = WARM_UP + iterations;
     let b = barrier.clone();
-    let ponger = std::thread::spawn(move || -> Result<LatencyHistogram, String> {
+    let ponger = std::thread::spawn(move || -> Result<LatencyHistogram> {
         let side = make_ponger();
         b.wait();
         let mut side = side?;
@@ -184,7 +188,7 @@ fn ping_pong<P: Side, Q: Side>(
                 _ => {
                     std::hint::spin_loop();
                     if monotonic_ns() - idle_since > RESEND_NS * MAX_RESENDS {
-                        return Err("the ping side went quiet".into());
+                        return Err(BenchError::Quiet);
                     }
                 }
             }
@@ -194,7 +198,7 @@ fn ping_pong<P: Side, Q: Side>(
     let pinger = {
         let b = barrier;
         std::thread::spawn(
-            move || -> Result<(LatencyHistogram, LatencyHistogram, u64), String> {
+            move || -> Result<(LatencyHistogram, LatencyHistogram, u64)> {
                 let side = make_pinger();
                 b.wait();
                 let mut side = side?;
@@ -220,7 +224,7 @@ fn ping_pong<P: Side, Q: Side>(
                         if now - sent > RESEND_NS {
                             resends += 1;
                             if resends > MAX_RESENDS {
-                                return Err(format!("no answer to ping {seq}"));
+                                return Err(BenchError::NoAnswer(seq));
                             }
                             sent = now;
                             side.send(seq, now)?;
@@ -231,12 +235,8 @@ fn ping_pong<P: Side, Q: Side>(
             },
         )
     };
-    let pinged = pinger
-        .join()
-        .map_err(|_| "the ping thread panicked".to_string())?;
-    let ponged = ponger
-        .join()
-        .map_err(|_| "the pong thread panicked".to_string())?;
+    let pinged = pinger.join().map_err(|_| BenchError::Panicked("ping"))?;
+    let ponged = ponger.join().map_err(|_| BenchError::Panicked("pong"))?;
     let (command, rtt, resends) = pinged?;
     let state = ponged?;
     Ok(Channels {
@@ -247,7 +247,7 @@ fn ping_pong<P: Side, Q: Side>(
     })
 }
 
-type Result<T, E = String> = std::result::Result<T, E>;
+type Result<T, E = BenchError> = std::result::Result<T, E>;
 
 /// vic's channels: [`BoardPorts`] and [`CentralPorts`], the real message types.
 pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
@@ -255,16 +255,8 @@ pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
     let (a, b) = (ns.clone(), ns.clone());
     let r = ping_pong(
         iterations,
-        move || {
-            BoardPorts::open(&a)
-                .map(VicBoard)
-                .map_err(|e| e.to_string())
-        },
-        move || {
-            CentralPorts::open(&b)
-                .map(VicPlanner)
-                .map_err(|e| e.to_string())
-        },
+        move || Ok(BoardPorts::open(&a).map(VicBoard)?),
+        move || Ok(CentralPorts::open(&b).map(VicPlanner)?),
     );
     remove_namespace(&ns);
     r
@@ -282,180 +274,6 @@ pub fn bare_ping_pong(iterations: u64) -> Result<Channels> {
     );
     remove_namespace(&ns);
     r
-}
-
-/// Options of the end-to-end run of the pair.
-#[derive(Debug, Clone)]
-pub struct PairOptions {
-    pub board_bin: PathBuf,
-    pub planner_bin: PathBuf,
-    pub config: PathBuf,
-    pub overrides: Vec<String>,
-    /// A plan for the `stiffness` strategy (`vic plan --method sooc --out`).
-    pub plan: PathBuf,
-    /// Trials the planner runs (about 1.5 s each).
-    pub trials: u64,
-}
-
-/// The end-to-end figures of the running pair.
-#[derive(Debug, Clone, Serialize)]
-pub struct Pair {
-    /// Age of the newest state at a reader polling at 1 kHz on the whole-millisecond deadlines
-    /// the planner's loop uses, with the planner's subscription (now − the state's publish
-    /// stamp): what the planner sees at each of its ticks.
-    pub state_age_us: Dist,
-    /// Age of the command slice the board used at each tick, from its own statistics (slices are
-    /// sent at 50 Hz and cover 320 ms: up to 20 ms by design).
-    pub command_age_us: Dist,
-    /// Pulse published (at a phase spread over the period) → first board state carrying it (its
-    /// publish stamp): the pulse has been applied to the plant by then.
-    pub pulse_to_effect_us: Dist,
-    /// Pulse published → that state received by the injecting tool.
-    pub pulse_to_observed_us: Dist,
-    pub pulses: u64,
-    /// The board's own statistics over the run (jitter, work, command age, ticks …).
-    pub board: serde_json::Value,
-    pub trials: u64,
-}
-
-/// Runs `vic-board` and `vic-planner --strategy stiffness` in a fresh namespace, injects a small
-/// torque pulse every 100 ms and records the state age, the pulse-to-effect delay and the board's
-/// statistics.
-pub fn run_pair(o: &PairOptions) -> Result<Pair> {
-    use std::process::{Command, Stdio};
-    let ns = super::unique_namespace("bp");
-    let mut guard = crate::rt::daemon::Children::new(&ns);
-    let mut board = Command::new(&o.board_bin);
-    board
-        .arg("--config")
-        .arg(&o.config)
-        .args(["--namespace", &ns, "--json"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit());
-    for s in &o.overrides {
-        board.args(["--set", s]);
-    }
-    guard.children.push(
-        board
-            .spawn()
-            .map_err(|e| format!("cannot start {}: {e}", o.board_bin.display()))?,
-    );
-    let tool = ToolPorts::open(&ns).map_err(|e| e.to_string())?;
-    let t0 = std::time::Instant::now();
-    while tool.latest_state().is_none() {
-        if t0.elapsed() > Duration::from_secs(10) {
-            return Err("vic-board published no state within 10 s".into());
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    let mut planner = Command::new(&o.planner_bin);
-    planner
-        .arg("--config")
-        .arg(&o.config)
-        .arg("--plan")
-        .arg(&o.plan)
-        .args(["--strategy", "stiffness", "--namespace", &ns, "--json"])
-        .args(["--trials", &o.trials.to_string()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit());
-    for s in &o.overrides {
-        planner.args(["--set", s]);
-    }
-    guard.children.push(
-        planner
-            .spawn()
-            .map_err(|e| format!("cannot start {}: {e}", o.planner_bin.display()))?,
-    );
-    set_timer_slack_1ns();
-    let mut age = LatencyHistogram::new();
-    let mut effect = LatencyHistogram::new();
-    let mut observed = LatencyHistogram::new();
-    let mut periodic = Periodic::new(1_000_000, 0);
-    let mut pulse_seq = 0u64;
-    let mut pending: Option<(u64, u64)> = None;
-    let deadline = std::time::Instant::now() + Duration::from_secs(20 + 5 * o.trials);
-    let mut tick = 0u64;
-    let planner_status = loop {
-        let wake = periodic.wait();
-        tick += 1;
-        let mut newest: Option<StateMsg> = None;
-        let now = {
-            tool.drain_states(|s| {
-                if let Some((seq, t_inject)) = pending
-                    && s.disturbance_seq >= seq
-                {
-                    effect.record(s.header.time_ns.saturating_sub(t_inject));
-                    observed.record(monotonic_ns().saturating_sub(t_inject));
-                    pending = None;
-                }
-                newest = Some(*s);
-            });
-            monotonic_ns()
-        };
-        if let Some(s) = newest {
-            age.record(now.saturating_sub(s.header.time_ns));
-        }
-        if tick.is_multiple_of(100) && pending.is_none() {
-            // At a phase spread over the period (379 µs steps), not on the board's deadlines.
-            pulse_seq += 1;
-            crate::rt::realtime::sleep_until(wake.deadline_ns + (pulse_seq * 379_000) % 900_000, 0);
-            let t = monotonic_ns();
-            let d = Disturbance {
-                header: Header::new(pulse_seq, t),
-                kind: DisturbanceKind::Pulse as u32,
-                torque: [0.05, 0.0],
-                duration_ns: 1_000_000,
-                value: 0.0,
-                ..Default::default()
-            };
-            if tool.publish_disturbance(&d).is_ok() {
-                pending = Some((pulse_seq, t));
-            }
-        }
-        if tick.is_multiple_of(50) {
-            let p = guard.children.last_mut().expect("the planner");
-            match p.try_wait() {
-                Ok(Some(status)) => break status,
-                Ok(None) => {}
-                Err(e) => return Err(format!("vic-planner: {e}")),
-            }
-            if std::time::Instant::now() > deadline {
-                return Err("vic-planner did not finish in time".into());
-            }
-        }
-    };
-    if !planner_status.success() {
-        return Err(format!("vic-planner failed ({planner_status})"));
-    }
-    guard.children.pop();
-    let mut board = guard.children.pop().expect("the board");
-    crate::rt::daemon::Children::terminate(&mut board);
-    let mut stdout = String::new();
-    if let Some(mut s) = board.stdout.take() {
-        use std::io::Read;
-        let _ = s.read_to_string(&mut stdout);
-    }
-    drop(tool);
-    drop(guard);
-    let stats: serde_json::Value = serde_json::from_str(stdout.trim())
-        .map_err(|e| format!("vic-board printed no statistics: {e}"))?;
-    let ca = &stats["command_age_us"];
-    let f = |k: &str| ca[k].as_f64().unwrap_or(f64::NAN);
-    Ok(Pair {
-        state_age_us: Dist::from_histogram(&age),
-        command_age_us: Dist {
-            p50_us: f("p50"),
-            p99_us: f("p99"),
-            p999_us: f("p999"),
-            max_us: f("max"),
-            count: ca["count"].as_u64().unwrap_or(0),
-        },
-        pulse_to_effect_us: Dist::from_histogram(&effect),
-        pulse_to_observed_us: Dist::from_histogram(&observed),
-        pulses: effect.count(),
-        board: stats,
-        trials: o.trials,
-    })
 }
 
 /// Options of `vic bench ipc`.

@@ -1,13 +1,18 @@
 //! Benchmarks against the machine's own limits (`vic bench`): the board's 1 kHz loop against
 //! `cyclictest` ([`loop_bench`], [`cyclictest`]) and the transport against a bare iceoryx2
-//! ping-pong with the same payload ([`ipc`]). Each measures vic and its baseline in the same run
-//! and reports both distributions and their ratio.
+//! ping-pong with the same payload ([`ipc`]), then the running board + planner pair ([`pair`]).
+//! Each measures vic and its baseline in the same run and reports both distributions and their
+//! ratio.
 
 #[cfg(feature = "zenoh")]
 pub mod bridge;
 pub mod cyclictest;
+pub mod error;
 pub mod ipc;
 pub mod loop_bench;
+pub mod pair;
+
+pub use error::{BenchError, HistogramError};
 
 use crate::rt::realtime::LatencyHistogram;
 use serde::{Deserialize, Serialize};

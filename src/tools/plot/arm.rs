@@ -55,17 +55,13 @@ impl<'a> ArmFigure<'a> {
                 })
                 .collect()
         };
-        let reference_angles: Vec<f64> = columns
-            .iter()
-            .flat_map(|c| c.reference_q.iter().flatten().map(|q| q * RAD_TO_DEG))
-            .collect();
-        let angle = shared_range(band_values(|s| &s.angle), &reference_angles, false);
+        let angle = shared_range(
+            band_values(|s| &s.angle),
+            &reference_degrees(columns),
+            false,
+        );
         let velocity = shared_range(band_values(|s| &s.velocity), &[], false);
-        let torque = shared_range(command_values(columns, Commands::Torque), &[], true);
-        let stiffness = columns
-            .iter()
-            .any(|c| n_controls(c) > n_torques(c))
-            .then(|| shared_range(command_values(columns, Commands::Stiffness), &[], true));
+        let (torque, stiffness) = command_ranges(columns);
         ArmFigure {
             columns,
             hand_view: hand_view(columns, &stats),
@@ -76,21 +72,6 @@ impl<'a> ArmFigure<'a> {
             torque,
             stiffness,
         }
-    }
-
-    pub(super) fn heights(&self) -> Vec<u32> {
-        let mut h = vec![
-            ARM_HAND_HEIGHT,
-            ARM_TIME_HEIGHT,
-            ARM_TIME_HEIGHT,
-            ARM_TIME_HEIGHT,
-        ];
-        if self.stiffness.is_some() {
-            h.push(ARM_TIME_HEIGHT);
-        }
-        // The bottom panel also holds the time axis' description.
-        *h.last_mut().unwrap() += X_LABEL_AREA_DESC - X_LABEL_AREA;
-        h
     }
 
     pub(super) fn draw_hand<DB: DrawingBackend>(
@@ -216,38 +197,37 @@ impl<'a> ArmFigure<'a> {
     }
 }
 
-impl Figure for ArmFigure<'_> {
-    fn size(&self) -> (u32, u32) {
-        columns_size(self.columns.len(), &self.heights())
+impl ColumnFigure for ArmFigure<'_> {
+    const LETTER_PANELS: [usize; 3] = [0, 1, 3];
+
+    fn columns(&self) -> &[ColumnPlot] {
+        self.columns
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
-        let heights = self.heights();
-        draw_columns(
-            root,
-            &heights,
-            self.columns.len(),
-            [0, 1, 3],
-            |c, panels| {
-                self.draw_hand(&panels[0], c)?;
-                let rows: [(&str, (f64, f64)); 2] = [
-                    ("angle [deg]", self.angle),
-                    ("velocity [deg/s]", self.velocity),
-                ];
-                for (r, (desc, range)) in rows.into_iter().enumerate() {
-                    let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
-                    self.draw_joint_stats(&mut chart, c, r == 0)?;
-                }
-                draw_command_rows(
-                    &panels[3..],
-                    self.time,
-                    self.torque,
-                    self.stiffness,
-                    &self.columns[c],
-                    c == 0,
-                )
-            },
-        )
+    fn own_heights(&self) -> (Vec<u32>, u32) {
+        let h = vec![ARM_HAND_HEIGHT, ARM_TIME_HEIGHT, ARM_TIME_HEIGHT];
+        (h, ARM_TIME_HEIGHT)
+    }
+
+    fn command_ranges(&self) -> (Span, Span, Option<Span>) {
+        (self.time, self.torque, self.stiffness)
+    }
+
+    fn draw_own<DB: DrawingBackend>(
+        &self,
+        c: usize,
+        panels: &[DrawingArea<DB, Shift>],
+    ) -> DrawResult<(), DB> {
+        self.draw_hand(&panels[0], c)?;
+        let rows: [(&str, (f64, f64)); 2] = [
+            ("angle [deg]", self.angle),
+            ("velocity [deg/s]", self.velocity),
+        ];
+        for (r, (desc, range)) in rows.into_iter().enumerate() {
+            let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
+            self.draw_joint_stats(&mut chart, c, r == 0)?;
+        }
+        Ok(())
     }
 }
 

@@ -28,30 +28,15 @@ impl<'a> JointFigure<'a> {
                 })
                 .collect()
         };
-        let reference: Vec<f64> = columns
-            .iter()
-            .flat_map(|c| c.reference_q.iter().flatten().map(|q| q * RAD_TO_DEG))
-            .collect();
+        let (torque, stiffness) = command_ranges(columns);
         JointFigure {
             columns,
             time: time_range(columns),
-            angle: shared_range(trial_values(|c| &c.q), &reference, false),
+            angle: shared_range(trial_values(|c| &c.q), &reference_degrees(columns), false),
             velocity: shared_range(trial_values(|c| &c.qd), &[], false),
-            torque: shared_range(command_values(columns, Commands::Torque), &[], true),
-            stiffness: columns
-                .iter()
-                .any(|c| n_controls(c) > n_torques(c))
-                .then(|| shared_range(command_values(columns, Commands::Stiffness), &[], true)),
+            torque,
+            stiffness,
         }
-    }
-
-    pub(super) fn heights(&self) -> Vec<u32> {
-        let mut h = vec![JOINT_ANGLE_HEIGHT, JOINT_TIME_HEIGHT, JOINT_TIME_HEIGHT];
-        if self.stiffness.is_some() {
-            h.push(JOINT_TIME_HEIGHT);
-        }
-        *h.last_mut().unwrap() += X_LABEL_AREA_DESC - X_LABEL_AREA;
-        h
     }
 
     /// Every trial of every joint's angle [deg] (with the reference) or velocity [deg/s].
@@ -114,39 +99,39 @@ impl<'a> JointFigure<'a> {
     }
 }
 
-impl Figure for JointFigure<'_> {
-    fn size(&self) -> (u32, u32) {
-        columns_size(self.columns.len(), &self.heights())
+impl ColumnFigure for JointFigure<'_> {
+    const LETTER_PANELS: [usize; 3] = [0, 1, 2];
+
+    fn columns(&self) -> &[ColumnPlot] {
+        self.columns
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
-        let heights = self.heights();
-        draw_columns(
-            root,
-            &heights,
-            self.columns.len(),
-            [0, 1, 2],
-            |c, panels| {
-                let top = titled(&panels[0], &self.columns[c].title)?;
-                let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
-                self.draw_trials(&mut chart, c, true)?;
-                let mut chart = time_chart(
-                    &panels[1],
-                    self.time,
-                    self.velocity,
-                    "velocity [deg/s]",
-                    false,
-                )?;
-                self.draw_trials(&mut chart, c, false)?;
-                draw_command_rows(
-                    &panels[2..],
-                    self.time,
-                    self.torque,
-                    self.stiffness,
-                    &self.columns[c],
-                    c == 0,
-                )
-            },
+    fn own_heights(&self) -> (Vec<u32>, u32) {
+        (
+            vec![JOINT_ANGLE_HEIGHT, JOINT_TIME_HEIGHT],
+            JOINT_TIME_HEIGHT,
         )
+    }
+
+    fn command_ranges(&self) -> (Span, Span, Option<Span>) {
+        (self.time, self.torque, self.stiffness)
+    }
+
+    fn draw_own<DB: DrawingBackend>(
+        &self,
+        c: usize,
+        panels: &[DrawingArea<DB, Shift>],
+    ) -> DrawResult<(), DB> {
+        let top = titled(&panels[0], &self.columns[c].title)?;
+        let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
+        self.draw_trials(&mut chart, c, true)?;
+        let mut chart = time_chart(
+            &panels[1],
+            self.time,
+            self.velocity,
+            "velocity [deg/s]",
+            false,
+        )?;
+        self.draw_trials(&mut chart, c, false)
     }
 }

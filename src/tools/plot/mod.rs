@@ -198,23 +198,24 @@ pub(super) fn check_columns(columns: &[ColumnPlot], path: &Path) -> Result<(), P
     })
 }
 
+/// The embedded DejaVu Sans font could not be registered with plotters.
+#[derive(Debug, Clone, Copy, thiserror::Error)]
+#[error("the embedded DejaVu Sans font could not be registered")]
+pub(super) struct FontError;
+
 /// Registers DejaVu Sans (regular and bold) as plotters' "sans-serif", once per process.
-pub(super) fn register_fonts() -> Result<(), String> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    REGISTERED
-        .get_or_init(|| {
-            let fonts = [
-                (FontStyle::Normal, dejavu::sans::regular()),
-                (FontStyle::Bold, dejavu::sans::bold()),
-            ];
-            for (style, bytes) in fonts {
-                plotters::style::register_font(FONT, style, bytes).map_err(|_| {
-                    "the embedded DejaVu Sans font could not be registered".to_string()
-                })?;
-            }
-            Ok(())
-        })
-        .clone()
+pub(super) fn register_fonts() -> Result<(), FontError> {
+    static REGISTERED: OnceLock<Result<(), FontError>> = OnceLock::new();
+    *REGISTERED.get_or_init(|| {
+        let fonts = [
+            (FontStyle::Normal, dejavu::sans::regular()),
+            (FontStyle::Bold, dejavu::sans::bold()),
+        ];
+        for (style, bytes) in fonts {
+            plotters::style::register_font(FONT, style, bytes).map_err(|_| FontError)?;
+        }
+        Ok(())
+    })
 }
 
 pub(super) fn draw_error<E: std::error::Error + Send + Sync>(
@@ -228,9 +229,9 @@ pub(super) fn draw_error<E: std::error::Error + Send + Sync>(
 }
 
 pub(super) fn render(figure: &impl Figure, png: &Path, svg: &Path) -> Result<(), PlotError> {
-    register_fonts().map_err(|message| PlotError::Draw {
+    register_fonts().map_err(|e| PlotError::Draw {
         path: png.to_path_buf(),
-        message,
+        message: e.to_string(),
     })?;
     let size = figure.size();
     {

@@ -194,6 +194,63 @@ pub(super) fn house_mesh<'m, 'a, 'b, DB: DrawingBackend>(
         .axis_desc_style((FONT, DESC_SIZE))
 }
 
+/// An axis range `(low, high)`.
+pub(super) type Span = (f64, f64);
+
+/// A figure of plan columns side by side (Fig. 1 and Fig. 2): in each column the figure's own
+/// panels, then the command rows (torque, and stiffness when some column has stiffness
+/// commands), which the bottom panel's time-axis description closes.
+pub(super) trait ColumnFigure {
+    /// The panels at which rows A, B and C start.
+    const LETTER_PANELS: [usize; 3];
+    fn columns(&self) -> &[ColumnPlot];
+    /// Pixel heights of the figure's own panels (above the command rows), and of a command row.
+    fn own_heights(&self) -> (Vec<u32>, u32);
+    /// Time, torque and stiffness ranges of the command rows (shared by the columns).
+    fn command_ranges(&self) -> (Span, Span, Option<Span>);
+    /// Draws column `c`'s own panels (the first `own_heights().0.len()` of `panels`).
+    fn draw_own<DB: DrawingBackend>(
+        &self,
+        c: usize,
+        panels: &[DrawingArea<DB, Shift>],
+    ) -> DrawResult<(), DB>;
+
+    /// Every panel's pixel height, top to bottom.
+    fn heights(&self) -> Vec<u32> {
+        let (mut h, row) = self.own_heights();
+        h.push(row);
+        if self.command_ranges().2.is_some() {
+            h.push(row);
+        }
+        // The bottom panel also holds the time axis' description.
+        *h.last_mut().expect("panels") += X_LABEL_AREA_DESC - X_LABEL_AREA;
+        h
+    }
+}
+
+impl<F: ColumnFigure> Figure for F {
+    fn size(&self) -> (u32, u32) {
+        columns_size(self.columns().len(), &self.heights())
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
+        let heights = self.heights();
+        let own = self.own_heights().0.len();
+        let (time, torque, stiffness) = self.command_ranges();
+        draw_columns(
+            root,
+            &heights,
+            self.columns().len(),
+            F::LETTER_PANELS,
+            |c, panels| {
+                self.draw_own(c, panels)?;
+                let column = &self.columns()[c];
+                draw_command_rows(&panels[own..], time, torque, stiffness, column, c == 0)
+            },
+        )
+    }
+}
+
 /// Width and height [px] of a figure of `columns` columns of panels of the given heights.
 pub(super) fn columns_size(columns: usize, heights: &[u32]) -> (u32, u32) {
     (GUTTER + COLUMN_WIDTH * columns as u32, heights.iter().sum())

@@ -132,3 +132,21 @@ pub(super) fn pad(lo: f64, hi: f64) -> (f64, f64) {
     }
     (lo - 0.06 * width, hi + 0.06 * width)
 }
+
+/// Every column's reference joint angles [deg].
+pub(super) fn reference_degrees(columns: &[ColumnPlot]) -> Vec<f64> {
+    columns
+        .iter()
+        .flat_map(|c| c.reference_q.iter().flatten().map(|q| q * RAD_TO_DEG))
+        .collect()
+}
+
+/// The shared torque range, and the stiffness range when some column has stiffness commands.
+pub(super) fn command_ranges(columns: &[ColumnPlot]) -> ((f64, f64), Option<(f64, f64)>) {
+    let torque = shared_range(command_values(columns, Commands::Torque), &[], true);
+    let stiffness = columns
+        .iter()
+        .any(|c| n_controls(c) > n_torques(c))
+        .then(|| shared_range(command_values(columns, Commands::Stiffness), &[], true));
+    (torque, stiffness)
+}
