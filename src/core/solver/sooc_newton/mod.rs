@@ -15,7 +15,8 @@
 //! control-limited DDP (Tassa, Mansard & Todorov 2014): the stage QP is solved by projected Newton,
 //! clamped controls get no feedback. The step is applied with its feedback on `δz` and a
 //! backtracking line search on the true `J`; Levenberg–Marquardt regularisation (relative to each
-//! control's own cost curvature, which makes it independent of units) guards indefinite models.
+//! control's Gauss–Newton curvature `ℓ_uu + Bᵀ V B`, which makes it independent of units and of
+//! how cheap the control is in the cost) guards indefinite models.
 //!
 //! Convergence ([`Optimality`]) is judged on the exact gradient from the adjoint, not on the
 //! model: the scaled projected gradient and the Newton model's predicted decrease, both relative
@@ -526,7 +527,7 @@ fn control_scales(bounds: &Bounds) -> [f64; MAX_QP] {
     scale
 }
 
-/// Levenberg–Marquardt regularisation μ (relative to each control's own cost curvature) with
+/// Levenberg–Marquardt regularisation μ (relative to each control's Gauss–Newton curvature) with
 /// Tassa's multiplicative schedule.
 struct Damping {
     mu: f64,
