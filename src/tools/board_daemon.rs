@@ -5,7 +5,7 @@
 //! SIGTERM, and prints its statistics.
 
 use crate::planning::plan::setup;
-use crate::planning::scenario::Scenario;
+use crate::planning::scenario::{ConfigError, Scenario};
 use crate::rt::board::Board;
 use crate::rt::realtime::{BoardLoopOptions, BoardStats, PercentilesJson, run_board};
 use crate::rt::record::{RecordOptions, Recorder};
@@ -50,9 +50,9 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
     }
     non_negative_seconds("--duration-s", o.duration_s)?;
     crate::rt::transport::validate_namespace(&o.namespace).input()?;
-    let scenario = Scenario::load(&o.config, &o.overrides).input()?;
+    let scenario = load_with_hold_stiffness(o)?;
     let period_ns = 1_000_000_000 / o.rate_hz;
-    let mut board = board_of(&scenario, period_ns, o.hold_stiffness)?;
+    let mut board = board_of(&scenario, period_ns)?;
     let stop = stop_on_signal()?;
     let ep = BoardPorts::open(&o.namespace)?;
     let cleaned_dead_nodes = ep.session().cleaned_dead_nodes();
@@ -100,17 +100,31 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
     }
 }
 
+/// The scenario with `--hold-stiffness` applied as `board.hold_stiffness`, so that the flag is
+/// checked like the key (range, damping law, stability) and its error names the flag.
+fn load_with_hold_stiffness(o: &BoardOptions) -> anyhow::Result<Scenario> {
+    let mut overrides = o.overrides.clone();
+    let Some(k) = o.hold_stiffness else {
+        return Scenario::load(&o.config, &overrides).input();
+    };
+    let value = match k {
+        k if k.is_nan() => "nan".to_string(),
+        k if k.is_infinite() => if k > 0.0 { "inf" } else { "-inf" }.to_string(),
+        k => format!("{k:e}"),
+    };
+    overrides.push(format!("board.hold_stiffness={value}"));
+    Scenario::load(&o.config, &overrides).map_err(|e| match &e {
+        ConfigError::Invalid { key, .. } if key == "hold_stiffness" => {
+            input_error(format!("--hold-stiffness {k}: {e}"))
+        }
+        _ => input_error(e),
+    })
+}
+
 /// The board of `scenario` ticking every `period_ns`, at rest at the scenario's start.
-fn board_of(
-    scenario: &Scenario,
-    period_ns: u64,
-    hold_stiffness: Option<f64>,
-) -> anyhow::Result<Board> {
+fn board_of(scenario: &Scenario, period_ns: u64) -> anyhow::Result<Board> {
     let setup = setup(scenario).input()?;
-    let mut cfg = crate::tools::launch::board_config(scenario, period_ns);
-    if let Some(k) = hold_stiffness {
-        cfg.hold_stiffness = k;
-    }
+    let cfg = crate::tools::launch::board_config(scenario, period_ns);
     Board::new(scenario.model.clone(), cfg, &setup.x0).input()
 }
 

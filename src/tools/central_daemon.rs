@@ -61,6 +61,12 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         return Err(input_error("--rate-hz must be 1..1000 and --trials ≥ 1"));
     }
     crate::rt::transport::validate_namespace(&o.namespace).input()?;
+    // The namespace is claimed before planning: a second central process is refused at once
+    // (naming the first), not after minutes of planning, and the first is never disturbed.
+    let ports = match o.lockstep {
+        true => None,
+        false => Some(CentralPorts::open(&o.namespace).runtime()?),
+    };
     let mut overrides = o.overrides.clone();
     if !o.strategy.uses_stiffness() {
         overrides.push("actuator.stiffness_max=0".into());
@@ -84,7 +90,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         lookahead_ns: (lookahead_ms * 1e6) as u64,
     };
     let mut central = Central::new(track, o.strategy, timing);
-    let (records, lost) = match run_trials(o, &mut central, &setup.x0, period_ns)? {
+    let (records, lost) = match run_trials(o, ports.as_ref(), &mut central, &setup.x0, period_ns)? {
         Ok(records) => (records, None),
         // The trials before the board was lost are results: print them, then fail.
         Err(e) => (e.records().to_vec(), Some(e)),
@@ -116,32 +122,34 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
 /// process (the one the live daemon would run, same limits, at 1 kHz) on a simulated clock.
 fn run_trials(
     o: &CentralOptions,
+    ports: Option<&CentralPorts>,
     central: &mut Central,
     x0: &[f64],
     period_ns: u64,
 ) -> anyhow::Result<Result<Vec<TrialRecord>, LiveError>> {
-    if o.lockstep {
+    let Some(ep) = ports.filter(|_| !o.lockstep) else {
         let s = Scenario::load(&o.config, &o.overrides).input()?;
         let cfg = crate::tools::launch::board_config(&s, 1_000_000);
         let mut board = crate::rt::board::Board::new(s.model.clone(), cfg, x0).input()?;
-        Ok(Ok(lockstep(
+        return Ok(Ok(lockstep(
             &mut board, central, 1_000_000, period_ns, o.trials, o.seed,
-        )))
-    } else {
-        let stop = stop_on_signal()?;
-        let ep = CentralPorts::open(&o.namespace)?;
-        match run_live(
-            &ep,
-            central,
-            o.trials,
-            o.seed,
-            period_ns,
-            o.board_timeout,
-            &stop,
-        ) {
-            Err(LiveError::Transport(e)) => Err(e).runtime(),
-            other => Ok(other),
-        }
+        )));
+    };
+    let stop = stop_on_signal()?;
+    // What arrived while planning is old: the board must answer afresh.
+    ep.drain_states(|_| ());
+    let _ = ep.latest_telemetry();
+    match run_live(
+        ep,
+        central,
+        o.trials,
+        o.seed,
+        period_ns,
+        o.board_timeout,
+        &stop,
+    ) {
+        Err(LiveError::Transport(e)) => Err(e).runtime(),
+        other => Ok(other),
     }
 }
 

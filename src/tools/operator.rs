@@ -9,8 +9,8 @@
 use crate::rt::board::{FaultReason, Rejection};
 use crate::rt::realtime::PercentilesJson;
 use crate::rt::transport::{
-    Disturbance, DisturbanceKind, Header, MAX_JOINTS, Mode, Telemetry, ToolPorts, monotonic_ns,
-    session_seq,
+    Disturbance, DisturbanceKind, Header, MAX_JOINTS, Mode, ObserverPorts, Telemetry, ToolPorts,
+    monotonic_ns, session_seq,
 };
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -301,7 +301,7 @@ impl Status {
 
 /// One snapshot of the board's telemetry in `namespace`.
 pub fn status(namespace: &str, timeout: Duration) -> Result<Status, OperatorError> {
-    let ep = ToolPorts::open(namespace)?;
+    let ep = ObserverPorts::open(namespace)?;
     let t = ep
         .wait_for_telemetry(timeout)
         .ok_or(OperatorError::NoBoard(namespace.into()))?;
@@ -317,7 +317,7 @@ pub fn monitor(
     mut show: impl FnMut(Option<&Status>) -> bool,
 ) -> Result<(), OperatorError> {
     use std::sync::atomic::Ordering;
-    let ep = ToolPorts::open(namespace)?;
+    let ep = ObserverPorts::open(namespace)?;
     while !stop.load(Ordering::Relaxed) {
         let start = Instant::now();
         let t = ep.wait_for_telemetry(interval);

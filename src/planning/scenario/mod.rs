@@ -15,7 +15,7 @@ mod solver;
 mod stability;
 mod validate;
 
-pub use board::BoardSection;
+pub use board::{BOARD_RANGES, BoardRange, BoardSection, JOINT_LIMIT_RAD};
 pub use error::ConfigError;
 pub use solver::IlqgSection;
 

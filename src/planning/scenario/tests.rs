@@ -29,6 +29,8 @@ start_deg = [-60.0]
 target_deg = [-30.0]
 duration = 1.5
 dt = 0.01
+[board]
+hold_stiffness = 40.0
 "#;
 
 fn load(extra: &[&str]) -> Result<Scenario, ConfigError> {

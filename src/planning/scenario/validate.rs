@@ -6,7 +6,7 @@ use super::raw::{
     DampingLaw, PathKind, RawActuator, RawConfig, RawCost, RawField, RawLimits, RawNoise, RawPlant,
     RawTask,
 };
-use super::stability::check_substep;
+use super::stability::{check_hold_stiffness, check_substep};
 use super::{CostWeights, Scenario, Task, TaskPath};
 use crate::core::model::{Actuator, ArmModel, Damping, Field, Noise, Plant, SingleJoint, TwoLink};
 use crate::core::solver::Bounds;
@@ -52,6 +52,7 @@ pub(super) fn validate(
     check_substep(&model, &task, &bounds, &check)?;
     let solver = raw.solver.resolve(&check)?;
     let board = raw.board.resolve(dof, &check)?;
+    check_hold_stiffness(&model, &task, board.hold_stiffness, &check)?;
     Ok(Scenario {
         source: path.to_path_buf(),
         model,

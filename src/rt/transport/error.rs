@@ -13,6 +13,12 @@ pub enum TransportError {
          stop it or use another --namespace"
     )]
     BoardAlreadyRunning { namespace: String, pid: u32 },
+    /// A second central process would send a second stream of commands to one board.
+    #[error(
+        "namespace \"{namespace}\": a central process (vic-planner) is already running in this \
+         namespace (pid {pid}); stop it or use another --namespace"
+    )]
+    CentralAlreadyRunning { namespace: String, pid: u32 },
     /// The private iceoryx2 directory is not safe to use.
     #[error(
         "iceoryx2 directory {path}: {reason}; remove it (or fix its owner and mode 700) and \
@@ -32,15 +38,20 @@ pub enum TransportError {
     /// Nothing answered: no board publishes telemetry in the namespace.
     #[error("no board in namespace \"{namespace}\"")]
     NoBoard { namespace: String },
-    /// A service has all the ports it was created for (other processes hold them).
+    /// A service has all the ports of one kind it was created for: which limit, the configured
+    /// number, and who holds the slots.
     #[error(
-        "namespace \"{namespace}\": service {service} has no {port} slot left (too many \
-         processes use it: stop some or use another --namespace)"
+        "namespace \"{namespace}\": {in_use} of {max} {} of service {service} in use, held by \
+         {holders}; stop one of these processes or use another --namespace",
+        kind.plural()
     )]
     TooManyPorts {
         namespace: String,
         service: &'static str,
-        port: &'static str,
+        kind: super::limits::PortKind,
+        in_use: usize,
+        max: usize,
+        holders: String,
     },
     /// iceoryx2 refused something else (a node, a service, a port or a send).
     #[error("namespace \"{namespace}\": {what}: {reason}")]

@@ -7,23 +7,31 @@
 //! - [`namespace`]: names, files and dead nodes of a namespace (iceoryx2's `global.prefix`, so
 //!   instances and parallel tests never see each other);
 //! - [`service`]: iceoryx2's `ipc` service with its global file in the private directory;
-//! - [`ports`]: one type per role ([`BoardPorts`], [`CentralPorts`], [`ToolPorts`]) with plain
-//!   `publish_*`, `latest_*` and `drain_*` methods; no caller touches an iceoryx2 builder.
+//! - [`limits`]: the port and node limits of every service, in one place, and the "too many"
+//!   error that names the limit and who holds the slots;
+//! - [`session`]: one process's node and the services it opens;
+//! - [`ports`]: one type per role ([`BoardPorts`], [`CentralPorts`], [`ToolPorts`],
+//!   [`ObserverPorts`], [`RecorderPorts`]) with plain `publish_*`, `latest_*` and `drain_*`
+//!   methods; no caller touches an iceoryx2 builder.
 
 pub mod clock;
 pub mod error;
+pub mod limits;
 pub mod namespace;
 pub mod ports;
 pub mod protocol;
 pub mod service;
+pub mod session;
 
 pub use clock::{monotonic_ns, process_session, session_seq};
 pub use error::TransportError;
+pub use limits::PortKind;
 pub use namespace::{
     DEFAULT_NAMESPACE, check_namespace_owner, dead_nodes, ensure_root_dir, namespace_files, prefix,
     remove_namespace, root_dir, validate_namespace,
 };
 pub use ports::{
-    BoardObserver, BoardPorts, CentralPorts, RecorderPorts, STATE_BUFFER, ToolPorts, board_present,
+    BoardObserver, BoardPorts, BoardWatch, CentralPorts, ObserverPorts, RecorderPorts,
+    STATE_BUFFER, ToolPorts, board_present,
 };
 pub use protocol::*;

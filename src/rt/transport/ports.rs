@@ -1,247 +1,36 @@
 //! The iceoryx2 ports of each role. A process opens the ports of its role and nothing else:
-//! [`BoardPorts`] (the board daemon), [`CentralPorts`] (the planner) and [`ToolPorts`] (`vic
-//! inject`, `status`, `monitor`). A role that does not publish a message has no method to publish
-//! it, so a wrong call is a compile error, not a run-time one.
+//! [`BoardPorts`] (the board daemon), [`CentralPorts`] (the planner), [`ToolPorts`] (`vic
+//! inject`, the only tool that publishes), [`ObserverPorts`] (`vic status`, `vic monitor`: read
+//! only) and [`RecorderPorts`] (`vic record`: read only). A role that does not publish a message
+//! has no method to publish it, so a wrong call is a compile error, not a run-time one; a role
+//! that does not publish takes no publisher slot, so observers cannot lock `vic inject` out.
 //!
-//! Every role shares one [`Session`] (the node of the namespace, the service settings) and the
-//! planner and the tools share one [`BoardObserver`] (the board's states, telemetry and events).
+//! Every role shares one [`Session`] (the node of the namespace, the service settings); the
+//! planner and `vic inject` share one [`BoardObserver`] (the board's states, telemetry and
+//! events), the read-only tools a [`BoardWatch`] (telemetry and events only: no subscriber on the
+//! 1 kHz state stream, which would cost the board's loop a delivery per tick).
 
 use super::error::TransportError;
-use super::namespace::{any_node_alive, config, dead_nodes_in, live_nodes_named};
-use super::namespace::{
-    check_namespace_owner, ensure_root_dir, remove_namespace, restrict_namespace_files,
-};
 use super::protocol::{BoardEvent, CommandSlice, Control, Disturbance, StateMsg, Telemetry};
 use super::service::Service as Ipc;
+pub use super::session::{EVENT_SERVICE, STATE_BUFFER, Session, Topic};
+use super::session::{Pub, Sub, drain, latest, send};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
-use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::*;
 use std::time::{Duration, Instant};
 
-/// Subscriber buffer of the state service: a 50 Hz reader sees every 1 kHz state.
-pub const STATE_BUFFER: usize = 128;
+/// The limits, here too because the protocol document lists them with the ports.
+pub use super::limits::{MAX_LISTENERS, MAX_NODES, MAX_NOTIFIERS, MAX_PUBLISHERS, MAX_SUBSCRIBERS};
 
-/// The limits of every service of a namespace, in one place. Sized for one board, one central
-/// process, one recorder, `vic inject` and at least 8 read-only observers (`vic status`,
-/// `vic monitor`, a Python client), with room to spare:
-/// - publishers per message service: the board or the central process, plus a tool or a
-///   test's hostile sender;
-pub const MAX_PUBLISHERS: usize = 4;
-/// - subscribers per message service: board, central, recorder, inject and 8 observers = 12;
-pub const MAX_SUBSCRIBERS: usize = 16;
-/// - nodes (processes) per service;
-pub const MAX_NODES: usize = 32;
-/// - notifiers and listeners of the board's event service (every observer listens).
-pub const MAX_NOTIFIERS: usize = 4;
-pub const MAX_LISTENERS: usize = 24;
-
-/// A message type with its service: the name, how many past samples a late subscriber gets and
-/// how many a subscriber buffers.
-pub trait Topic: std::fmt::Debug + ZeroCopySend + Copy + 'static {
-    const SERVICE: &'static str;
-    const HISTORY: usize;
-    const BUFFER: usize;
-}
-
-impl Topic for StateMsg {
-    const SERVICE: &'static str = "vic/state";
-    const HISTORY: usize = 1;
-    const BUFFER: usize = STATE_BUFFER;
-}
-impl Topic for Telemetry {
-    const SERVICE: &'static str = "vic/telemetry";
-    const HISTORY: usize = 1;
-    const BUFFER: usize = 1;
-}
-impl Topic for CommandSlice {
-    const SERVICE: &'static str = "vic/command";
-    const HISTORY: usize = 0;
-    const BUFFER: usize = 8;
-}
-impl Topic for Control {
-    const SERVICE: &'static str = "vic/control";
-    const HISTORY: usize = 0;
-    const BUFFER: usize = 8;
-}
-impl Topic for Disturbance {
-    const SERVICE: &'static str = "vic/disturbance";
-    const HISTORY: usize = 0;
-    const BUFFER: usize = 8;
-}
-
-/// The board's event service ([`super::protocol::BoardEvent`] ids).
-pub const EVENT_SERVICE: &str = "vic/board-event";
 /// The board's node name: how a second board finds the first.
-const BOARD_NODE: &str = "vic-board";
-
-type Pub<T> = Publisher<Ipc, T, ()>;
-type Sub<T> = Subscriber<Ipc, T, ()>;
-type PubSubService<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>;
-type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
-
-/// One process's node in a namespace. Drop it after its ports (declare it last): the last process
-/// of a namespace to leave also removes the namespace's files, so that a clean shutdown leaves
-/// nothing in `/dev/shm`.
-pub struct Session {
-    namespace: String,
-    config: Config,
-    node: Option<Node<Ipc>>,
-    /// Dead nodes of the namespace whose resources were removed when this session opened.
-    cleaned_dead_nodes: usize,
-    /// Process ids of the other boards alive in the namespace when this session opened.
-    boards_alive: Vec<u32>,
-}
-
-impl Drop for Session {
-    fn drop(&mut self) {
-        self.node = None;
-        if !any_node_alive(&self.config) {
-            remove_namespace(&self.namespace);
-        }
-    }
-}
-
-impl Session {
-    /// Creates the node `node_name` in namespace `ns`, removing what killed processes left.
-    fn open(ns: &str, node_name: &str) -> Result<Session, TransportError> {
-        set_log_level(LogLevel::Error);
-        let cfg = config(ns)?;
-        // The private directory first (iceoryx2 would create it with its own modes), then no
-        // file of the namespace may belong to someone else.
-        ensure_root_dir()?;
-        check_namespace_owner(ns)?;
-        let name = NodeName::new(node_name).map_err(|e| TransportError::ipc(ns, "node name", e))?;
-        // Dead nodes (killed processes) are counted before our node's creation, which already
-        // removes some of their resources.
-        let dead_before = dead_nodes_in(&cfg);
-        let node = NodeBuilder::new()
-            .name(&name)
-            .config(&cfg)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<Ipc>()
-            .map_err(|e| TransportError::ipc(ns, "cannot create a node", e))?;
-        // The resources of the rest are removed here so that the services open cleanly.
-        let (boards_alive, _) = live_nodes_named(ns, &cfg, BOARD_NODE, node.id())?;
-        let cleaned_dead_nodes = dead_before.saturating_sub(dead_nodes_in(&cfg));
-        restrict_namespace_files(ns);
-        Ok(Session {
-            namespace: ns.to_string(),
-            config: cfg,
-            node: Some(node),
-            cleaned_dead_nodes,
-            boards_alive,
-        })
-    }
-
-    fn node(&self) -> &Node<Ipc> {
-        self.node
-            .as_ref()
-            .expect("the node lives as long as the session")
-    }
-
-    fn service<T: Topic>(&self) -> Result<PubSubService<T>, TransportError> {
-        let ns = &self.namespace;
-        let name =
-            ServiceName::new(T::SERVICE).map_err(|e| TransportError::ipc(ns, T::SERVICE, e))?;
-        self.node()
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .max_publishers(MAX_PUBLISHERS)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .max_nodes(MAX_NODES)
-            .subscriber_max_buffer_size(STATE_BUFFER)
-            .history_size(T::HISTORY)
-            .enable_safe_overflow(true)
-            .open_or_create()
-            .map_err(|e| TransportError::ipc(ns, format!("service {}", T::SERVICE), e))
-    }
-
-    fn too_many(&self, service: &'static str, port: &'static str) -> TransportError {
-        TransportError::TooManyPorts {
-            namespace: self.namespace.clone(),
-            service,
-            port,
-        }
-    }
-
-    fn publisher<T: Topic>(&self) -> Result<Pub<T>, TransportError> {
-        self.service::<T>()?
-            .publisher_builder()
-            .create()
-            .map_err(|e| match e {
-                PublisherCreateError::ExceedsMaxSupportedPublishers => {
-                    self.too_many(T::SERVICE, "publisher")
-                }
-                e => TransportError::ipc(&self.namespace, format!("{} publisher", T::SERVICE), e),
-            })
-    }
-
-    fn subscriber<T: Topic>(&self) -> Result<Sub<T>, TransportError> {
-        self.subscriber_with_buffer(T::BUFFER)
-    }
-
-    fn subscriber_with_buffer<T: Topic>(&self, buffer: usize) -> Result<Sub<T>, TransportError> {
-        self.service::<T>()?
-            .subscriber_builder()
-            .buffer_size(buffer)
-            .create()
-            .map_err(|e| match e {
-                SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
-                    self.too_many(T::SERVICE, "subscriber")
-                }
-                e => TransportError::ipc(&self.namespace, format!("{} subscriber", T::SERVICE), e),
-            })
-    }
-
-    fn event_service(&self) -> Result<EventService, TransportError> {
-        let ns = &self.namespace;
-        let name = ServiceName::new(EVENT_SERVICE)
-            .map_err(|e| TransportError::ipc(ns, EVENT_SERVICE, e))?;
-        self.node()
-            .service_builder(&name)
-            .event()
-            .max_notifiers(MAX_NOTIFIERS)
-            .max_listeners(MAX_LISTENERS)
-            .max_nodes(MAX_NODES)
-            .open_or_create()
-            .map_err(|e| TransportError::ipc(ns, format!("service {EVENT_SERVICE}"), e))
-    }
-
-    /// The namespace of this session.
-    pub fn namespace(&self) -> &str {
-        &self.namespace
-    }
-
-    /// Dead nodes of the namespace whose resources were removed when this session opened.
-    pub fn cleaned_dead_nodes(&self) -> usize {
-        self.cleaned_dead_nodes
-    }
-}
-
-fn send<T: Topic>(session: &Session, port: &Pub<T>, value: &T) -> Result<(), TransportError> {
-    port.send_copy(*value).map(|_| ()).map_err(|e| {
-        TransportError::ipc(&session.namespace, format!("cannot send {}", T::SERVICE), e)
-    })
-}
-
-/// Calls `f` on every message waiting on `port`, oldest first; returns how many there were.
-fn drain<T: Topic>(port: &Sub<T>, mut f: impl FnMut(&T)) -> usize {
-    let mut n = 0;
-    while let Ok(Some(sample)) = port.receive() {
-        f(&sample);
-        n += 1;
-    }
-    n
-}
-
-/// The newest message waiting on `port`, if any (the older ones are consumed).
-fn latest<T: Topic>(port: &Sub<T>) -> Option<T> {
-    let mut last = None;
-    drain(port, |m| last = Some(*m));
-    last
-}
+pub const BOARD_NODE: &str = "vic-board";
+/// The central process's node name: how a second one finds the first.
+pub const CENTRAL_NODE: &str = "vic-planner";
+/// The node name of `vic inject` (the one tool with a publisher).
+pub const INJECT_NODE: &str = "vic-inject";
+/// The node name of the read-only tools (`vic status`, `vic monitor`).
+pub const OBSERVER_NODE: &str = "vic-observer";
 
 /// The board's ports: it receives commands, control requests and disturbances, publishes its
 /// state and telemetry, and wakes the listeners when something was applied.
@@ -260,7 +49,7 @@ impl BoardPorts {
     /// would answer one planner).
     pub fn open(ns: &str) -> Result<BoardPorts, TransportError> {
         let session = Session::open(ns, BOARD_NODE)?;
-        if let Some(&pid) = session.boards_alive.first() {
+        if let Some(&pid) = session.same_name_alive.first() {
             return Err(TransportError::BoardAlreadyRunning {
                 namespace: ns.to_string(),
                 pid,
@@ -272,11 +61,7 @@ impl BoardPorts {
             commands: session.subscriber()?,
             controls: session.subscriber()?,
             disturbances: session.subscriber()?,
-            events: session
-                .event_service()?
-                .notifier_builder()
-                .create()
-                .map_err(|e| TransportError::ipc(ns, "event notifier", e))?,
+            events: session.notifier()?,
             session,
         })
     }
@@ -317,34 +102,20 @@ impl BoardPorts {
     }
 }
 
-/// What the planner and the tools see of the board: its states, its telemetry and its events.
-pub struct BoardObserver {
-    states: Sub<StateMsg>,
+/// What every observer sees of the board: its telemetry and its events (no states).
+pub struct BoardWatch {
     telemetry: Sub<Telemetry>,
     events: Listener<Ipc>,
 }
 
-impl BoardObserver {
-    fn open(session: &Session) -> Result<BoardObserver, TransportError> {
-        Ok(BoardObserver {
-            states: session.subscriber()?,
+impl BoardWatch {
+    fn open(session: &Session) -> Result<BoardWatch, TransportError> {
+        Ok(BoardWatch {
             telemetry: session.subscriber()?,
-            events: session
-                .event_service()?
-                .listener_builder()
-                .create()
-                .map_err(|e| TransportError::ipc(&session.namespace, "event listener", e))?,
+            events: session.listener()?,
         })
     }
 
-    /// Every state received since the last call, oldest first.
-    pub fn drain_states(&self, f: impl FnMut(&StateMsg)) -> usize {
-        drain(&self.states, f)
-    }
-    /// The newest state received since the last call, if any.
-    pub fn latest_state(&self) -> Option<StateMsg> {
-        latest(&self.states)
-    }
     /// The newest telemetry received since the last call, if any.
     pub fn latest_telemetry(&self) -> Option<Telemetry> {
         latest(&self.telemetry)
@@ -385,6 +156,38 @@ impl BoardObserver {
     }
 }
 
+/// What the planner and `vic inject` see of the board: its states, its telemetry and its events.
+/// Dereferences to its [`BoardWatch`].
+pub struct BoardObserver {
+    states: Sub<StateMsg>,
+    watch: BoardWatch,
+}
+
+impl BoardObserver {
+    fn open(session: &Session) -> Result<BoardObserver, TransportError> {
+        Ok(BoardObserver {
+            states: session.subscriber()?,
+            watch: BoardWatch::open(session)?,
+        })
+    }
+
+    /// Every state received since the last call, oldest first.
+    pub fn drain_states(&self, f: impl FnMut(&StateMsg)) -> usize {
+        drain(&self.states, f)
+    }
+    /// The newest state received since the last call, if any.
+    pub fn latest_state(&self) -> Option<StateMsg> {
+        latest(&self.states)
+    }
+}
+
+impl std::ops::Deref for BoardObserver {
+    type Target = BoardWatch;
+    fn deref(&self) -> &BoardWatch {
+        &self.watch
+    }
+}
+
 /// The central controller's ports: it publishes command slices and control requests and
 /// observes the board. Dereferences to its [`BoardObserver`].
 pub struct CentralPorts {
@@ -395,9 +198,16 @@ pub struct CentralPorts {
 }
 
 impl CentralPorts {
-    /// Connects a planner to namespace `ns`.
+    /// Connects a central process to namespace `ns`. Refused while another one runs there (two
+    /// streams of commands would fight over one board).
     pub fn open(ns: &str) -> Result<CentralPorts, TransportError> {
-        let session = Session::open(ns, "vic-planner")?;
+        let session = Session::open(ns, CENTRAL_NODE)?;
+        if let Some(&pid) = session.same_name_alive.first() {
+            return Err(TransportError::CentralAlreadyRunning {
+                namespace: ns.to_string(),
+                pid,
+            });
+        }
         Ok(CentralPorts {
             commands: session.publisher()?,
             controls: session.publisher()?,
@@ -426,8 +236,8 @@ impl std::ops::Deref for CentralPorts {
     }
 }
 
-/// The command-line tools' ports: they publish disturbances and observe the board.
-/// Dereferences to its [`BoardObserver`].
+/// The ports of `vic inject`: it publishes disturbances and observes the board (its states carry
+/// the acknowledgement). Dereferences to its [`BoardObserver`].
 pub struct ToolPorts {
     disturbances: Pub<Disturbance>,
     observer: BoardObserver,
@@ -435,9 +245,9 @@ pub struct ToolPorts {
 }
 
 impl ToolPorts {
-    /// Connects a tool to namespace `ns`.
+    /// Connects `vic inject` (or another sender of disturbances) to namespace `ns`.
     pub fn open(ns: &str) -> Result<ToolPorts, TransportError> {
-        let session = Session::open(ns, "vic-tool")?;
+        let session = Session::open(ns, INJECT_NODE)?;
         Ok(ToolPorts {
             disturbances: session.publisher()?,
             observer: BoardObserver::open(&session)?,
@@ -458,6 +268,35 @@ impl std::ops::Deref for ToolPorts {
     type Target = BoardObserver;
     fn deref(&self) -> &BoardObserver {
         &self.observer
+    }
+}
+
+/// The ports of a read-only tool (`vic status`, `vic monitor`): the board's telemetry and events,
+/// no publisher and no state subscriber. Dereferences to its [`BoardWatch`].
+pub struct ObserverPorts {
+    watch: BoardWatch,
+    session: Session,
+}
+
+impl ObserverPorts {
+    /// Connects a read-only observer to namespace `ns`.
+    pub fn open(ns: &str) -> Result<ObserverPorts, TransportError> {
+        let session = Session::open(ns, OBSERVER_NODE)?;
+        Ok(ObserverPorts {
+            watch: BoardWatch::open(&session)?,
+            session,
+        })
+    }
+    /// The node this observer holds in its namespace.
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+}
+
+impl std::ops::Deref for ObserverPorts {
+    type Target = BoardWatch;
+    fn deref(&self) -> &BoardWatch {
+        &self.watch
     }
 }
 
@@ -514,13 +353,15 @@ impl RecorderPorts {
 /// Whether a board is alive in the namespace (it publishes telemetry within `timeout`). Cheap
 /// enough to call from tools, not from a loop.
 pub fn board_present(ns: &str, timeout: Duration) -> Result<bool, TransportError> {
-    Ok(ToolPorts::open(ns)?.wait_for_telemetry(timeout).is_some())
+    Ok(ObserverPorts::open(ns)?
+        .wait_for_telemetry(timeout)
+        .is_some())
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::clock::monotonic_ns;
-    use super::super::namespace::namespace_files;
+    use super::super::namespace::{namespace_files, remove_namespace};
     use super::super::protocol::Header;
     use super::*;
 

@@ -1,0 +1,325 @@
+//! One process's node in a namespace and the services it opens: the message types with their
+//! service settings ([`Topic`]), port creation that names the limit and its holders when a service
+//! is full, and plain send / drain helpers for the role types of [`super::ports`].
+
+use super::error::TransportError;
+use super::limits::{
+    MAX_LISTENERS, MAX_NODES, MAX_NOTIFIERS, MAX_PUBLISHERS, MAX_SUBSCRIBERS, PortKind, too_many,
+};
+use super::namespace::{any_node_alive, config, dead_nodes_in, live_nodes_named};
+use super::namespace::{
+    check_namespace_owner, ensure_root_dir, remove_namespace, restrict_namespace_files,
+};
+use super::protocol::{CommandSlice, Control, Disturbance, StateMsg, Telemetry};
+use super::service::Service as Ipc;
+use iceoryx2::port::listener::{Listener, ListenerCreateError};
+use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+
+/// Subscriber buffer of the state service: a 50 Hz reader sees every 1 kHz state.
+pub const STATE_BUFFER: usize = 128;
+
+/// A message type with its service: the name, how many past samples a late subscriber gets and
+/// how many a subscriber buffers.
+pub trait Topic: std::fmt::Debug + ZeroCopySend + Copy + 'static {
+    const SERVICE: &'static str;
+    const HISTORY: usize;
+    const BUFFER: usize;
+}
+
+impl Topic for StateMsg {
+    const SERVICE: &'static str = "vic/state";
+    const HISTORY: usize = 1;
+    const BUFFER: usize = STATE_BUFFER;
+}
+impl Topic for Telemetry {
+    const SERVICE: &'static str = "vic/telemetry";
+    const HISTORY: usize = 1;
+    const BUFFER: usize = 1;
+}
+impl Topic for CommandSlice {
+    const SERVICE: &'static str = "vic/command";
+    const HISTORY: usize = 0;
+    const BUFFER: usize = 8;
+}
+impl Topic for Control {
+    const SERVICE: &'static str = "vic/control";
+    const HISTORY: usize = 0;
+    const BUFFER: usize = 8;
+}
+impl Topic for Disturbance {
+    const SERVICE: &'static str = "vic/disturbance";
+    const HISTORY: usize = 0;
+    const BUFFER: usize = 8;
+}
+
+/// The board's event service ([`super::protocol::BoardEvent`] ids).
+pub const EVENT_SERVICE: &str = "vic/board-event";
+
+pub(super) type Pub<T> = Publisher<Ipc, T, ()>;
+pub(super) type Sub<T> = Subscriber<Ipc, T, ()>;
+type PubSubService<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>;
+type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
+
+/// One process's node in a namespace. Drop it after its ports (declare it last): the last process
+/// of a namespace to leave also removes the namespace's files, so that a clean shutdown leaves
+/// nothing in `/dev/shm`.
+pub struct Session {
+    namespace: String,
+    config: Config,
+    node: Option<Node<Ipc>>,
+    /// Dead nodes of the namespace whose resources were removed when this session opened.
+    cleaned_dead_nodes: usize,
+    /// Process ids of the other live nodes with this session's node name when it opened.
+    pub(super) same_name_alive: Vec<u32>,
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        self.node = None;
+        if !any_node_alive(&self.config) {
+            remove_namespace(&self.namespace);
+        }
+    }
+}
+
+impl Session {
+    /// Creates the node `node_name` in namespace `ns`, removing what killed processes left.
+    pub(super) fn open(ns: &str, node_name: &str) -> Result<Session, TransportError> {
+        set_log_level(LogLevel::Error);
+        let cfg = config(ns)?;
+        // The private directory first (iceoryx2 would create it with its own modes), then no
+        // file of the namespace may belong to someone else.
+        ensure_root_dir()?;
+        check_namespace_owner(ns)?;
+        let name = NodeName::new(node_name).map_err(|e| TransportError::ipc(ns, "node name", e))?;
+        // Dead nodes (killed processes) are counted before our node's creation, which already
+        // removes some of their resources.
+        let dead_before = dead_nodes_in(&cfg);
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&cfg)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<Ipc>()
+            .map_err(|e| TransportError::ipc(ns, "cannot create a node", e))?;
+        // The resources of the rest are removed here so that the services open cleanly.
+        let (same_name_alive, _) = live_nodes_named(ns, &cfg, node_name, node.id())?;
+        let cleaned_dead_nodes = dead_before.saturating_sub(dead_nodes_in(&cfg));
+        restrict_namespace_files(ns);
+        Ok(Session {
+            namespace: ns.to_string(),
+            config: cfg,
+            node: Some(node),
+            cleaned_dead_nodes,
+            same_name_alive,
+        })
+    }
+
+    fn node(&self) -> &Node<Ipc> {
+        self.node
+            .as_ref()
+            .expect("the node lives as long as the session")
+    }
+
+    /// The error of a service that already has its `max` nodes (processes).
+    fn too_many_nodes(&self, service: &'static str, max: usize) -> TransportError {
+        too_many(
+            &self.namespace,
+            &self.config,
+            service,
+            PortKind::Node,
+            max,
+            None,
+        )
+    }
+
+    fn service<T: Topic>(&self) -> Result<PubSubService<T>, TransportError> {
+        let ns = &self.namespace;
+        let name =
+            ServiceName::new(T::SERVICE).map_err(|e| TransportError::ipc(ns, T::SERVICE, e))?;
+        self.node()
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .max_publishers(MAX_PUBLISHERS)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .subscriber_max_buffer_size(STATE_BUFFER)
+            .history_size(T::HISTORY)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|e| match e {
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::ExceedsMaxNumberOfNodes,
+                ) => self.too_many_nodes(T::SERVICE, MAX_NODES),
+                e => TransportError::ipc(ns, format!("service {}", T::SERVICE), e),
+            })
+    }
+
+    pub(super) fn publisher<T: Topic>(&self) -> Result<Pub<T>, TransportError> {
+        let svc = self.service::<T>()?;
+        svc.publisher_builder().create().map_err(|e| match e {
+            PublisherCreateError::ExceedsMaxSupportedPublishers => {
+                let mut ids = Vec::new();
+                svc.dynamic_config().list_publishers(|d| {
+                    ids.push(d.node_id);
+                    CallbackProgression::Continue
+                });
+                let max = svc.static_config().max_publishers();
+                let kind = PortKind::Publisher;
+                too_many(
+                    &self.namespace,
+                    &self.config,
+                    T::SERVICE,
+                    kind,
+                    max,
+                    Some(&ids),
+                )
+            }
+            e => TransportError::ipc(&self.namespace, format!("{} publisher", T::SERVICE), e),
+        })
+    }
+
+    pub(super) fn subscriber<T: Topic>(&self) -> Result<Sub<T>, TransportError> {
+        self.subscriber_with_buffer(T::BUFFER)
+    }
+
+    pub(super) fn subscriber_with_buffer<T: Topic>(
+        &self,
+        buffer: usize,
+    ) -> Result<Sub<T>, TransportError> {
+        let svc = self.service::<T>()?;
+        let builder = svc.subscriber_builder().buffer_size(buffer);
+        builder.create().map_err(|e| match e {
+            SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
+                let mut ids = Vec::new();
+                svc.dynamic_config().list_subscribers(|d| {
+                    ids.push(d.node_id);
+                    CallbackProgression::Continue
+                });
+                let max = svc.static_config().max_subscribers();
+                let kind = PortKind::Subscriber;
+                too_many(
+                    &self.namespace,
+                    &self.config,
+                    T::SERVICE,
+                    kind,
+                    max,
+                    Some(&ids),
+                )
+            }
+            e => TransportError::ipc(&self.namespace, format!("{} subscriber", T::SERVICE), e),
+        })
+    }
+
+    fn event_service(&self) -> Result<EventService, TransportError> {
+        let ns = &self.namespace;
+        let name = ServiceName::new(EVENT_SERVICE)
+            .map_err(|e| TransportError::ipc(ns, EVENT_SERVICE, e))?;
+        self.node()
+            .service_builder(&name)
+            .event()
+            .max_notifiers(MAX_NOTIFIERS)
+            .max_listeners(MAX_LISTENERS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| match e {
+                EventOpenOrCreateError::EventOpenError(EventOpenError::ExceedsMaxNumberOfNodes) => {
+                    self.too_many_nodes(EVENT_SERVICE, MAX_NODES)
+                }
+                e => TransportError::ipc(ns, format!("service {EVENT_SERVICE}"), e),
+            })
+    }
+
+    /// A listener of the board's events.
+    pub(super) fn listener(&self) -> Result<Listener<Ipc>, TransportError> {
+        let svc = self.event_service()?;
+        svc.listener_builder().create().map_err(|e| match e {
+            ListenerCreateError::ExceedsMaxSupportedListeners => {
+                let mut ids = Vec::new();
+                svc.dynamic_config().list_listeners(|d| {
+                    ids.push(d.node_id);
+                    CallbackProgression::Continue
+                });
+                let max = svc.static_config().max_listeners();
+                let kind = PortKind::Listener;
+                too_many(
+                    &self.namespace,
+                    &self.config,
+                    EVENT_SERVICE,
+                    kind,
+                    max,
+                    Some(&ids),
+                )
+            }
+            e => TransportError::ipc(&self.namespace, "event listener", e),
+        })
+    }
+
+    /// The board's notifier of its events.
+    pub(super) fn notifier(&self) -> Result<Notifier<Ipc>, TransportError> {
+        let svc = self.event_service()?;
+        svc.notifier_builder().create().map_err(|e| match e {
+            NotifierCreateError::ExceedsMaxSupportedNotifiers => {
+                let mut ids = Vec::new();
+                svc.dynamic_config().list_notifiers(|d| {
+                    ids.push(d.node_id);
+                    CallbackProgression::Continue
+                });
+                let max = svc.static_config().max_notifiers();
+                let kind = PortKind::Notifier;
+                too_many(
+                    &self.namespace,
+                    &self.config,
+                    EVENT_SERVICE,
+                    kind,
+                    max,
+                    Some(&ids),
+                )
+            }
+            e => TransportError::ipc(&self.namespace, "event notifier", e),
+        })
+    }
+
+    /// The namespace of this session.
+    pub fn namespace(&self) -> &str {
+        &self.namespace
+    }
+
+    /// Dead nodes of the namespace whose resources were removed when this session opened.
+    pub fn cleaned_dead_nodes(&self) -> usize {
+        self.cleaned_dead_nodes
+    }
+}
+
+pub(super) fn send<T: Topic>(
+    session: &Session,
+    port: &Pub<T>,
+    value: &T,
+) -> Result<(), TransportError> {
+    port.send_copy(*value).map(|_| ()).map_err(|e| {
+        TransportError::ipc(&session.namespace, format!("cannot send {}", T::SERVICE), e)
+    })
+}
+
+/// Calls `f` on every message waiting on `port`, oldest first; returns how many there were.
+pub(super) fn drain<T: Topic>(port: &Sub<T>, mut f: impl FnMut(&T)) -> usize {
+    let mut n = 0;
+    while let Ok(Some(sample)) = port.receive() {
+        f(&sample);
+        n += 1;
+    }
+    n
+}
+
+/// The newest message waiting on `port`, if any (the older ones are consumed).
+pub(super) fn latest<T: Topic>(port: &Sub<T>) -> Option<T> {
+    let mut last = None;
+    drain(port, |m| last = Some(*m));
+    last
+}
