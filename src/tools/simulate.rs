@@ -142,17 +142,24 @@ fn print_report(
             .map(|v| format!("{v:.3}"))
             .collect::<Vec<_>>()
     );
+    let f = |v: Option<f64>| v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.3}"));
     println!(
-        "errors     RMS {:.3} {u}, final mean {:.3} / max {:.3} {u}",
-        report.rms_error, report.final_error_mean, report.final_error_max
+        "errors     RMS {} {u}, final mean {} / max {} {u} (over the trials that did not diverge)",
+        f(report.rms_error),
+        f(report.final_error_mean),
+        f(report.final_error_max)
     );
     println!(
         "diverged   {} of {} (ending > {divergence} {u} from the target)",
         report.diverged, report.trials
     );
+    let mc = match (report.expected_cost_mc, report.expected_cost_se) {
+        (Some(m), Some(se)) => format!("{m:.6e} ± {se:.2e}"),
+        (Some(m), None) => format!("{m:.6e}"),
+        _ => "– (every trial diverged)".into(),
+    };
     println!(
-        "cost       Monte Carlo {:.6e} ± {:.2e}, predicted {:.6e}",
-        report.expected_cost_mc, report.expected_cost_se, predicted
+        "cost       Monte Carlo {mc} (trials that did not diverge), predicted {predicted:.6e}"
     );
 }
 

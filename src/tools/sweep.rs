@@ -60,8 +60,9 @@ pub struct SweepOptions {
     pub divergence: Option<f64>,
 }
 
-/// One strategy at one latency. Errors are over all trials, `None` when every trial diverged
-/// (never a sentinel number).
+/// One strategy at one latency. The errors and the Monte Carlo cost are over the trials that did
+/// not diverge, `None` when every trial diverged (a diverged trial is counted, never averaged in
+/// and never a sentinel number; see [`summarize`]).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SweepPoint {
     pub strategy: Strategy,
@@ -69,6 +70,9 @@ pub struct SweepPoint {
     pub final_error_mean: Option<f64>,
     pub final_error_max: Option<f64>,
     pub rms_error: Option<f64>,
+    /// Trials that diverged, and their fraction.
+    #[serde(default)]
+    pub diverged: usize,
     pub diverged_fraction: f64,
     pub expected_cost_mc: Option<f64>,
     /// The executed policy's expected cost predicted by closed-loop covariance propagation
@@ -118,16 +122,15 @@ pub fn sweep_latency(
                 .divergence
                 .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
             let r = summarize(&set, &trials, divergence);
-            let kept = r.diverged < r.trials;
-            let finite = |v: f64| (kept && v.is_finite()).then_some(v);
             points.push(SweepPoint {
                 strategy,
                 latency_ms,
-                final_error_mean: finite(r.final_error_mean),
-                final_error_max: finite(r.final_error_max),
-                rms_error: finite(r.rms_error),
+                final_error_mean: r.final_error_mean,
+                final_error_max: r.final_error_max,
+                rms_error: r.rms_error,
+                diverged: r.diverged,
                 diverged_fraction: r.diverged_fraction,
-                expected_cost_mc: r.expected_cost_mc.is_finite().then_some(r.expected_cost_mc),
+                expected_cost_mc: r.expected_cost_mc,
                 expected_cost_predicted: predicted_cost(&set, &policy, feedback),
                 mean_stiffness: p.summary.mean_stiffness,
                 unit: r.unit,

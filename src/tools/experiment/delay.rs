@@ -289,6 +289,7 @@ mod tests {
             final_error_mean: v,
             final_error_max: v,
             rms_error: v,
+            diverged: usize::from(v.is_none()),
             diverged_fraction: if v.is_some() { 0.0 } else { 1.0 },
             expected_cost_mc: v,
             expected_cost_predicted: v,
