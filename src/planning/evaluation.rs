@@ -221,7 +221,8 @@ pub fn predicted_cost(setup: &Setup, policy: &Policy, feedback: Feedback) -> Opt
     let d = match feedback {
         Feedback::OpenLoop | Feedback::Full => 0,
         Feedback::Predicted { latency_steps } => latency_steps,
-        Feedback::Delayed { .. } => return None,
+        // The naive law's augmented state, and the replanner's changing plan, are not modelled.
+        Feedback::Delayed { .. } | Feedback::Replan { .. } => return None,
     };
     let dynamics = &setup.dynamics;
     let (n, m, p) = (dynamics.nx(), policy.nu(), dynamics.nw());

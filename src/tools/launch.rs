@@ -48,6 +48,7 @@ pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, String> {
     Track::new(
         plan.policy(setup).map_err(|e| e.to_string())?,
         setup.dynamics.clone(),
+        setup.cost.clone(),
         &setup.x0,
     )
     .map_err(|e| e.to_string())

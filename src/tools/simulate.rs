@@ -25,6 +25,9 @@ pub enum Execution {
     /// The plan's gains on the present state predicted from the one seen `delay_ms` late (a
     /// Smith predictor; execute an undelayed plan with it).
     Predictor { delay_ms: f64 },
+    /// The plan re-solved every central period from the present predicted from the state seen
+    /// `delay_ms` late ([`crate::core::replan`]).
+    Replan { delay_ms: f64 },
 }
 
 /// What `vic simulate` was asked for.
@@ -93,6 +96,9 @@ fn feedback(execution: Execution, plan: &PlanFile, dt: f64) -> anyhow::Result<Fe
             },
         },
         Execution::Predictor { delay_ms } => Feedback::Predicted {
+            latency_steps: whole_steps("--delay-ms", delay_ms, dt * 1000.0)?,
+        },
+        Execution::Replan { delay_ms } => Feedback::Replan {
             latency_steps: whole_steps("--delay-ms", delay_ms, dt * 1000.0)?,
         },
     })

@@ -52,6 +52,7 @@ pub fn run_delay_sweeps(
         trials,
         seed,
         divergence: None,
+        pulse: None,
     };
     let cases = [
         (
@@ -305,6 +306,7 @@ mod tests {
             scenario: "x.toml".into(),
             trials: 2,
             seed: 1,
+            pulse: None,
             points,
         }
     }

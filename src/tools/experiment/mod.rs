@@ -302,6 +302,7 @@ fn column_result(
                 format!("delayed-feedback ({latency_steps} steps)")
             }
             Feedback::Predicted { latency_steps } => format!("predictor ({latency_steps} steps)"),
+            Feedback::Replan { latency_steps } => format!("replan ({latency_steps} steps)"),
         },
         final_std_mm: (unit == Unit::Millimetre).then_some(report.final_std),
         final_std_deg: (unit == Unit::Degree).then_some(report.final_std),
