@@ -79,8 +79,17 @@ pub fn solve_sooc(
     };
     let sizing = MomentDynamics::new(&setup.dynamics);
     let mut workspace = SoocSolver::new(&sizing, horizon, options);
+    let stage = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    if let Some(p) = progress {
+        let (p, stage) = (p.clone(), stage.clone());
+        workspace.observer = Some(Arc::new(move |it: &Progress| {
+            let fraction = f64::from_bits(stage.load(std::sync::atomic::Ordering::Relaxed));
+            p(&format!("open-loop moments (noise × {fraction})"), it);
+        }));
+    }
     let mut last = None;
     for &fraction in &solver.noise_continuation {
+        stage.store(fraction.to_bits(), std::sync::atomic::Ordering::Relaxed);
         let mut dynamics = setup.dynamics.clone();
         dynamics.model.noise = dynamics.model.noise.scaled(fraction);
         let moments = MomentDynamics::new(&dynamics);

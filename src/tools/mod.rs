@@ -28,6 +28,7 @@ pub mod operator;
 pub mod operator_command;
 pub mod plan_command;
 pub mod plot;
+pub mod progress;
 pub mod record_command;
 pub mod report;
 pub mod reproduce;

@@ -1,10 +1,10 @@
 //! `vic plan`: solve a scenario's stochastic optimal control problem (ILQG for the scenario's
 //! feedback delay, or SOOC for open-loop execution), write the plan file and report its summary.
 
-use crate::planning::plan::{Method, PlanFile, ProgressFn, plan};
+use crate::planning::plan::{Method, PlanFile, plan};
 use crate::planning::scenario::Scenario;
 use crate::tools::cli::{Classify, print_json};
-use std::io::IsTerminal;
+use crate::tools::progress::Progress;
 use std::path::PathBuf;
 
 /// What `vic plan` was asked for.
@@ -29,10 +29,11 @@ pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
     }
     let scenario = Scenario::load(&o.config, &overrides).input()?;
     let method = o.method.unwrap_or(scenario.solver.method);
-    let plan = plan(&scenario, method, progress_printer())
+    let progress = Progress::spinner();
+    let plan = plan(&scenario, method, progress.solver_callback())
         .map_err(|e| format!("{}: {e}", o.config.display()))
         .input()?;
-    clear_progress_line();
+    drop(progress);
     if let Some(out) = &o.out {
         write_plan(&plan, out)?;
     }
@@ -60,28 +61,6 @@ pub fn read_plan(path: &std::path::Path) -> anyhow::Result<PlanFile> {
     serde_json::from_str(&text)
         .map_err(|e| format!("{}: not a plan file: {e}", path.display()))
         .input()
-}
-
-/// Progress on stderr when it is a terminal: one line, rewritten in place; nothing when piped.
-pub fn progress_printer() -> Option<ProgressFn> {
-    if !std::io::stderr().is_terminal() {
-        return None;
-    }
-    Some(std::sync::Arc::new(
-        |phase: &str, p: &crate::core::solver::ilqg::Progress| {
-            eprint!(
-                "\r\x1b[2K{phase}: iteration {} merit {:.6e} (μ {:.1e}, step {})",
-                p.iteration, p.merit, p.mu, p.alpha
-            );
-        },
-    ))
-}
-
-/// Erases the progress line on a terminal.
-pub fn clear_progress_line() {
-    if std::io::stderr().is_terminal() {
-        eprint!("\r\x1b[2K");
-    }
 }
 
 fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {

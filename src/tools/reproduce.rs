@@ -7,8 +7,7 @@ use crate::tools::experiment::{
     ExperimentError, ExperimentRun, Figure, delay_markdown, results_markdown, run,
     run_delay_sweeps, to_json, write_delay_outputs, write_outputs,
 };
-use crate::tools::plan_command::{clear_progress_line, progress_printer};
-use std::io::IsTerminal;
+use crate::tools::progress::Progress;
 use std::path::{Path, PathBuf};
 
 /// The Monte Carlo every figure runs with, and where its scenarios are.
@@ -21,20 +20,17 @@ pub struct FigureRunOptions {
     pub config_dir: PathBuf,
 }
 
-/// Runs every column of `figure`, naming each on a terminal as it starts (after `label`).
+/// Runs every column of `figure`, with a progress bar over its columns (after `label`) and the
+/// solver's state on a terminal.
 fn run_figure(figure: Figure, o: &FigureRunOptions, label: &str) -> anyhow::Result<ExperimentRun> {
-    let tty = std::io::stderr().is_terminal();
+    let progress = Progress::steps(label, 0);
     run(
         figure,
         &o.config_dir,
         o.trials,
         o.seed,
-        progress_printer(),
-        |i, n, name| {
-            if tty {
-                eprintln!("\r\x1b[2K{label}[{}/{n}] {name}", i + 1);
-            }
-        },
+        progress.solver_callback(),
+        |i, n, name| progress.step(i, n, name),
     )
     .map_err(|e| match e {
         ExperimentError::Config(c) => input_error(c),
@@ -56,8 +52,7 @@ pub fn experiment(
             o.config_dir.display()
         )));
     }
-    let run = run_figure(figure, o, "")?;
-    clear_progress_line();
+    let run = run_figure(figure, o, figure.name())?;
     let files = write_outputs(&run, out_dir).runtime()?;
     if json {
         return print_json(&to_json(&run));
@@ -99,26 +94,22 @@ fn print_table(run: &ExperimentRun) {
 pub fn results(o: &FigureRunOptions, out_dir: &Path) -> anyhow::Result<()> {
     let mut runs = Vec::new();
     for figure in [Figure::Fig1, Figure::Fig2, Figure::Icub] {
-        let r = run_figure(figure, o, &format!("{} ", figure.name()))?;
+        let r = run_figure(figure, o, figure.name())?;
         for f in write_outputs(&r, &out_dir.join("figures")).runtime()? {
             println!("wrote {}", f.display());
         }
         runs.push(r);
     }
     // Delay versus stiffness: the latency sweeps, after the paper's figures.
-    let tty = std::io::stderr().is_terminal();
-    let progress = |s: &str| {
-        if tty {
-            eprint!("\r\x1b[2Kdelay: {s}");
-        }
-    };
+    let line = Progress::spinner();
+    let progress = |s: &str| line.message(&format!("delay: {s}"));
     let sweeps = run_delay_sweeps(&o.config_dir, o.trials, o.seed, &progress).runtime()?;
+    drop(line);
     for s in &sweeps {
         for f in write_delay_outputs(s, &out_dir.join("figures")).runtime()? {
             println!("wrote {}", f.display());
         }
     }
-    clear_progress_line();
     let command = format!(
         "cargo run --release -- results --trials {} --seed {} --out-dir {}",
         o.trials,

@@ -151,7 +151,14 @@ impl SoocSolver {
         for j in 0..m {
             lo[j] = bounds.lower[j] - self.u[k][j];
             hi[j] = bounds.upper[j] - self.u[k][j];
-            reg[j] = mu * d.luu[(j, j)].abs().max(1e-12);
+            // μ scales the control's Gauss–Newton curvature `ℓ_uu + Bᵀ V B` (the diagonal of
+            // Q_uu without the costate term), not its own cost curvature `ℓ_uu` alone: with
+            // w_st = 1e-4 the stiffness's ℓ_uu is ~1e-4 of what a unit of stiffness does to
+            // the expected cost through the covariance, so a μ relative to ℓ_uu could not
+            // convexify an indefinite Newton model before μ reached its limit, and the solver
+            // fell back to Gauss–Newton steps that crawl (the VSA plans stalled that way).
+            let gauss_newton = (bw.quu[(j, j)] - bw.huu[(j, j)]).abs();
+            reg[j] = mu * gauss_newton.max(d.luu[(j, j)].abs()).max(1e-12);
         }
         let quu = &bw.quu;
         let hq = |i: usize, j: usize| {

@@ -15,7 +15,8 @@
 //! control-limited DDP (Tassa, Mansard & Todorov 2014): the stage QP is solved by projected Newton,
 //! clamped controls get no feedback. The step is applied with its feedback on `δz` and a
 //! backtracking line search on the true `J`; Levenberg–Marquardt regularisation (relative to each
-//! control's own cost curvature, which makes it independent of units) guards indefinite models.
+//! control's Gauss–Newton curvature `ℓ_uu + Bᵀ V B`, which makes it independent of units and of
+//! how cheap the control is in the cost) guards indefinite models.
 //!
 //! Convergence ([`Optimality`]) is judged on the exact gradient from the adjoint, not on the
 //! model: the scaled projected gradient and the Newton model's predicted decrease, both relative
@@ -164,11 +165,17 @@ pub struct SoocProblem<'a> {
     pub horizon: usize,
 }
 
+/// A callback for accepted steps; it receives the same report as ILQG's progress.
+pub type Observer = std::sync::Arc<dyn Fn(&crate::core::solver::ilqg::Progress) + Send + Sync>;
+
 /// The solver with its preallocated workspace, sized for one problem size; reuse it across solves
 /// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`] allocates nothing per
 /// iteration).
 pub struct SoocSolver {
     pub options: SoocOptions,
+    /// Told of every accepted step (iteration, `J`, relative μ, step length): progress for
+    /// long solves. Not called otherwise, so it costs nothing when unset.
+    pub observer: Option<Observer>,
     n: usize,
     nu: usize,
     horizon: usize,
@@ -196,6 +203,7 @@ impl SoocSolver {
         let nz = n + super::sooc::vech_len(n);
         SoocSolver {
             options,
+            observer: None,
             n,
             nu: m,
             horizon,
@@ -337,6 +345,7 @@ impl SoocSolver {
                     cost = c;
                     iterations += 1;
                     history.push(c);
+                    self.notify(iterations, c, damping.mu, alpha);
                     model.needs_expansion = true;
                     // A full step: trust the model more.
                     if alpha >= 0.5 {
@@ -364,6 +373,18 @@ impl SoocSolver {
             solve_time: start.elapsed(),
             history,
         })
+    }
+
+    /// Tells the observer, if any, of an accepted step.
+    fn notify(&self, iteration: usize, merit: f64, mu: f64, alpha: f64) {
+        if let Some(observe) = &self.observer {
+            observe(&crate::core::solver::ilqg::Progress {
+                iteration,
+                merit,
+                mu,
+                alpha,
+            });
+        }
     }
 
     /// Clamps the controls, clears the gains and rolls the start out: its cost.
@@ -526,7 +547,7 @@ fn control_scales(bounds: &Bounds) -> [f64; MAX_QP] {
     scale
 }
 
-/// Levenberg–Marquardt regularisation μ (relative to each control's own cost curvature) with
+/// Levenberg–Marquardt regularisation μ (relative to each control's Gauss–Newton curvature) with
 /// Tassa's multiplicative schedule.
 struct Damping {
     mu: f64,
