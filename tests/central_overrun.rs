@@ -59,7 +59,13 @@ fn joint() -> (Scenario, Setup, PlanFile) {
 }
 
 fn central(set: &Setup, p: &PlanFile, latency_ms: f64, x0: &[f64]) -> Central {
-    let track = Track::new(p.policy(set).expect("policy"), set.dynamics.clone(), x0).unwrap();
+    let track = Track::new(
+        p.policy(set).expect("policy"),
+        set.dynamics.clone(),
+        set.cost.clone(),
+        x0,
+    )
+    .unwrap();
     let lookahead_ms = 2.0 * PERIOD_NS as f64 * 1e-6;
     let (sensor, command) = split_latency_ms(latency_ms, lookahead_ms);
     let timing = Timing {

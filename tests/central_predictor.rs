@@ -45,7 +45,13 @@ fn run_lockstep(
     trials: usize,
     seed: u64,
 ) -> Vec<TrialRecord> {
-    let track = Track::new(p.policy(set).expect("policy"), set.dynamics.clone(), x0).unwrap();
+    let track = Track::new(
+        p.policy(set).expect("policy"),
+        set.dynamics.clone(),
+        set.cost.clone(),
+        x0,
+    )
+    .unwrap();
     let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
     let (sensor, command) = split_latency_ms(latency_ms, lookahead_ms);
     let timing = Timing {

@@ -19,6 +19,7 @@ fn the_sweep_orders_the_strategies_as_the_paper_argues() {
         trials: 40,
         seed: 3,
         divergence: None,
+        pulse: None,
     };
     let sweep = sweep_latency(&path, &[], &opts, &|_| {}).expect("sweep");
     assert_eq!(sweep.points.len(), 9);

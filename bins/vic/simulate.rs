@@ -23,6 +23,10 @@ enum PolicyArg {
     /// predictor's feedback (as predictor; give it a plan with stiffness).
     #[value(name = "stiffness+predictor")]
     StiffnessPredictor,
+    /// The central strategy `replan`: the plan (give it a SOOC plan) re-solved every 20 ms from
+    /// the present predicted from the state seen --delay-ms late (default 0), played open loop
+    /// between re-solves. Slow: seconds per trial on the arm.
+    Replan,
 }
 
 #[derive(clap::Args)]
@@ -44,7 +48,7 @@ pub struct SimulateArgs {
     #[command(flatten)]
     seed: SeedArgs,
     /// Feedback latency for --policy delayed-feedback [ms] (default: the plan's delay) and for
-    /// --policy predictor (default 0).
+    /// --policy predictor and replan (default 0).
     #[arg(long, value_name = "D")]
     delay_ms: Option<f64>,
     /// A trial has diverged when it ends further than this from the target [mm for the arm,
@@ -70,6 +74,9 @@ impl SimulateArgs {
                 delay_ms: self.delay_ms,
             },
             PolicyArg::Predictor | PolicyArg::StiffnessPredictor => Execution::Predictor {
+                delay_ms: self.delay_ms.unwrap_or(0.0),
+            },
+            PolicyArg::Replan => Execution::Replan {
                 delay_ms: self.delay_ms.unwrap_or(0.0),
             },
         };

@@ -3,7 +3,7 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use vic::tools::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
-use vic::tools::sweep::{Strategy, SweepOptions, sweep_latency, write_figure};
+use vic::tools::sweep::{Pulse, Strategy, SweepOptions, sweep_latency, write_figure};
 
 #[derive(clap::Args)]
 pub struct SweepArgs {
@@ -28,7 +28,9 @@ struct LatencyArgs {
     #[arg(long, value_delimiter = ',', default_value = "0,20,50,100,150,200,300")]
     latencies: Vec<f64>,
     /// Strategies: naive-delayed (Eq. 13, planned for the latency, no stiffness), predictor
-    /// (a Smith predictor across the latency, no stiffness), stiffness (the open-loop SOOC plan).
+    /// (a Smith predictor across the latency, no stiffness), stiffness (the open-loop SOOC plan),
+    /// stiffness+predictor, replan (the SOOC plan re-solved every 20 ms from the predicted
+    /// present; slow: seconds per trial on the arm).
     #[arg(long, value_delimiter = ',', value_parser = Strategy::from_name,
           default_value = "naive-delayed,predictor,stiffness")]
     strategies: Vec<Strategy>,
@@ -41,6 +43,16 @@ struct LatencyArgs {
     /// degrees for a single joint] (default 50 mm / 10°).
     #[arg(long, value_name = "DIST")]
     divergence: Option<f64>,
+    /// Disturbance rejection: a torque pulse of this size [N m] on the first joint (or
+    /// `T1,T2` per joint) in every trial of every strategy, unknown to the controllers.
+    #[arg(long, value_name = "TORQUE", value_delimiter = ',', num_args = 1..=2)]
+    pulse: Vec<f64>,
+    /// When the pulse starts [ms after the movement's start].
+    #[arg(long, value_name = "MS", default_value_t = 400.0)]
+    pulse_at_ms: f64,
+    /// How long the pulse lasts [ms].
+    #[arg(long, value_name = "MS", default_value_t = 50.0)]
+    pulse_ms: f64,
     /// Write the figure (sweep.png, sweep.svg) and the numbers (sweep.json) into this folder.
     #[arg(long, value_name = "DIR")]
     out_dir: Option<PathBuf>,
@@ -51,12 +63,35 @@ struct LatencyArgs {
 impl SweepArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let SweepWhat::Latency(a) = self.what;
+        let pulse = match a.pulse.as_slice() {
+            [] => None,
+            torque => {
+                let ok = |v: f64| v.is_finite();
+                let valid = torque.iter().all(|t| ok(*t))
+                    && ok(a.pulse_at_ms)
+                    && a.pulse_at_ms >= 0.0
+                    && ok(a.pulse_ms)
+                    && a.pulse_ms > 0.0;
+                if !valid {
+                    return Err(anyhow::anyhow!(
+                        "--pulse must be finite N m, --pulse-at-ms ≥ 0 and --pulse-ms > 0"
+                    ))
+                    .input();
+                }
+                Some(Pulse {
+                    torque: [torque[0], torque.get(1).copied().unwrap_or(0.0)],
+                    start: a.pulse_at_ms * 1e-3,
+                    duration: a.pulse_ms * 1e-3,
+                })
+            }
+        };
         let opts = SweepOptions {
             latencies_ms: a.latencies,
             strategies: a.strategies,
             trials: a.trials as usize,
             seed: a.seed.seed,
             divergence: a.divergence,
+            pulse,
         };
         let quiet = a.json.json;
         let sweep = sweep_latency(&a.scenario.config, &a.scenario.set.overrides, &opts, &|p| {

@@ -10,6 +10,7 @@ pub mod delay;
 pub mod dynamics;
 pub mod model;
 pub mod policy;
+pub mod replan;
 pub mod rng;
 pub mod scalar;
 pub mod solver;

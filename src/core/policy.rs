@@ -29,6 +29,12 @@ pub enum Feedback {
     /// `D`. Execute an undelayed plan with it.
     #[serde(rename = "predictor")]
     Predicted { latency_steps: usize },
+    /// Receding-horizon stiffness planning ([`crate::core::replan::Replanner`]): every central
+    /// period the controller predicts the present from the state seen `D` steps late and
+    /// re-solves the open-loop plan of torque and stiffness from it. The law lives in the
+    /// replanner (it changes the plan); a [`Policy`] alone plays its plan open loop under it.
+    #[serde(rename = "replan")]
+    Replan { latency_steps: usize },
 }
 
 impl Feedback {
@@ -37,9 +43,9 @@ impl Feedback {
         match self {
             Feedback::OpenLoop => None,
             Feedback::Full => Some(k),
-            Feedback::Delayed { latency_steps } | Feedback::Predicted { latency_steps } => {
-                k.checked_sub(latency_steps)
-            }
+            Feedback::Delayed { latency_steps }
+            | Feedback::Predicted { latency_steps }
+            | Feedback::Replan { latency_steps } => k.checked_sub(latency_steps),
         }
     }
 }
@@ -55,6 +61,7 @@ impl std::fmt::Display for Feedback {
             Feedback::Predicted { latency_steps } => {
                 write!(f, "predictor ({latency_steps} steps)")
             }
+            Feedback::Replan { latency_steps } => write!(f, "replan ({latency_steps} steps)"),
         }
     }
 }
@@ -75,14 +82,18 @@ pub enum Strategy {
     Stiffness,
     /// The plan's torque and stiffness plus the predictor's feedback on top.
     StiffnessPredictor,
+    /// Receding-horizon stiffness planning: the SOOC plan re-solved every central period from
+    /// the present predicted over the commands in flight ([`Feedback::Replan`]).
+    Replan,
 }
 
 impl Strategy {
-    pub const ALL: [Strategy; 4] = [
+    pub const ALL: [Strategy; 5] = [
         Strategy::NaiveDelayed,
         Strategy::Predictor,
         Strategy::Stiffness,
         Strategy::StiffnessPredictor,
+        Strategy::Replan,
     ];
 
     pub fn name(self) -> &'static str {
@@ -91,6 +102,7 @@ impl Strategy {
             Strategy::Predictor => "predictor",
             Strategy::Stiffness => "stiffness",
             Strategy::StiffnessPredictor => "stiffness+predictor",
+            Strategy::Replan => "replan",
         }
     }
 
@@ -110,13 +122,17 @@ impl Strategy {
                 Feedback::Predicted { latency_steps }
             }
             Strategy::Stiffness => Feedback::OpenLoop,
+            Strategy::Replan => Feedback::Replan { latency_steps },
         }
     }
 
     /// Whether it commands stiffness: the feedback-only strategies send none, whatever the plan
     /// holds (feedback is all they have).
     pub fn uses_stiffness(self) -> bool {
-        matches!(self, Strategy::Stiffness | Strategy::StiffnessPredictor)
+        matches!(
+            self,
+            Strategy::Stiffness | Strategy::StiffnessPredictor | Strategy::Replan
+        )
     }
 }
 
@@ -129,7 +145,8 @@ impl std::fmt::Display for Strategy {
 /// A strategy name that is not one of [`Strategy::ALL`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown strategy \"{0}\" (one of naive-delayed, predictor, stiffness, stiffness+predictor)"
+    "unknown strategy \"{0}\" (one of naive-delayed, predictor, stiffness, stiffness+predictor, \
+     replan)"
 )]
 pub struct UnknownStrategy(pub String);
 
@@ -232,7 +249,7 @@ impl Policy {
         u: &mut [f64],
     ) {
         let seen = match (feedback, seen) {
-            (Feedback::OpenLoop, _) | (_, None) => None,
+            (Feedback::OpenLoop | Feedback::Replan { .. }, _) | (_, None) => None,
             (Feedback::Predicted { .. }, Some((l, x))) => {
                 predict_present(dynamics, l, x, applied, scratch);
                 Some(Seen {

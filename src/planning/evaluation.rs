@@ -30,23 +30,31 @@ pub struct Report {
     pub ellipse_95: Vec<f64>,
     /// Orientation of the ellipse's major axis [deg from the x axis] (0 for a joint).
     pub ellipse_angle_deg: f64,
-    /// RMS distance to the reference over all knots and trials.
-    pub rms_error: f64,
-    /// Mean and largest distance of the final position to the target.
-    pub final_error_mean: f64,
-    pub final_error_max: f64,
+    /// RMS distance to the reference over all knots of the trials that did not diverge (`None`
+    /// when every trial diverged).
+    pub rms_error: Option<f64>,
+    /// Mean and largest distance of the final position to the target, over the trials that did
+    /// not diverge (`None` when every trial diverged).
+    pub final_error_mean: Option<f64>,
+    pub final_error_max: Option<f64>,
     /// Trials that ended further than the divergence threshold from the target (or blew up).
     pub diverged: usize,
     pub diverged_fraction: f64,
     /// Fraction of trials ending further than [`Unit::far_threshold`] from the target.
     pub far_fraction: f64,
-    /// Monte Carlo expected cost and its standard error.
-    pub expected_cost_mc: f64,
-    pub expected_cost_se: f64,
+    /// Monte Carlo expected cost and its standard error over the trials that did not diverge
+    /// (`None` when every trial diverged, or the standard error with fewer than two kept).
+    pub expected_cost_mc: Option<f64>,
+    pub expected_cost_se: Option<f64>,
 }
 
 /// Summarises `trials` run on `setup`; a trial diverged when its final position is further than
-/// `divergence` (in the report's unit) from the target.
+/// `divergence` (in the report's unit) from the target, or is not finite.
+///
+/// A diverged trial is counted, never averaged: the errors and the Monte Carlo cost are taken over
+/// the other trials only (one trial that left the workspace would otherwise decide every mean),
+/// and are `None` when no trial is left. The spread (`final_mean`, `final_std`, the ellipse) and
+/// `far_fraction` describe every trial, as the paper's Fig. 1 plots them.
 pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
     let model = &setup.dynamics.model;
     let unit = Unit::for_model(model);
@@ -81,25 +89,26 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         angle,
         final_std,
     } = spread(&finals, goal.len(), k);
+    let targets: Vec<Vec<f64>> = (0..=steps).map(target).collect();
+    let final_errors: Vec<f64> = finals.iter().map(|f| dist(f, &goal)).collect();
+    let is_diverged = |e: f64| !e.is_finite() || e > divergence;
+    let kept: Vec<usize> = (0..trials.len())
+        .filter(|&i| !is_diverged(final_errors[i]))
+        .collect();
+    let diverged = trials.len() - kept.len();
     let mut sq = 0.0;
     let mut n = 0.0;
-    let targets: Vec<Vec<f64>> = (0..=steps).map(target).collect();
-    for t in trials {
-        for (i, x) in t.x.iter().enumerate() {
-            let d = dist(&position(model, x), &targets[i]);
+    for &i in &kept {
+        for (k, x) in trials[i].x.iter().enumerate() {
+            let d = dist(&position(model, x), &targets[k]);
             sq += d * d;
             n += 1.0;
         }
     }
-    let final_errors: Vec<f64> = finals.iter().map(|f| dist(f, &goal)).collect();
-    let diverged = final_errors
-        .iter()
-        .filter(|e| !e.is_finite() || **e > divergence)
-        .count();
-    let costs: Vec<f64> = trials.iter().map(|t| t.cost).collect();
-    let cost_mean = costs.iter().sum::<f64>() / count;
-    let cost_var =
-        costs.iter().map(|c| (c - cost_mean).powi(2)).sum::<f64>() / (count - 1.0).max(1.0);
+    let kept_errors: Vec<f64> = kept.iter().map(|&i| final_errors[i]).collect();
+    let costs: Vec<f64> = kept.iter().map(|&i| trials[i].cost).collect();
+    let (cost_mean, cost_se) = mean_and_standard_error(&costs);
+    let finite = |v: f64| v.is_finite().then_some(v);
     Report {
         trials: trials.len(),
         unit,
@@ -107,9 +116,9 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         final_std,
         ellipse_95,
         ellipse_angle_deg: angle,
-        rms_error: (sq / n).sqrt(),
-        final_error_mean: final_errors.iter().sum::<f64>() / count,
-        final_error_max: final_errors.iter().copied().fold(0.0, f64::max),
+        rms_error: (n > 0.0).then(|| (sq / n).sqrt()).and_then(finite),
+        final_error_mean: mean_and_standard_error(&kept_errors).0,
+        final_error_max: kept_errors.iter().copied().reduce(f64::max),
         diverged,
         diverged_fraction: diverged as f64 / count,
         far_fraction: final_errors
@@ -118,8 +127,26 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
             .count() as f64
             / count,
         expected_cost_mc: cost_mean,
-        expected_cost_se: (cost_var / count).sqrt(),
+        expected_cost_se: cost_se,
     }
+}
+
+/// The mean of `values` and its standard error (`None` for an empty set, the standard error
+/// also for a single value, or when not finite).
+pub fn mean_and_standard_error(values: &[f64]) -> (Option<f64>, Option<f64>) {
+    if values.is_empty() {
+        return (None, None);
+    }
+    let count = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / count;
+    let se = (values.len() > 1).then(|| {
+        let var = values.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / (count - 1.0);
+        (var / count).sqrt()
+    });
+    (
+        mean.is_finite().then_some(mean),
+        se.filter(|v| v.is_finite()),
+    )
 }
 
 /// The spread of final positions (`dim` coordinates in SI units, `k` the report unit's scale).
@@ -194,7 +221,8 @@ pub fn predicted_cost(setup: &Setup, policy: &Policy, feedback: Feedback) -> Opt
     let d = match feedback {
         Feedback::OpenLoop | Feedback::Full => 0,
         Feedback::Predicted { latency_steps } => latency_steps,
-        Feedback::Delayed { .. } => return None,
+        // The naive law's augmented state, and the replanner's changing plan, are not modelled.
+        Feedback::Delayed { .. } | Feedback::Replan { .. } => return None,
     };
     let dynamics = &setup.dynamics;
     let (n, m, p) = (dynamics.nx(), policy.nu(), dynamics.nw());

@@ -6,10 +6,12 @@
 
 use crate::core::dynamics::{DiscreteDynamics, Dynamics};
 use crate::core::policy::{Feedback, Policy};
+use crate::core::replan::{Executor, ReplanOptions, Replanner};
 use crate::core::rng::{add_diffusion, trial_rng};
 use crate::planning::plan::Setup;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 /// One simulated movement.
 #[derive(Debug, Clone)]
@@ -18,6 +20,48 @@ pub struct Trial {
     pub u: Vec<DVector<f64>>,
     /// Realised cost (Eq. 14 on this trajectory).
     pub cost: f64,
+}
+
+/// A torque pulse on the plant that the controller does not know of: `torque` [N m per joint]
+/// from `start` for `duration` [s] (the sweep's disturbance-rejection variant; the same pulse
+/// for every strategy).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pulse {
+    pub torque: [f64; 2],
+    pub start: f64,
+    pub duration: f64,
+}
+
+impl Pulse {
+    /// The plant of `dynamics` with the pulse added to the external torque of the knots whose
+    /// step starts inside it (a step acts over `[kΔ, (k+1)Δ)`).
+    pub fn apply(&self, dynamics: &DiscreteDynamics) -> DiscreteDynamics {
+        let mut plant = dynamics.clone();
+        let dt = plant.dt;
+        for (k, e) in plant.exogenous.iter_mut().enumerate() {
+            let t = k as f64 * dt;
+            if t + 1e-9 >= self.start && t + 1e-9 < self.start + self.duration {
+                for (tau, p) in e.tau_ext.iter_mut().zip(self.torque) {
+                    *tau += p;
+                }
+            }
+        }
+        plant
+    }
+}
+
+/// What a trial executes: `policy` with `feedback`, or for [`Feedback::Replan`] a replanner of
+/// the policy on the controller's model (the plan's, `setup.dynamics`).
+pub fn executor<'a>(setup: &Setup, policy: &'a Policy, feedback: Feedback) -> Executor<'a> {
+    match feedback {
+        Feedback::Replan { .. } => Executor::Replan(Box::new(Replanner::new(
+            policy,
+            &setup.dynamics,
+            &setup.cost,
+            ReplanOptions::at_50_hz(setup.dynamics.dt),
+        ))),
+        _ => Executor::Plan { policy, feedback },
+    }
 }
 
 /// Simulates one trial of `policy` with `feedback` on the stochastic plant (Euler–Maruyama,
@@ -31,8 +75,27 @@ pub fn run_trial(
     seed: u64,
     trial: u64,
 ) -> Trial {
-    let (nx, nw) = (dynamics.nx(), dynamics.nw());
-    let steps = policy.steps();
+    let mut exec = Executor::Plan { policy, feedback };
+    run_trial_on(
+        dynamics, dynamics, cost, x0, &mut exec, feedback, seed, trial,
+    )
+}
+
+/// Simulates one trial of `exec` on the stochastic `plant` (Euler–Maruyama, Eq. 10); the
+/// controller predicts with its own `model` (the plant without the disturbances it cannot know).
+#[allow(clippy::too_many_arguments)]
+pub fn run_trial_on(
+    plant: &DiscreteDynamics,
+    model: &DiscreteDynamics,
+    cost: &dyn crate::core::cost::Cost,
+    x0: &[f64],
+    exec: &mut Executor<'_>,
+    feedback: Feedback,
+    seed: u64,
+    trial: u64,
+) -> Trial {
+    let (nx, nw) = (plant.nx(), plant.nw());
+    let steps = model.exogenous.len() - 1;
     let mut rng = trial_rng(seed, trial);
     let mut x = vec![DVector::from_column_slice(x0)];
     let mut us = Vec::with_capacity(steps);
@@ -40,12 +103,11 @@ pub fn run_trial(
     let mut predicted = DVector::zeros(nx);
     let mut total = 0.0;
     for k in 0..steps {
-        let mut u = DVector::zeros(policy.nu());
+        let mut u = DVector::zeros(plant.nu());
         let seen = feedback.seen_knot(k);
-        policy.command_into(
-            dynamics,
+        exec.command_into(
+            model,
             k,
-            feedback,
             seen.map(|j| (j, x[j].as_slice())),
             us[seen.unwrap_or(k)..k]
                 .iter()
@@ -54,9 +116,9 @@ pub fn run_trial(
             u.as_mut_slice(),
         );
         let mut next = DVector::zeros(nx);
-        dynamics.step(k, x[k].as_slice(), u.as_slice(), next.as_mut_slice());
+        plant.step(k, x[k].as_slice(), u.as_slice(), next.as_mut_slice());
         if nw > 0 {
-            dynamics.noise_gain(k, x[k].as_slice(), u.as_slice(), &mut g);
+            plant.noise_gain(k, x[k].as_slice(), u.as_slice(), &mut g);
             add_diffusion(next.as_mut_slice(), g.as_slice(), nx, nw, &mut rng);
         }
         total += cost.running(k, x[k].as_slice(), u.as_slice());
@@ -79,14 +141,29 @@ pub fn run_trials(
     trials: usize,
     seed: u64,
 ) -> Vec<Trial> {
+    run_trials_disturbed(setup, policy, feedback, None, trials, seed)
+}
+
+/// [`run_trials`] with an optional torque `pulse` on the plant, unknown to the controller.
+pub fn run_trials_disturbed(
+    setup: &Setup,
+    policy: &Policy,
+    feedback: Feedback,
+    pulse: Option<&Pulse>,
+    trials: usize,
+    seed: u64,
+) -> Vec<Trial> {
+    let plant = pulse.map_or_else(|| setup.dynamics.clone(), |p| p.apply(&setup.dynamics));
     (0..trials as u64)
         .into_par_iter()
         .map(|t| {
-            run_trial(
+            let mut exec = executor(setup, policy, feedback);
+            run_trial_on(
+                &plant,
                 &setup.dynamics,
                 &setup.cost,
                 &setup.x0,
-                policy,
+                &mut exec,
                 feedback,
                 seed,
                 t,

@@ -159,7 +159,7 @@ fn run_trials(
 fn plan_at_start(o: &CentralOptions, overrides: &[String]) -> anyhow::Result<PlanFile> {
     let mut overrides = overrides.to_vec();
     let method = match o.strategy {
-        Strategy::Stiffness => Method::Sooc,
+        Strategy::Stiffness | Strategy::Replan => Method::Sooc,
         Strategy::NaiveDelayed => {
             overrides.push(format!("task.delay_ms={}", o.latency_ms.unwrap_or(0.0)));
             Method::Ilqg

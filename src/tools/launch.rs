@@ -59,6 +59,7 @@ pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, LaunchError> {
     Ok(Track::new(
         plan.policy(setup)?,
         setup.dynamics.clone(),
+        setup.cost.clone(),
         &setup.x0,
     )?)
 }

@@ -75,13 +75,15 @@ fn print_table(run: &ExperimentRun) {
     for c in &run.columns {
         let unit = &c.report.unit;
         println!(
-            "{:<18} {:>8} {:>9.2} {unit:<3}{:>8.2} {unit:<3} {:>8.0} % {:>13.4e} {:>13.4e} {:>9.1}",
+            "{:<18} {:>8} {:>9.2} {unit:<3}{:>8} {unit:<3} {:>8.0} % {:>13} {:>13.4e} {:>9.1}",
             c.name,
             c.method,
             c.report.final_std,
-            c.rms_error,
+            c.rms_error
+                .map_or_else(|| "diverged".into(), |v| format!("{v:.2}")),
             c.diverged_fraction * 100.0,
-            c.expected_cost_mc,
+            c.expected_cost_mc
+                .map_or_else(|| "–".into(), |v| format!("{v:.4e}")),
             c.expected_cost_predicted,
             c.mean_stiffness
         );

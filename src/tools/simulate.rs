@@ -25,6 +25,9 @@ pub enum Execution {
     /// The plan's gains on the present state predicted from the one seen `delay_ms` late (a
     /// Smith predictor; execute an undelayed plan with it).
     Predictor { delay_ms: f64 },
+    /// The plan re-solved every central period from the present predicted from the state seen
+    /// `delay_ms` late ([`crate::core::replan`]).
+    Replan { delay_ms: f64 },
 }
 
 /// What `vic simulate` was asked for.
@@ -95,6 +98,9 @@ fn feedback(execution: Execution, plan: &PlanFile, dt: f64) -> anyhow::Result<Fe
         Execution::Predictor { delay_ms } => Feedback::Predicted {
             latency_steps: whole_steps("--delay-ms", delay_ms, dt * 1000.0)?,
         },
+        Execution::Replan { delay_ms } => Feedback::Replan {
+            latency_steps: whole_steps("--delay-ms", delay_ms, dt * 1000.0)?,
+        },
     })
 }
 
@@ -142,17 +148,24 @@ fn print_report(
             .map(|v| format!("{v:.3}"))
             .collect::<Vec<_>>()
     );
+    let f = |v: Option<f64>| v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.3}"));
     println!(
-        "errors     RMS {:.3} {u}, final mean {:.3} / max {:.3} {u}",
-        report.rms_error, report.final_error_mean, report.final_error_max
+        "errors     RMS {} {u}, final mean {} / max {} {u} (over the trials that did not diverge)",
+        f(report.rms_error),
+        f(report.final_error_mean),
+        f(report.final_error_max)
     );
     println!(
         "diverged   {} of {} (ending > {divergence} {u} from the target)",
         report.diverged, report.trials
     );
+    let mc = match (report.expected_cost_mc, report.expected_cost_se) {
+        (Some(m), Some(se)) => format!("{m:.6e} ± {se:.2e}"),
+        (Some(m), None) => format!("{m:.6e}"),
+        _ => "– (every trial diverged)".into(),
+    };
     println!(
-        "cost       Monte Carlo {:.6e} ± {:.2e}, predicted {:.6e}",
-        report.expected_cost_mc, report.expected_cost_se, predicted
+        "cost       Monte Carlo {mc} (trials that did not diverge), predicted {predicted:.6e}"
     );
 }
 

@@ -4,12 +4,16 @@
 //!
 //! The strategies: `naive-delayed` (Eq. 13: the gains of a plan made for the delay, on the state
 //! seen `D` steps late, no stiffness), `predictor` (the best delayed feedback without stiffness:
-//! a Smith predictor across the latency, [`Feedback::Predicted`]) and `stiffness` (the open-loop
-//! SOOC plan of torque and stiffness, which no latency affects).
+//! a Smith predictor across the latency, [`Feedback::Predicted`]), `stiffness` (the open-loop
+//! SOOC plan of torque and stiffness, which no latency affects), `stiffness+predictor`, and
+//! `replan` (the SOOC plan re-solved at 50 Hz from the predicted present,
+//! [`crate::core::replan`]). With a [`Pulse`], every trial of every strategy receives the same
+//! torque pulse, which no controller knows of.
 
 pub use crate::core::policy::Strategy;
 use crate::planning::evaluation::{predicted_cost, summarize};
-use crate::planning::montecarlo::run_trials;
+pub use crate::planning::montecarlo::Pulse;
+use crate::planning::montecarlo::run_trials_disturbed;
 use crate::planning::plan::{Method, PlanFile, plan, setup};
 use crate::planning::scenario::Scenario;
 use crate::planning::unit::Unit;
@@ -19,7 +23,7 @@ use std::path::Path;
 /// How a strategy's plan is made.
 pub fn method(strategy: Strategy) -> Method {
     match strategy {
-        Strategy::Stiffness => Method::Sooc,
+        Strategy::Stiffness | Strategy::Replan => Method::Sooc,
         _ => Method::Ilqg,
     }
 }
@@ -58,10 +62,14 @@ pub struct SweepOptions {
     pub seed: u64,
     /// A trial ending further than this from the target (in the report's unit) diverged.
     pub divergence: Option<f64>,
+    /// A torque pulse on the plant mid-movement, the same for every strategy and unknown to
+    /// every controller (the disturbance-rejection variant).
+    pub pulse: Option<Pulse>,
 }
 
-/// One strategy at one latency. Errors are over all trials, `None` when every trial diverged
-/// (never a sentinel number).
+/// One strategy at one latency. The errors and the Monte Carlo cost are over the trials that did
+/// not diverge, `None` when every trial diverged (a diverged trial is counted, never averaged in
+/// and never a sentinel number; see [`summarize`]).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SweepPoint {
     pub strategy: Strategy,
@@ -69,6 +77,9 @@ pub struct SweepPoint {
     pub final_error_mean: Option<f64>,
     pub final_error_max: Option<f64>,
     pub rms_error: Option<f64>,
+    /// Trials that diverged, and their fraction.
+    #[serde(default)]
+    pub diverged: usize,
     pub diverged_fraction: f64,
     pub expected_cost_mc: Option<f64>,
     /// The executed policy's expected cost predicted by closed-loop covariance propagation
@@ -84,6 +95,9 @@ pub struct Sweep {
     pub scenario: String,
     pub trials: usize,
     pub seed: u64,
+    /// The pulse every trial received, if any.
+    #[serde(default)]
+    pub pulse: Option<Pulse>,
     pub points: Vec<SweepPoint>,
 }
 
@@ -113,21 +127,27 @@ pub fn sweep_latency(
             let steps = latency_steps(latency_ms, s.task.dt)?;
             let feedback = strategy.feedback(steps);
             let policy = p.policy(&set).map_err(|e| e.to_string())?;
-            let trials = run_trials(&set, &policy, feedback, opts.trials, opts.seed);
+            let trials = run_trials_disturbed(
+                &set,
+                &policy,
+                feedback,
+                opts.pulse.as_ref(),
+                opts.trials,
+                opts.seed,
+            );
             let divergence = opts
                 .divergence
                 .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
             let r = summarize(&set, &trials, divergence);
-            let kept = r.diverged < r.trials;
-            let finite = |v: f64| (kept && v.is_finite()).then_some(v);
             points.push(SweepPoint {
                 strategy,
                 latency_ms,
-                final_error_mean: finite(r.final_error_mean),
-                final_error_max: finite(r.final_error_max),
-                rms_error: finite(r.rms_error),
+                final_error_mean: r.final_error_mean,
+                final_error_max: r.final_error_max,
+                rms_error: r.rms_error,
+                diverged: r.diverged,
                 diverged_fraction: r.diverged_fraction,
-                expected_cost_mc: r.expected_cost_mc.is_finite().then_some(r.expected_cost_mc),
+                expected_cost_mc: r.expected_cost_mc,
                 expected_cost_predicted: predicted_cost(&set, &policy, feedback),
                 mean_stiffness: p.summary.mean_stiffness,
                 unit: r.unit,
@@ -138,6 +158,7 @@ pub fn sweep_latency(
         scenario: path.display().to_string(),
         trials: opts.trials,
         seed: opts.seed,
+        pulse: opts.pulse,
         points,
     })
 }

@@ -13,10 +13,12 @@
 //! delay line and reach the board before knot `k` acts; when the state of `k − D` is not there
 //! yet, the freshest released state is used and the knot is counted in `stale_feedback`.
 
+use crate::core::cost::TrackingCost;
 use crate::core::dynamics::DiscreteDynamics;
 use crate::core::model::Exogenous;
 pub use crate::core::policy::Strategy;
 use crate::core::policy::{Feedback, Policy};
+use crate::core::replan::{Executor, ReplanOptions, ReplanStats, Replanner};
 use crate::core::scalar::{MAX_NU, MAX_NX};
 mod live;
 pub use live::{LiveError, run_live};
@@ -64,16 +66,19 @@ pub struct Track {
     pub policy: Policy,
     /// The plan's discrete model: the predictor runs it over the commands in flight.
     pub dynamics: DiscreteDynamics,
+    /// The plan's cost (Eq. 14): the replanner re-solves with it.
+    pub cost: TrackingCost,
     pub reference: Vec<Exogenous>,
     pub x0: [f64; MAX_NX],
 }
 
 impl Track {
     /// `policy` for a `dof`-joint impedance plant (state `(q, q')`, control `(τ, K)`), planned on
-    /// a grid of `dt` [s], tracking `reference` (one entry per knot `0..=N`) from `x0`.
+    /// the grid and reference of `dynamics` with `cost`, from `x0`.
     pub fn new(
         policy: Policy,
         dynamics: DiscreteDynamics,
+        cost: TrackingCost,
         x0: &[f64],
     ) -> Result<Track, TrackError> {
         let (dof, dt) = (dynamics.model.dof(), dynamics.dt);
@@ -98,6 +103,7 @@ impl Track {
             steps: policy.steps(),
             policy,
             dynamics,
+            cost,
             reference,
             x0: x,
         })
@@ -164,6 +170,11 @@ pub struct Central {
     compute_budget_ns: u64,
     overruns: u64,
     clock: fn() -> u64,
+    /// The `replan` strategy's receding-horizon planner (reset at every trial).
+    replanner: Option<Box<Replanner>>,
+    /// Its re-solves over all trials, and their compute time [ns] (real clock).
+    replan_stats: ReplanStats,
+    replan_time: LatencyHistogram,
 }
 
 /// How long the central controller's periods took to compute, over all its trials.
@@ -175,11 +186,36 @@ pub struct ComputeTiming {
     pub budget_us: f64,
     /// Periods whose work took longer than the budget: they sent the previous slice again.
     pub overruns: u64,
+    /// For the `replan` strategy: the time of each re-solve and what the re-solves did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replan: Option<ReplanTiming>,
+}
+
+/// The re-solves of the `replan` strategy, over all trials.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ReplanTiming {
+    /// Time of one re-solve [µs] (real clock): one per planner period.
+    pub solve_us: Percentiles,
+    pub stats: ReplanStats,
 }
 
 impl Central {
     pub fn new(track: Track, strategy: Strategy, timing: Timing) -> Self {
         let n = track.steps;
+        // One re-solve per planner period (the budget below), on the plan's grid.
+        let replanner = (strategy == Strategy::Replan).then(|| {
+            let period_ns = (timing.lookahead_ns / 2).max(1);
+            let options = ReplanOptions {
+                period_steps: (period_ns.div_ceil(track.dt_ns) as usize).max(1),
+                ..ReplanOptions::at_50_hz(track.dynamics.dt)
+            };
+            Box::new(Replanner::new(
+                &track.policy,
+                &track.dynamics,
+                &track.cost,
+                options,
+            ))
+        });
         Central {
             strategy,
             timing,
@@ -206,6 +242,9 @@ impl Central {
             compute_budget_ns: (timing.lookahead_ns / 2).max(1),
             overruns: 0,
             clock: monotonic_ns,
+            replanner,
+            replan_stats: ReplanStats::default(),
+            replan_time: LatencyHistogram::new(),
             track,
         }
     }
@@ -227,6 +266,10 @@ impl Central {
             compute_us: self.compute.percentiles(),
             budget_us: self.compute_budget_ns as f64 * 1e-3,
             overruns: self.overruns,
+            replan: self.replanner.as_ref().map(|_| ReplanTiming {
+                solve_us: self.replan_time.percentiles(),
+                stats: self.replan_stats,
+            }),
         }
     }
 
@@ -247,6 +290,9 @@ impl Central {
         self.acknowledged = false;
         self.stalled = false;
         self.last_slice = None;
+        if let Some(r) = &mut self.replanner {
+            r.reset();
+        }
         let dof = self.track.dof;
         self.control_seq += 1;
         self.reset_seq = self.control_seq;
@@ -349,16 +395,30 @@ impl Central {
         let mut u = [0.0; MAX_NU];
         let mut predicted = [0.0; MAX_NX];
         let from = seen.map_or(k, |(l, _)| l);
+        let seen = seen.as_ref().map(|(l, x)| (*l, &x[..nx]));
         // The commands in flight: the controller sent them, so it knows them exactly.
-        t.policy.command_into(
-            &t.dynamics,
-            k,
-            feedback,
-            seen.as_ref().map(|(l, x)| (*l, &x[..nx])),
-            self.sent_u[from..k].iter().map(|u| &u[..nu]),
-            &mut predicted,
-            &mut u,
-        );
+        let applied = self.sent_u[from..k].iter().map(|u| &u[..nu]);
+        match &mut self.replanner {
+            Some(r) => {
+                let t0 = (self.clock)();
+                let before = r.stats;
+                r.command_into(k, seen, applied, &mut predicted, &mut u);
+                if r.stats.solves > before.solves {
+                    self.replan_time.record((self.clock)().saturating_sub(t0));
+                    let s = &mut self.replan_stats;
+                    s.solves += 1;
+                    s.accepted += r.stats.accepted - before.accepted;
+                    s.converged += r.stats.converged - before.converged;
+                    s.kept_old += r.stats.kept_old - before.kept_old;
+                    s.iterations += r.stats.iterations - before.iterations;
+                }
+            }
+            None => Executor::Plan {
+                policy: &t.policy,
+                feedback,
+            }
+            .command_into(&t.dynamics, k, seen, applied, &mut predicted, &mut u),
+        }
         if !self.strategy.uses_stiffness() {
             // No stiffness: the feedback alone must hold the arm (clamped again, should the
             // bounds exclude zero stiffness).

@@ -52,6 +52,7 @@ pub fn run_delay_sweeps(
         trials,
         seed,
         divergence: None,
+        pulse: None,
     };
     let cases = [
         (
@@ -289,6 +290,7 @@ mod tests {
             final_error_mean: v,
             final_error_max: v,
             rms_error: v,
+            diverged: usize::from(v.is_none()),
             diverged_fraction: if v.is_some() { 0.0 } else { 1.0 },
             expected_cost_mc: v,
             expected_cost_predicted: v,
@@ -304,6 +306,7 @@ mod tests {
             scenario: "x.toml".into(),
             trials: 2,
             seed: 1,
+            pulse: None,
             points,
         }
     }

@@ -166,10 +166,12 @@ pub struct ColumnResult {
     /// Spread of the final joint angle [deg] (single joint).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub final_std_deg: Option<f64>,
-    /// RMS distance to the reference over the movement (mm or deg, see `report.unit`).
-    pub rms_error: f64,
+    /// RMS distance to the reference over the movement (mm or deg, see `report.unit`), over the
+    /// trials that did not diverge (`None` when all did).
+    pub rms_error: Option<f64>,
     pub diverged_fraction: f64,
-    pub expected_cost_mc: f64,
+    /// Monte Carlo expected cost over the trials that did not diverge (`None` when all did).
+    pub expected_cost_mc: Option<f64>,
     pub expected_cost_predicted: f64,
     pub plan_converged: bool,
     pub plan_iterations: usize,
@@ -300,6 +302,7 @@ fn column_result(
                 format!("delayed-feedback ({latency_steps} steps)")
             }
             Feedback::Predicted { latency_steps } => format!("predictor ({latency_steps} steps)"),
+            Feedback::Replan { latency_steps } => format!("replan ({latency_steps} steps)"),
         },
         final_std_mm: (unit == Unit::Millimetre).then_some(report.final_std),
         final_std_deg: (unit == Unit::Degree).then_some(report.final_std),

@@ -1,0 +1,267 @@
+//! Receding-horizon stiffness planning: the `replan` strategy of a central controller that sees
+//! the state `D` steps late (DESIGN §6, last sentence; issue 13).
+//!
+//! Every central period (`period_steps` knots: 2 at Δ = 10 ms and 50 Hz) the controller
+//! predicts the present state `x̂_k` from the delayed measurement over the commands in flight
+//! (the predictor's own [`predict_present`]), re-solves the open-loop problem of SOOC (Berret &
+//! Jean 2020; the moment dynamics and Eq. 14's expected cost) from `x̂_k` to the end of the
+//! movement, warm-started from the previous plan's remaining commands (the shifted previous
+//! solution), with at most `max_iterations` Newton steps, and plays the result open loop until
+//! the next period. Between replans nothing is fed back: what corrects a deviation is the next
+//! plan's torque *and* stiffness.
+//!
+//! The start of each re-solve: mean `x̂_k`, covariance **zero**. [`SoocProblem`] starts from a
+//! known state (`P_0 = 0`), and the alternative — the old plan's open-loop covariance at knot `k`
+//! — describes the uncertainty of a controller that never measured anything since the start,
+//! which the measurement has removed. What zero leaves out is the prediction error over the last
+//! `D` steps (the noise that entered during the latency); so each re-solve believes the present
+//! a little better known than it is and may buy slightly less stiffness for the first `D` knots
+//! of its window. The Monte Carlo measures what that costs.
+//!
+//! Acceptance: converged or not, the new commands replace the old ones only when they are finite
+//! and their open-loop expected cost from `x̂_k` is not worse than the old plan's remaining
+//! commands from the same `x̂_k`; otherwise the old plan goes on ("a solve that misses its period
+//! sends the previous plan's slice, never nothing").
+
+use crate::core::cost::TrackingCost;
+use crate::core::dynamics::{DiscreteDynamics, Dynamics};
+use crate::core::policy::{Policy, predict_present};
+use crate::core::solver::Problem;
+use crate::core::solver::sooc::{MomentCost, MomentDynamics};
+use crate::core::solver::sooc_newton::{SoocOptions, SoocProblem, SoocSolver, SoocStop};
+use nalgebra::DVector;
+use serde::{Deserialize, Serialize};
+
+/// Newton iterations per re-solve. One stagewise Newton step on the arm costs about 7 ms over the
+/// whole movement (less as the horizon shrinks); from a warm start the first steps take most of
+/// the decrease, and three keep a Monte Carlo of the arm to seconds per point.
+pub const REPLAN_MAX_ITERATIONS: usize = 3;
+
+/// The central period of the paper's iCub layer [s] (50 Hz).
+pub const CENTRAL_PERIOD_S: f64 = 0.02;
+
+/// How often and how hard the controller replans.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ReplanOptions {
+    /// Knots between re-solves (one central period).
+    pub period_steps: usize,
+    /// Newton iterations per re-solve.
+    pub max_iterations: usize,
+}
+
+impl ReplanOptions {
+    /// One re-solve per central period of [`CENTRAL_PERIOD_S`] on a grid of `dt` [s], capped at
+    /// [`REPLAN_MAX_ITERATIONS`].
+    pub fn at_50_hz(dt: f64) -> Self {
+        ReplanOptions {
+            period_steps: ((CENTRAL_PERIOD_S / dt).round() as usize).max(1),
+            max_iterations: REPLAN_MAX_ITERATIONS,
+        }
+    }
+}
+
+/// What the re-solves of a trial did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct ReplanStats {
+    /// Re-solves started.
+    pub solves: usize,
+    /// Re-solves whose commands replaced the old plan's.
+    pub accepted: usize,
+    /// Re-solves that met SOOC's convergence criterion within the cap.
+    pub converged: usize,
+    /// Re-solves that failed (non-finite start) or came back worse or not finite: the old plan
+    /// went on.
+    pub kept_old: usize,
+    /// Newton iterations over all re-solves.
+    pub iterations: usize,
+}
+
+/// How one re-solve ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ReplanOutcome {
+    /// The new commands replaced the old ones: expected cost from `x̂` before and after.
+    Accepted { old_cost: f64, new_cost: f64 },
+    /// The old plan goes on (the solve failed, or its result was not finite or not better).
+    KeptOld,
+}
+
+/// A receding-horizon controller for one trial: the plan it is playing and what it needs to
+/// re-solve it. [`Replanner::reset`] restores the first plan for the next trial.
+#[derive(Debug, Clone)]
+pub struct Replanner {
+    pub options: ReplanOptions,
+    /// The controller's model of the plant (it knows no disturbance).
+    dynamics: DiscreteDynamics,
+    cost: TrackingCost,
+    /// The plan made before the movement (the SOOC plan).
+    original: Vec<DVector<f64>>,
+    /// The plan being played: the original with every accepted re-solve written over its tail.
+    plan: Policy,
+    pub stats: ReplanStats,
+}
+
+impl Replanner {
+    /// Replans `policy` (an open-loop plan of torque and stiffness; its gains are ignored) on the
+    /// controller's model `dynamics` with the cost `cost`.
+    pub fn new(
+        policy: &Policy,
+        dynamics: &DiscreteDynamics,
+        cost: &TrackingCost,
+        options: ReplanOptions,
+    ) -> Self {
+        let mut plan = policy.clone();
+        plan.gains.clear();
+        Replanner {
+            options,
+            dynamics: dynamics.clone(),
+            cost: cost.clone(),
+            original: policy.acting.clone(),
+            plan,
+            stats: ReplanStats::default(),
+        }
+    }
+
+    /// Back to the plan made before the movement, statistics cleared.
+    pub fn reset(&mut self) {
+        for (a, o) in self.plan.acting.iter_mut().zip(&self.original) {
+            a.copy_from(o);
+        }
+        self.stats = ReplanStats::default();
+    }
+
+    /// The commands being played (knots `0..N`).
+    pub fn plan(&self) -> &[DVector<f64>] {
+        &self.plan.acting
+    }
+
+    /// Whether the controller re-solves at knot `k`: once per period, after the start (knot 0
+    /// plays the plan made from the start state) and before the last knot.
+    pub fn replans_at(&self, k: usize) -> bool {
+        k > 0 && k + 1 < self.plan.steps() && k.is_multiple_of(self.options.period_steps)
+    }
+
+    /// The command of knot `k` for a controller holding the state `x` of knot `seen` (or none
+    /// yet), the commands `applied` since (knots `seen..k`): at a replanning knot, predicts the
+    /// present over them into `scratch` (`≥ nx`) and re-solves from it; then the plan's command.
+    /// Returns the re-solve's outcome, if one ran.
+    pub fn command_into<'a>(
+        &mut self,
+        k: usize,
+        seen: Option<(usize, &[f64])>,
+        applied: impl IntoIterator<Item = &'a [f64]>,
+        scratch: &mut [f64],
+        u: &mut [f64],
+    ) -> Option<ReplanOutcome> {
+        let outcome = match seen {
+            Some((l, x)) if self.replans_at(k) => {
+                predict_present(&self.dynamics, l, x, applied, scratch);
+                Some(self.replan_from(k, &scratch[..x.len()]))
+            }
+            _ => None,
+        };
+        self.plan.control_into(k, None, u);
+        outcome
+    }
+
+    /// Re-solves the open-loop problem from the state `x` at knot `k0` to the end of the
+    /// movement, warm-started from the plan's remaining commands, and keeps the result if it is
+    /// finite and not worse than them.
+    pub fn replan_from(&mut self, k0: usize, x: &[f64]) -> ReplanOutcome {
+        self.stats.solves += 1;
+        let horizon = self.plan.steps() - k0;
+        // The problem from knot k0 on: the reference (and the cost's targets) shifted by k0.
+        let mut dynamics = self.dynamics.clone();
+        dynamics
+            .exogenous
+            .drain(..k0.min(dynamics.exogenous.len() - 1));
+        let mut cost = self.cost.clone();
+        cost.reference.drain(..k0.min(cost.reference.len() - 1));
+        let moments = MomentDynamics::new(&dynamics);
+        let moment_cost = MomentCost::new(&cost, horizon);
+        let warm = &self.plan.acting[k0..];
+        let old_cost = Problem {
+            dynamics: &moments,
+            cost: &moment_cost,
+            x0: moments.initial_state(x),
+            horizon,
+            bounds: self.plan.bounds.clone(),
+        }
+        .rollout(warm)
+        .1;
+        let problem = SoocProblem {
+            dynamics: &moments,
+            cost: &moment_cost,
+            x0: x,
+            bounds: &self.plan.bounds,
+            horizon,
+        };
+        let options = SoocOptions {
+            max_iterations: self.options.max_iterations,
+            ..SoocOptions::default()
+        };
+        let mut solver = SoocSolver::new(&moments, horizon, options);
+        let Ok(sol) = solver.solve(&problem, warm) else {
+            self.stats.kept_old += 1;
+            return ReplanOutcome::KeptOld;
+        };
+        self.stats.iterations += sol.iterations;
+        if sol.stop == SoocStop::Converged {
+            self.stats.converged += 1;
+        }
+        let finite =
+            sol.expected_cost.is_finite() && sol.u.iter().all(|u| u.iter().all(|v| v.is_finite()));
+        // `old_cost` not finite (the old plan blows up from here): any finite plan is better.
+        if !finite || sol.expected_cost > old_cost {
+            self.stats.kept_old += 1;
+            return ReplanOutcome::KeptOld;
+        }
+        for (a, u) in self.plan.acting[k0..].iter_mut().zip(&sol.u) {
+            a.copy_from(u);
+        }
+        self.stats.accepted += 1;
+        ReplanOutcome::Accepted {
+            old_cost,
+            new_cost: sol.expected_cost,
+        }
+    }
+
+    /// The controller's model.
+    pub fn dynamics(&self) -> &DiscreteDynamics {
+        &self.dynamics
+    }
+}
+
+/// What a controller executes in a trial: a plan with a feedback law, or a receding-horizon
+/// replanner. The Monte Carlo and the central controller both drive this, so that offline,
+/// lockstep and live execute one law.
+#[derive(Debug, Clone)]
+pub enum Executor<'a> {
+    Plan {
+        policy: &'a Policy,
+        feedback: crate::core::policy::Feedback,
+    },
+    Replan(Box<Replanner>),
+}
+
+impl Executor<'_> {
+    /// The command of knot `k` (see [`Policy::command_into`] and [`Replanner::command_into`]).
+    /// `dynamics` is the controller's model (the replanner carries its own).
+    pub fn command_into<'b>(
+        &mut self,
+        dynamics: &dyn Dynamics,
+        k: usize,
+        seen: Option<(usize, &[f64])>,
+        applied: impl IntoIterator<Item = &'b [f64]>,
+        scratch: &mut [f64],
+        u: &mut [f64],
+    ) {
+        match self {
+            Executor::Plan { policy, feedback } => {
+                policy.command_into(dynamics, k, *feedback, seen, applied, scratch, u)
+            }
+            Executor::Replan(r) => {
+                r.command_into(k, seen, applied, scratch, u);
+            }
+        }
+    }
+}
