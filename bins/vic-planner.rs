@@ -32,7 +32,9 @@ struct Args {
     /// How the plan is played: `naive-delayed` (the plan's gains on the state seen
     /// --latency-ms late, Eq. 13, no stiffness), `predictor` (the gains on the present state
     /// predicted from the delayed one over the commands in flight, no stiffness), `stiffness`
-    /// (the plan's torque and stiffness, no central feedback) or `stiffness+predictor` (both).
+    /// (the plan's torque and stiffness, no central feedback), `stiffness+predictor` (both) or
+    /// `replan` (SOOC re-solved every period from the predicted present, warm-started from the
+    /// previous plan; a re-solve takes tens of ms, so at 50 Hz it can overrun on a slow machine).
     #[arg(long, default_value = "stiffness", value_parser = Strategy::from_name)]
     strategy: Strategy,
     /// Feedback latency [ms]: knot k feeds back the state of k − latency (default: the plan's
