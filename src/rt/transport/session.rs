@@ -12,6 +12,7 @@ use super::namespace::{
 };
 use super::protocol::{CommandSlice, Control, Disturbance, StateMsg, Telemetry};
 use super::service::Service as Ipc;
+use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::port::listener::{Listener, ListenerCreateError};
 use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
@@ -139,6 +140,27 @@ impl Session {
         )
     }
 
+    /// The error of a service whose ports of `kind` are all taken: `list` walks the ports in
+    /// use and reports each one's node, so the error can name the processes that hold them.
+    fn too_many_ports(
+        &self,
+        service: &'static str,
+        kind: PortKind,
+        max: usize,
+        list: impl FnOnce(&mut dyn FnMut(UniqueNodeId)),
+    ) -> TransportError {
+        let mut ids = Vec::new();
+        list(&mut |id| ids.push(id));
+        too_many(
+            &self.namespace,
+            &self.config,
+            service,
+            kind,
+            max,
+            Some(&ids),
+        )
+    }
+
     fn service<T: Topic>(&self) -> Result<PubSubService<T>, TransportError> {
         let ns = &self.namespace;
         let name =
@@ -164,23 +186,17 @@ impl Session {
     pub(super) fn publisher<T: Topic>(&self) -> Result<Pub<T>, TransportError> {
         let svc = self.service::<T>()?;
         svc.publisher_builder().create().map_err(|e| match e {
-            PublisherCreateError::ExceedsMaxSupportedPublishers => {
-                let mut ids = Vec::new();
-                svc.dynamic_config().list_publishers(|d| {
-                    ids.push(d.node_id);
-                    CallbackProgression::Continue
-                });
-                let max = svc.static_config().max_publishers();
-                let kind = PortKind::Publisher;
-                too_many(
-                    &self.namespace,
-                    &self.config,
-                    T::SERVICE,
-                    kind,
-                    max,
-                    Some(&ids),
-                )
-            }
+            PublisherCreateError::ExceedsMaxSupportedPublishers => self.too_many_ports(
+                T::SERVICE,
+                PortKind::Publisher,
+                svc.static_config().max_publishers(),
+                |push| {
+                    svc.dynamic_config().list_publishers(|d| {
+                        push(d.node_id);
+                        CallbackProgression::Continue
+                    })
+                },
+            ),
             e => TransportError::ipc(&self.namespace, format!("{} publisher", T::SERVICE), e),
         })
     }
@@ -196,23 +212,17 @@ impl Session {
         let svc = self.service::<T>()?;
         let builder = svc.subscriber_builder().buffer_size(buffer);
         builder.create().map_err(|e| match e {
-            SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
-                let mut ids = Vec::new();
-                svc.dynamic_config().list_subscribers(|d| {
-                    ids.push(d.node_id);
-                    CallbackProgression::Continue
-                });
-                let max = svc.static_config().max_subscribers();
-                let kind = PortKind::Subscriber;
-                too_many(
-                    &self.namespace,
-                    &self.config,
-                    T::SERVICE,
-                    kind,
-                    max,
-                    Some(&ids),
-                )
-            }
+            SubscriberCreateError::ExceedsMaxSupportedSubscribers => self.too_many_ports(
+                T::SERVICE,
+                PortKind::Subscriber,
+                svc.static_config().max_subscribers(),
+                |push| {
+                    svc.dynamic_config().list_subscribers(|d| {
+                        push(d.node_id);
+                        CallbackProgression::Continue
+                    })
+                },
+            ),
             e => TransportError::ipc(&self.namespace, format!("{} subscriber", T::SERVICE), e),
         })
     }
@@ -240,23 +250,17 @@ impl Session {
     pub(super) fn listener(&self) -> Result<Listener<Ipc>, TransportError> {
         let svc = self.event_service()?;
         svc.listener_builder().create().map_err(|e| match e {
-            ListenerCreateError::ExceedsMaxSupportedListeners => {
-                let mut ids = Vec::new();
-                svc.dynamic_config().list_listeners(|d| {
-                    ids.push(d.node_id);
-                    CallbackProgression::Continue
-                });
-                let max = svc.static_config().max_listeners();
-                let kind = PortKind::Listener;
-                too_many(
-                    &self.namespace,
-                    &self.config,
-                    EVENT_SERVICE,
-                    kind,
-                    max,
-                    Some(&ids),
-                )
-            }
+            ListenerCreateError::ExceedsMaxSupportedListeners => self.too_many_ports(
+                EVENT_SERVICE,
+                PortKind::Listener,
+                svc.static_config().max_listeners(),
+                |push| {
+                    svc.dynamic_config().list_listeners(|d| {
+                        push(d.node_id);
+                        CallbackProgression::Continue
+                    })
+                },
+            ),
             e => TransportError::ipc(&self.namespace, "event listener", e),
         })
     }
@@ -265,23 +269,17 @@ impl Session {
     pub(super) fn notifier(&self) -> Result<Notifier<Ipc>, TransportError> {
         let svc = self.event_service()?;
         svc.notifier_builder().create().map_err(|e| match e {
-            NotifierCreateError::ExceedsMaxSupportedNotifiers => {
-                let mut ids = Vec::new();
-                svc.dynamic_config().list_notifiers(|d| {
-                    ids.push(d.node_id);
-                    CallbackProgression::Continue
-                });
-                let max = svc.static_config().max_notifiers();
-                let kind = PortKind::Notifier;
-                too_many(
-                    &self.namespace,
-                    &self.config,
-                    EVENT_SERVICE,
-                    kind,
-                    max,
-                    Some(&ids),
-                )
-            }
+            NotifierCreateError::ExceedsMaxSupportedNotifiers => self.too_many_ports(
+                EVENT_SERVICE,
+                PortKind::Notifier,
+                svc.static_config().max_notifiers(),
+                |push| {
+                    svc.dynamic_config().list_notifiers(|d| {
+                        push(d.node_id);
+                        CallbackProgression::Continue
+                    })
+                },
+            ),
             e => TransportError::ipc(&self.namespace, "event notifier", e),
         })
     }
