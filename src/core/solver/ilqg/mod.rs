@@ -346,17 +346,7 @@ impl Ilqg {
             l.fill(0.0);
         }
         self.solved = false;
-        self.candidate.x[0].copy_from_slice(&problem.x0);
-        let policy = Some((&self.nominal, &self.ff[..], &self.gains[..]));
-        if rollout(
-            problem,
-            &mut self.candidate,
-            policy,
-            Some(&problem.bounds),
-            0.0,
-        )
-        .is_ok()
-        {
+        if self.roll_candidate(problem, 0.0) {
             std::mem::swap(&mut self.nominal, &mut self.candidate);
         } else {
             // The old gains do not hold the plant from here: replay the shifted controls.

@@ -4,6 +4,21 @@
 use super::*;
 
 impl Ilqg {
+    /// Rolls the candidate out from `x0` under the nominal plan, its feedforward scaled by
+    /// `alpha` and its gains (clamped to the bounds); false if the rollout diverged.
+    pub(super) fn roll_candidate(&mut self, problem: &Problem, alpha: f64) -> bool {
+        self.candidate.x[0].copy_from_slice(&problem.x0);
+        let policy = Some((&self.nominal, &self.ff[..], &self.gains[..]));
+        rollout(
+            problem,
+            &mut self.candidate,
+            policy,
+            Some(&problem.bounds),
+            alpha,
+        )
+        .is_ok()
+    }
+
     /// The largest feedforward step relative to its control, `max |l_k| / (|ū_k| + 1)`: zero at
     /// a first-order optimum (projected onto the limits, since clamped components get `l = 0`).
     pub(super) fn feedforward_gradient(&self) -> f64 {
@@ -61,17 +76,7 @@ impl Ilqg {
         stochastic: bool,
     ) -> Option<Step> {
         for alpha in ALPHAS {
-            self.candidate.x[0].copy_from_slice(&problem.x0);
-            let policy = Some((&self.nominal, &self.ff[..], &self.gains[..]));
-            if rollout(
-                problem,
-                &mut self.candidate,
-                policy,
-                Some(&problem.bounds),
-                alpha,
-            )
-            .is_err()
-            {
+            if !self.roll_candidate(problem, alpha) {
                 continue;
             }
             let merit_new = self.merit(problem, stochastic, true);
