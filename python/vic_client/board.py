@@ -26,6 +26,7 @@ from .protocol import (
     PROTOCOL_VERSION,
     STATE_BUFFER,
     STATE_DTYPE,
+    CommandSlice,
     Control,
     ControlKind,
     Disturbance,
@@ -39,10 +40,12 @@ from .protocol import (
 NODE_NAME = "vic-python"
 _NAMESPACE_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
 
-# (service name, payload, history, subscriber buffer of this client's port) as in PROTOCOL.md.
+# (service name, payload, history, subscriber buffer) as in PROTOCOL.md; a Board opens every one
+# but `command` (the central process's).
 SERVICES = {
     "state": ("vic/state", StateMsg, 1, STATE_BUFFER),
     "telemetry": ("vic/telemetry", Telemetry, 1, 1),
+    "command": ("vic/command", CommandSlice, 0, 8),
     "control": ("vic/control", Control, 0, 8),
     "disturbance": ("vic/disturbance", Disturbance, 0, 8),
 }
@@ -210,7 +213,7 @@ class Board:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                return {key: self._open(*spec) for key, spec in SERVICES.items()}
+                return {k: self._open(*s) for k, s in SERVICES.items() if k != "command"}
             except Exception as e:  # the bindings' open errors share no base class
                 if time.monotonic() >= deadline:
                     raise VicError(
@@ -275,6 +278,13 @@ class Board:
         """The states of the next ``seconds`` as one structured array."""
         parts = list(self.states(timeout=seconds, batch=True))
         return np.concatenate(parts) if parts else np.zeros(0, dtype=STATE_DTYPE)
+
+    def since_tick(self, tick):
+        """The states held in the ring from ``tick`` on (those an acknowledgement wait already
+        took included), oldest first."""
+        self.poll()
+        held = self.ring.array()
+        return held[held["tick"] >= tick]
 
     def wait_state(self, predicate, timeout=2.0):
         """Polls until a new state satisfies ``predicate(record)``; returns it, or raises."""
