@@ -184,7 +184,7 @@ def live_checks(ns, out):
         assert running["trial_time_ns"] <= 2_000_000, running["trial_time_ns"]
         hold = b.wait_state(lambda s: s["mode"] == vc.Mode.SAFE_HOLD, 2.0)
         # The watchdog (50 ms by default) expires without a central process.
-        assert 45e6 <= hold["trial_time_ns"] <= 60e6, hold["trial_time_ns"]
+        assert 45e6 <= hold["trial_time_ns"] <= 100e6, hold["trial_time_ns"]
         s = b.collect(0.2)  # past the 100 ms ramp
         assert set(s["mode"].tolist()) == {vc.Mode.SAFE_HOLD}
         # No force acts: the arm stays exactly where it was put.
