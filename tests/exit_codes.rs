@@ -98,6 +98,7 @@ fn bad_flags_are_the_users_input() {
                 "predictor",
                 "--trials",
                 "2",
+                "--json",
             ],
         ),
         2,
