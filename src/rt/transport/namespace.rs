@@ -184,9 +184,19 @@ pub(super) fn live_nodes_named(
     .map_err(|e| TransportError::ipc(ns, "cannot list the nodes", e))?;
     let mut cleaned = 0;
     for view in dead {
+        let id = *view.id();
         cleaned += view.try_remove_stale_resources().is_ok() as usize;
+        // The dead node was listed under this namespace's prefix: its directory is ours to
+        // remove once iceoryx2 emptied it (`remove_dir` refuses a directory that is not empty).
+        let _ = std::fs::remove_dir(node_dir(&id));
     }
     Ok((alive, cleaned))
+}
+
+/// iceoryx2's directory of one node's detail files: `{root}/nodes/{id}` (the default node
+/// directory, which [`config`] keeps).
+fn node_dir(id: &iceoryx2::identifiers::UniqueNodeId) -> std::path::PathBuf {
+    root_dir().join("nodes").join(id.value().to_string())
 }
 
 /// Names of the namespace's files in `/dev/shm`.
@@ -204,10 +214,30 @@ pub fn remove_namespace(ns: &str) -> usize {
     if validate_namespace(ns).is_err() {
         return 0;
     }
-    namespace_paths(ns)
+    let paths = namespace_paths(ns);
+    let removed = paths
         .iter()
         .filter(|p| std::fs::remove_file(p).is_ok())
-        .count()
+        .count();
+    remove_emptied_node_dirs(&paths);
+    removed
+}
+
+/// Removes the node directories (`{root}/nodes/{id}`) that held files of the namespace and are
+/// empty now: those of its nodes killed before they could remove their own (iceoryx2 removes the
+/// directory of a node that exits cleanly, and of a dead node it cleans up, but not of one whose
+/// files [`remove_namespace`] removed). A directory another namespace's node still uses keeps
+/// its files, so `remove_dir` (empty directories only) leaves it.
+fn remove_emptied_node_dirs(removed: &[std::path::PathBuf]) {
+    let nodes = root_dir().join("nodes");
+    let dirs: std::collections::BTreeSet<&std::path::Path> = removed
+        .iter()
+        .filter_map(|p| p.parent())
+        .filter(|d| d.parent() == Some(nodes.as_path()))
+        .collect();
+    for d in dirs {
+        let _ = std::fs::remove_dir(d);
+    }
 }
 
 /// Makes the namespace's files in `/dev/shm` owner-only. iceoryx2 creates them 0600 (its 0666
