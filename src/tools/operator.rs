@@ -350,7 +350,20 @@ pub fn status(namespace: &str, timeout: Duration) -> Result<Status, OperatorErro
     match snapshot {
         Ok(t) => {
             let mut s = Status::from_telemetry(namespace, &t);
-            s.nodes = nodes;
+            // Listed again now that the board answered (it may have started after the first
+            // listing), without this tool's own node, keeping the dead ones its node cleaned.
+            let own = std::process::id();
+            let mut now: Vec<NodeInfo> = list_nodes(namespace)
+                .unwrap_or_default()
+                .into_iter()
+                .filter(|n| n.pid != own)
+                .collect();
+            let cleaned: Vec<NodeInfo> = nodes
+                .into_iter()
+                .filter(|n| n.state == NodeLiveness::Dead && !now.iter().any(|m| m.id == n.id))
+                .collect();
+            now.extend(cleaned);
+            s.nodes = now;
             Ok(s)
         }
         Err(e) => Err(OperatorError::WithNodes {
