@@ -2,10 +2,14 @@
 # Soak test of the real-time pair (not run in CI): scripts/soak.sh [MINUTES=10]
 #
 # Builds release, starts vic-board with --record in a namespace of its own and vic-planner running
-# trials in a loop, and every second injects a disturbance (a 10 ms pulse) and a malformed command
-# slice (NaN, wrong version, out-of-order sequence, stiffness out of bounds, wrong joint count;
-# examples/malformed.rs). Samples the board's RSS at start and end, then stops everything and
-# prints deadlines missed, messages rejected, memory, and ticks recorded vs ticks run.
+# trials in a loop, and every second injects a disturbance (a 10 ms pulse) and one hostile message
+# in turn (examples/malformed.rs, from a raw sender's node beside the planner): a slice with
+# knot_dt 1e15, a slice with seq u64::MAX, a stale message, a wrong protocol version, a flood
+# burst of 2000 slices, NaN torque, an unbounded stiffness, a wrong joint count. Samples the
+# board's RSS at start and end, then stops everything and prints deadlines missed, messages
+# rejected, memory, and ticks recorded vs ticks run; fails (exit 1) unless every hostile message
+# was counted by the board (rejected, or dropped and counted from the sequence gaps) and the
+# planner's trials kept running.
 # Processes and shared-memory files are cleaned up on exit, Ctrl-C included.
 #
 # Environment: CARGO_TARGET_DIR (default ./target), SOAK_DIR (where the recording and logs go;
@@ -46,10 +50,16 @@ cleanup() {
     wait 2>/dev/null || true
     # What transport::remove_namespace removes: the namespace's files in /dev/shm and under
     # iceoryx2's root folder.
-    find /dev/shm -maxdepth 1 -name "vic_${NS}_*" -delete 2>/dev/null || true
-    find /tmp/iceoryx2 -name "vic_${NS}_*" -delete 2>/dev/null || true
+    # iceoryx2's root folder (the user's private /tmp/vic-UID), then the node folders that held
+    # this namespace's files and are empty now (rmdir leaves any other).
+    local root dirs
+    root=/tmp/vic-$(id -u)
+    dirs=$(find "$root/nodes" -mindepth 2 -maxdepth 2 -name "vic_${NS}.*" -printf '%h\n' 2>/dev/null | sort -u)
+    find /dev/shm -maxdepth 1 -name "vic_${NS}.*" -delete 2>/dev/null || true
+    find "$root" -name "vic_${NS}.*" -delete 2>/dev/null || true
+    for d in $dirs; do rmdir "$d" 2>/dev/null || true; done
     local left
-    left=$(find /dev/shm -maxdepth 1 -name "vic_${NS}_*" | wc -l)
+    left=$(find /dev/shm -maxdepth 1 -name "vic_${NS}.*" | wc -l)
     echo "cleanup: namespace $NS, $left files left in /dev/shm" >&2
     exit "$code"
 }
@@ -121,3 +131,37 @@ echo "file rows          $ROWS rows, $GAPS gap markers ($OUT/soak.csv)"
 echo "injected           $(cat "$OUT/malformed.log")"
 echo "planner            $TRIALS trials, $HOLDS with safe hold"
 echo "board RSS [kB]     start $RSS_START, end $RSS_END"
+
+# Every hostile message counted by its reason. A burst overruns the board's 8-slot receive buffer:
+# the board rejects at least the 8 it receives, and counts the rest as dropped from the sequence
+# gaps only while no other session's slice (the planner's) came between (docs/PROTOCOL.md).
+M=$OUT/malformed.log
+k() { jq -r --arg k "$1" '.hostile_by_kind[$k] // 0' "$M" 2>/dev/null || echo 0; }
+r() { jq -r --arg k "$1" '.rejected_by_reason[$k] // 0' "$S"; }
+HOSTILE=$(jq -r '.hostile // 0' "$M" 2>/dev/null || echo 0)
+BURSTS=$(($(k flood-burst) / 2000))
+SINGLE=$((HOSTILE - $(k flood-burst)))
+REJECTED=$(jq -r '.rejected_messages' "$S")
+DROPPED=$(jq -r '.dropped_messages' "$S")
+echo "hostile counted    $REJECTED rejected + $DROPPED dropped of $HOSTILE hostile messages ($SINGLE single, $BURSTS bursts of 2000)"
+FAIL=0
+check() { # name, counted, at least
+    if (($2 < $3)); then
+        echo "FAIL: $1: the board counted $2, at least $3 expected" >&2
+        FAIL=1
+    fi
+}
+((HOSTILE > 0)) || { echo "FAIL: no hostile message sent" >&2; FAIL=1; }
+check "knot_dt 1e15 (shape)" "$(r shape)" "$(k knot-dt-1e15)"
+check "bad version" "$(r version)" "$(k bad-version)"
+check "stale" "$(r stale)" "$(k stale)"
+check "wrong joints" "$(r joints)" "$(k wrong-joints)"
+check "seq u64::MAX, NaN, unbounded stiffness, bursts (wrong trial, overflow)" \
+    $(($(r wrong-trial) + $(r overflow))) \
+    $(($(k seq-u64-max) + $(k nan-torque) + $(k stiffness-unbounded) + 8 * BURSTS))
+check "all hostile single messages" "$REJECTED" $((SINGLE + 8 * BURSTS))
+if [[ $TRIALS == "?" ]] || ((TRIALS == 0)); then
+    echo "FAIL: the planner ran no trial beside the hostile sender" >&2
+    FAIL=1
+fi
+exit "$FAIL"

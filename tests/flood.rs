@@ -19,8 +19,8 @@ use std::time::{Duration, Instant};
 use vic::planning::plan::setup;
 use vic::planning::scenario::Scenario;
 use vic::rt::transport::{
-    CentralPorts, CommandSlice, Control, ControlKind, Header, Mode, Rejection, Telemetry,
-    monotonic_ns,
+    CentralPorts, CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Header, Mode,
+    PROTOCOL_VERSION, Rejection, Telemetry, ToolPorts, monotonic_ns,
 };
 use vic::tools::bench::loop_bench::hold_slice;
 
@@ -186,4 +186,194 @@ fn a_flood_of_100k_invalid_commands_is_counted_and_does_not_feed_the_watchdog() 
 #[ignore = "1 M messages: run with --ignored (a few seconds)"]
 fn a_flood_of_1m_invalid_commands_is_counted_and_does_not_feed_the_watchdog() {
     flood(1_000_000, Duration::from_millis(400));
+}
+
+const JUNK_CONTROLS: u32 = 0xC0DE;
+const JUNK_DISTURBANCES: u32 = 0xD157;
+const MIXED_KINDS: u64 = 6;
+
+/// Junk control `i`: a reset, invalid one way in six (never a stop: a valid one would freeze
+/// the plant).
+fn junk_control(q0: &[f64], i: u64) -> Control {
+    let now = monotonic_ns();
+    let mut c = Control {
+        header: Header::in_session(JUNK_CONTROLS, i + 1, now),
+        kind: ControlKind::Reset as u32,
+        trial: 9,
+        seed: 1,
+        start_ns: now + 20_000_000,
+        ..Default::default()
+    };
+    c.q0[..2].copy_from_slice(q0);
+    match i % MIXED_KINDS {
+        0 => c.header.version = PROTOCOL_VERSION + 1,
+        1 => c.kind = 77,
+        2 => c.qd0[1] = f64::NAN,
+        3 => c.header.time_ns = now - 1_000_000_000,
+        4 => c.q0[0] = 100.0,
+        _ => c.start_ns = now + 10_000_000_000,
+    }
+    c
+}
+
+/// Junk disturbance `i`: invalid one way in six.
+fn junk_disturbance(i: u64) -> Disturbance {
+    let now = monotonic_ns();
+    let mut d = Disturbance {
+        header: Header::in_session(JUNK_DISTURBANCES, i + 1, now),
+        kind: DisturbanceKind::Pulse as u32,
+        torque: [0.5, 0.0],
+        duration_ns: 10_000_000,
+        ..Default::default()
+    };
+    match i % MIXED_KINDS {
+        0 => d.header.version = PROTOCOL_VERSION + 1,
+        1 => d.kind = 77,
+        2 => d.torque[0] = f64::INFINITY,
+        3 => d.header.time_ns = now - 1_000_000_000,
+        4 => d.header.time_ns = now + 1_000_000_000,
+        _ => d.torque[1] = 1e6,
+    }
+    d
+}
+
+/// A flood of `n` invalid controls and `n` invalid disturbances while a valid sender keeps a
+/// trial running: every one counted (rejected by reason or dropped), none applied (the trial,
+/// its reset, the disturbance state and the mode are those of the valid sender), the loop keeps
+/// its rate.
+fn flood_controls_and_disturbances(n: u64, min_duration: Duration) {
+    let scenario = Scenario::load(std::path::Path::new(CONFIG), &[]).unwrap();
+    let q0 = setup(&scenario).unwrap().x0[..2].to_vec();
+    let ns = unique_namespace("floodcd");
+    let mut d = Daemons::default();
+    d.board(&ns, &[]);
+    let ep = CentralPorts::open(&ns).unwrap();
+    let tool = ToolPorts::open(&ns).unwrap();
+    assert!(ep.wait_for_telemetry(Duration::from_secs(20)).is_some());
+
+    let start = (monotonic_ns() + 20_000_000) / 1_000_000 * 1_000_000;
+    let mut reset = Control {
+        header: Header::in_session(VALID_SESSION, 1, monotonic_ns()),
+        kind: ControlKind::Reset as u32,
+        trial: 1,
+        seed: 1,
+        start_ns: start,
+        ..Default::default()
+    };
+    reset.q0[..2].copy_from_slice(&q0);
+    ep.publish_control(&reset).unwrap();
+    let mut seq = 0;
+    let mut next_valid = Instant::now();
+    // A valid hold slice every 20 ms (the planner's rate), from the valid session.
+    let mut keep_running = |seq: &mut u64| {
+        if Instant::now() >= next_valid {
+            *seq += 1;
+            let t = monotonic_ns().saturating_sub(start);
+            let mut c = hold_slice(2, &q0, *seq, 1, t / 10_000_000 * 10_000_000, 100.0);
+            c.header = Header::in_session(VALID_SESSION, *seq, monotonic_ns());
+            ep.publish_command(&c).unwrap();
+            next_valid += Duration::from_millis(20);
+        }
+    };
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_millis(400) {
+        keep_running(&mut seq);
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    // Telemetry published after `after_ns`, the valid sender going on meanwhile (a blocking
+    // wait would let the watchdog expire).
+    macro_rules! telemetry_running {
+        ($after_ns:expr) => {{
+            let after_ns: u64 = $after_ns;
+            let t0 = Instant::now();
+            loop {
+                keep_running(&mut seq);
+                if let Some(t) = ep.latest_telemetry()
+                    && t.header.time_ns > after_ns
+                {
+                    break t;
+                }
+                assert!(t0.elapsed() < Duration::from_secs(5), "no telemetry");
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }};
+    }
+    let before = telemetry_running!(monotonic_ns());
+    assert_eq!(Mode::from_u32(before.mode), Mode::Running, "{before:?}");
+    assert_eq!((before.rejected_messages, before.dropped_messages), (0, 0));
+
+    // Each junk session is shown once, alone, so that the board counts its later losses.
+    ep.publish_control(&junk_control(&q0, 0)).unwrap();
+    tool.publish_disturbance(&junk_disturbance(0)).unwrap();
+    std::thread::sleep(Duration::from_millis(5));
+    let t0 = Instant::now();
+    for i in 1..n {
+        ep.publish_control(&junk_control(&q0, i)).unwrap();
+        tool.publish_disturbance(&junk_disturbance(i)).unwrap();
+        if i % 500 == 499 {
+            let due = min_duration.mul_f64((i + 1) as f64 / n as f64);
+            while t0.elapsed() < due {
+                keep_running(&mut seq);
+                std::hint::spin_loop();
+            }
+            keep_running(&mut seq);
+        }
+    }
+    let sent_in = t0.elapsed();
+    let flood_end_ns = monotonic_ns();
+    let after = telemetry_running!(flood_end_ns + 150_000_000);
+    let state = ep.latest_state().expect("a state");
+
+    let rejected = after.rejected_messages - before.rejected_messages;
+    let dropped = after.dropped_messages - before.dropped_messages;
+    let by_reason: Vec<(&str, u64)> = Rejection::ALL
+        .iter()
+        .map(|r| {
+            let i = *r as usize;
+            (
+                r.name(),
+                after.rejected_by_reason[i] - before.rejected_by_reason[i],
+            )
+        })
+        .filter(|(_, v)| *v > 0)
+        .collect();
+    let ticks = after.tick - before.tick;
+    let seconds = (after.header.time_ns - before.header.time_ns) as f64 * 1e-9;
+    let rate = ticks as f64 / seconds;
+    let late = after.late_ticks - before.late_ticks;
+    eprintln!(
+        "flood of {n} controls + {n} disturbances in {sent_in:?}: rejected {rejected} \
+         {by_reason:?}, dropped by iceoryx2 {dropped}; {ticks} ticks in {seconds:.3} s = \
+         {rate:.1} Hz, {late} late, mode {}",
+        Mode::from_u32(after.mode).name()
+    );
+    assert_eq!(
+        rejected + dropped,
+        2 * n,
+        "rejected {rejected} + dropped {dropped}"
+    );
+    assert_eq!(by_reason.iter().map(|(_, v)| v).sum::<u64>(), rejected);
+    assert!(rejected > 0 && by_reason.len() >= 5, "{by_reason:?}");
+    // Nothing invalid applied: the valid sender's trial and reset, no disturbance, no change
+    // of field or noise, and the valid commands kept the plant running.
+    assert_eq!((state.trial, state.reset_seq), (1, 1), "{state:?}");
+    assert_eq!((state.disturbance_seq, after.disturbance_seq), (0, 0));
+    assert_eq!(after.tau_ext, [0.0; 2]);
+    assert_eq!(
+        (after.field_beta, after.noise_factor),
+        (before.field_beta, before.noise_factor)
+    );
+    assert_eq!(Mode::from_u32(after.mode), Mode::Running, "{after:?}");
+    assert_eq!(after.watchdog_trips, before.watchdog_trips);
+    // The loop kept its rate (the same loose bound as the command flood's).
+    assert!(rate >= 950.0, "tick rate {rate:.1} Hz during the flood");
+    assert!(
+        (late as f64) < 0.01 * ticks as f64 + 5.0,
+        "{late} late ticks of {ticks}"
+    );
+}
+
+#[test]
+fn a_flood_of_invalid_controls_and_disturbances_is_counted_and_never_applied() {
+    flood_controls_and_disturbances(50_000, Duration::from_millis(400));
 }

@@ -91,3 +91,61 @@ fn a_namespace_file_of_another_user_is_refused_with_a_message() {
         "{msg}"
     );
 }
+
+/// The node directories (`{root}/nodes/{id}`) holding files of namespace `ns`.
+fn node_dirs(ns: &str) -> BTreeSet<std::path::PathBuf> {
+    let nodes = root_dir().join("nodes");
+    namespace_files(ns)
+        .iter()
+        .filter_map(|f| std::path::Path::new(f).parent().map(|p| p.to_path_buf()))
+        .filter(|d| d.parent() == Some(nodes.as_path()))
+        .collect()
+}
+
+#[test]
+fn a_killed_boards_node_directory_goes_with_its_namespace() {
+    let ns = unique_namespace("nd");
+    let mut d = Daemons::default();
+    let board = d.board(&ns, &[]);
+    assert!(answers(&ns), "the board should answer");
+    let dirs = node_dirs(&ns);
+    assert!(!dirs.is_empty(), "no node directory of {ns}");
+    // Killed: the board cannot remove its own node directory; removing the namespace (what
+    // the last process of a namespace, the tests' guard and the soak script do) must.
+    d.signal_and_wait(board, libc::SIGKILL);
+    vic::rt::transport::remove_namespace(&ns);
+    assert!(files(&ns).is_empty(), "{:?}", files(&ns));
+    let left: Vec<_> = dirs.iter().filter(|d| d.exists()).collect();
+    assert!(left.is_empty(), "node directories left: {left:?}");
+}
+
+#[test]
+fn a_clean_exit_after_a_killed_observer_leaves_no_node_directory() {
+    let ns = unique_namespace("nc");
+    let mut d = Daemons::default();
+    let board = d.board(&ns, &[]);
+    assert!(answers(&ns), "the board should answer");
+    // An observer killed while the board runs: its node is dead.
+    let mut monitor = std::process::Command::new(env!("CARGO_BIN_EXE_vic"))
+        .args(["monitor", "--namespace", &ns, "--interval-s", "0.1"])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while node_dirs(&ns).len() < 2 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "the monitor has no node"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let dirs = node_dirs(&ns);
+    monitor.kill().unwrap();
+    monitor.wait().unwrap();
+    // The board exits cleanly, the last of its namespace.
+    let out = d.signal_and_wait(board, libc::SIGTERM);
+    assert!(out.status.success());
+    assert!(files(&ns).is_empty(), "{:?}", files(&ns));
+    let left: Vec<_> = dirs.iter().filter(|d| d.exists()).collect();
+    assert!(left.is_empty(), "node directories left: {left:?}");
+}

@@ -9,8 +9,8 @@
 use crate::rt::board::{FaultReason, Rejection};
 use crate::rt::realtime::PercentilesJson;
 use crate::rt::transport::{
-    Disturbance, DisturbanceKind, Header, MAX_JOINTS, Mode, ObserverPorts, Telemetry, ToolPorts,
-    monotonic_ns, session_seq,
+    Disturbance, DisturbanceKind, Header, MAX_JOINTS, Mode, NodeInfo, NodeLiveness, ObserverPorts,
+    Telemetry, ToolPorts, list_nodes, monotonic_ns, session_seq,
 };
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -29,6 +29,13 @@ pub enum OperatorError {
     NoAck(String),
     #[error("{0}")]
     Transport(#[from] crate::rt::transport::TransportError),
+    /// `vic status` failed; the processes of the namespace are listed anyway (who holds it).
+    #[error("{source}\nprocesses of namespace \"{namespace}\": {nodes}")]
+    WithNodes {
+        namespace: String,
+        source: Box<OperatorError>,
+        nodes: String,
+    },
 }
 
 /// A disturbance as the operator states it.
@@ -199,6 +206,10 @@ pub struct Status {
     pub noise_factor: f64,
     pub last_disturbance_seq: u64,
     pub last_disturbance_tick: u64,
+    /// The namespace's other processes (iceoryx2 nodes, alive or dead) when `vic status` looked
+    /// (`vic status` only; empty for `vic monitor`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub nodes: Vec<NodeInfo>,
 }
 
 impl Status {
@@ -227,6 +238,7 @@ impl Status {
             noise_factor: t.noise_factor,
             last_disturbance_seq: t.disturbance_seq,
             last_disturbance_tick: t.disturbance_tick,
+            nodes: Vec::new(),
         }
     }
 
@@ -248,6 +260,11 @@ impl Status {
         } else {
             String::new()
         };
+        let nodes = if self.nodes.is_empty() {
+            String::new()
+        } else {
+            format!("\nprocesses            {}", describe_nodes(&self.nodes))
+        };
         format!(
             "board \"{ns}\": {mode}{fault}, trial {trial}, tick {tick} at {rate:.1} Hz\n\
              jitter p50/p99/max   {jit} µs   ({late} late ticks, {missed} periods missed)\n\
@@ -255,7 +272,8 @@ impl Status {
              command age          {age} µs\n\
              tracking error       {err:.4} rad; stiffness {k:?} N m/rad\n\
              disturbances         τ_ext {tau:?} N m, field β {beta} N/m, noise ×{noise}\n\
-             rejected messages    {rej}{rejected}; safe-hold ticks {hold}, watchdog trips {trips}",
+             rejected messages    {rej}{rejected}; safe-hold ticks {hold}, watchdog trips {trips}\
+             {nodes}",
             ns = self.namespace,
             mode = self.mode,
             trial = self.trial,
@@ -299,13 +317,61 @@ impl Status {
     }
 }
 
-/// One snapshot of the board's telemetry in `namespace`.
+/// "vic-board pid 12, vic-observer pid 13, vic-observer pid 14 (dead)": the nodes for people.
+pub fn describe_nodes(nodes: &[NodeInfo]) -> String {
+    if nodes.is_empty() {
+        return "none".into();
+    }
+    let one = |n: &NodeInfo| {
+        let name = if n.name.is_empty() { "?" } else { &n.name };
+        match n.state {
+            NodeLiveness::Alive => format!("{name} pid {}", n.pid),
+            NodeLiveness::Dead => format!("{name} pid {} (dead)", n.pid),
+            NodeLiveness::Inaccessible => format!("node {} (inaccessible)", n.id),
+            NodeLiveness::Undefined => format!("node {} (incomplete)", n.id),
+        }
+    };
+    nodes.iter().map(one).collect::<Vec<_>>().join(", ")
+}
+
+/// One snapshot of the board's telemetry in `namespace`, with the namespace's processes. When
+/// no board answers or a service is full, the error lists the processes too.
 pub fn status(namespace: &str, timeout: Duration) -> Result<Status, OperatorError> {
-    let ep = ObserverPorts::open(namespace)?;
-    let t = ep
-        .wait_for_telemetry(timeout)
-        .ok_or(OperatorError::NoBoard(namespace.into()))?;
-    Ok(Status::from_telemetry(namespace, &t))
+    // Listed before this tool opens its own node: that needs no port (it works when every
+    // port of a service is taken), and a killed process is still listed as dead before the
+    // new node cleans up after it. This tool is not among them.
+    let nodes = list_nodes(namespace)?;
+    let snapshot = ObserverPorts::open(namespace)
+        .map_err(OperatorError::from)
+        .and_then(|ep| {
+            ep.wait_for_telemetry(timeout)
+                .ok_or(OperatorError::NoBoard(namespace.into()))
+        });
+    match snapshot {
+        Ok(t) => {
+            let mut s = Status::from_telemetry(namespace, &t);
+            // Listed again now that the board answered (it may have started after the first
+            // listing), without this tool's own node, keeping the dead ones its node cleaned.
+            let own = std::process::id();
+            let mut now: Vec<NodeInfo> = list_nodes(namespace)
+                .unwrap_or_default()
+                .into_iter()
+                .filter(|n| n.pid != own)
+                .collect();
+            let cleaned: Vec<NodeInfo> = nodes
+                .into_iter()
+                .filter(|n| n.state == NodeLiveness::Dead && !now.iter().any(|m| m.id == n.id))
+                .collect();
+            now.extend(cleaned);
+            s.nodes = now;
+            Ok(s)
+        }
+        Err(e) => Err(OperatorError::WithNodes {
+            namespace: namespace.into(),
+            source: Box::new(e),
+            nodes: describe_nodes(&nodes),
+        }),
+    }
 }
 
 /// Calls `show` with a snapshot about every `interval` until it returns false or `stop` is set;

@@ -42,7 +42,8 @@ pub enum TransportError {
     /// number, and who holds the slots.
     #[error(
         "namespace \"{namespace}\": {in_use} of {max} {} of service {service} in use, held by \
-         {holders}; stop one of these processes or use another --namespace",
+         {holders}; stop one of these processes or use another --namespace (`vic status \
+         --namespace {namespace}` lists every process of the namespace)",
         kind.plural()
     )]
     TooManyPorts {

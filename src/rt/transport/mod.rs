@@ -27,11 +27,11 @@ pub use clock::{monotonic_ns, process_session, session_seq};
 pub use error::TransportError;
 pub use limits::PortKind;
 pub use namespace::{
-    DEFAULT_NAMESPACE, check_namespace_owner, dead_nodes, ensure_root_dir, namespace_files, prefix,
-    remove_namespace, root_dir, validate_namespace,
+    DEFAULT_NAMESPACE, NodeInfo, NodeLiveness, check_namespace_owner, dead_nodes, ensure_root_dir,
+    list_nodes, namespace_files, prefix, remove_namespace, root_dir, validate_namespace,
 };
 pub use ports::{
-    BoardObserver, BoardPorts, BoardWatch, CentralPorts, ObserverPorts, RecorderPorts,
+    BoardObserver, BoardPorts, BoardWatch, CentralPorts, ObserverPorts, RawPorts, RecorderPorts,
     STATE_BUFFER, ToolPorts, board_present,
 };
 pub use protocol::*;

@@ -184,9 +184,91 @@ pub(super) fn live_nodes_named(
     .map_err(|e| TransportError::ipc(ns, "cannot list the nodes", e))?;
     let mut cleaned = 0;
     for view in dead {
+        let id = *view.id();
         cleaned += view.try_remove_stale_resources().is_ok() as usize;
+        // The dead node was listed under this namespace's prefix: its directory is ours to
+        // remove once iceoryx2 emptied it (`remove_dir` refuses a directory that is not empty).
+        let _ = std::fs::remove_dir(node_dir(&id));
     }
     Ok((alive, cleaned))
+}
+
+/// iceoryx2's directory of one node's detail files: `{root}/nodes/{id}` (the default node
+/// directory, which [`config`] keeps).
+fn node_dir(id: &iceoryx2::identifiers::UniqueNodeId) -> std::path::PathBuf {
+    root_dir().join("nodes").join(id.value().to_string())
+}
+
+/// Whether a node of a namespace is alive, and its process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NodeLiveness {
+    Alive,
+    /// Its process died without removing its resources (the next process cleans them).
+    Dead,
+    /// Another user's node, or one this process may not inspect.
+    Inaccessible,
+    /// Its files are incomplete (being created or removed).
+    Undefined,
+}
+
+/// One node (process) of a namespace, as `vic status` lists it.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct NodeInfo {
+    /// The node name, i.e. the role (`vic-board`, `vic-planner`, `vic-observer`, ...); empty
+    /// when its details cannot be read.
+    pub name: String,
+    /// Its process id (0 when unknown).
+    pub pid: u32,
+    pub state: NodeLiveness,
+    /// iceoryx2's node id (hexadecimal).
+    pub id: String,
+}
+
+/// Every node of namespace `ns`, alive or not, sorted by role and pid. Needs no node of its own,
+/// so it works when every port of a service is taken.
+pub fn list_nodes(ns: &str) -> Result<Vec<NodeInfo>, TransportError> {
+    use iceoryx2::node::NodeView;
+    let cfg = config(ns)?;
+    let mut nodes = Vec::new();
+    let info = |view: &dyn NodeView, state| {
+        let (name, pid) = view.details().as_ref().map_or((String::new(), 0), |d| {
+            (d.name().as_str().to_string(), d.process_id().value() as u32)
+        });
+        NodeInfo {
+            name,
+            pid,
+            state,
+            id: view.id().to_string(),
+        }
+    };
+    let listed = Node::<Ipc>::list(&cfg, |state| {
+        nodes.push(match &state {
+            NodeState::Alive(v) => info(v, NodeLiveness::Alive),
+            NodeState::Dead(v) => info(v, NodeLiveness::Dead),
+            NodeState::Inaccessible(id) => NodeInfo {
+                name: String::new(),
+                pid: 0,
+                state: NodeLiveness::Inaccessible,
+                id: id.to_string(),
+            },
+            NodeState::Undefined(id) => NodeInfo {
+                name: String::new(),
+                pid: 0,
+                state: NodeLiveness::Undefined,
+                id: id.to_string(),
+            },
+        });
+        CallbackProgression::Continue
+    });
+    // A namespace nothing ever ran in has no node directory yet: no nodes.
+    if let Err(e) = listed
+        && std::fs::metadata(root_dir().join("nodes")).is_ok()
+    {
+        return Err(TransportError::ipc(ns, "cannot list the nodes", e));
+    }
+    nodes.sort_by(|a, b| (&a.name, a.pid, &a.id).cmp(&(&b.name, b.pid, &b.id)));
+    Ok(nodes)
 }
 
 /// Names of the namespace's files in `/dev/shm`.
@@ -204,14 +286,34 @@ pub fn remove_namespace(ns: &str) -> usize {
     if validate_namespace(ns).is_err() {
         return 0;
     }
-    namespace_paths(ns)
+    let paths = namespace_paths(ns);
+    let removed = paths
         .iter()
         .filter(|p| std::fs::remove_file(p).is_ok())
-        .count()
+        .count();
+    remove_emptied_node_dirs(&paths);
+    removed
 }
 
-/// Makes the namespace's files in `/dev/shm` owner-only. iceoryx2 creates them 0600 (its 0666
-/// global file lives in the private directory, [`super::service`]); this is a second line of
+/// Removes the node directories (`{root}/nodes/{id}`) that held files of the namespace and are
+/// empty now: those of its nodes killed before they could remove their own (iceoryx2 removes the
+/// directory of a node that exits cleanly, and of a dead node it cleans up, but not of one whose
+/// files [`remove_namespace`] removed). A directory another namespace's node still uses keeps
+/// its files, so `remove_dir` (empty directories only) leaves it.
+fn remove_emptied_node_dirs(removed: &[std::path::PathBuf]) {
+    let nodes = root_dir().join("nodes");
+    let dirs: std::collections::BTreeSet<&std::path::Path> = removed
+        .iter()
+        .filter_map(|p| p.parent())
+        .filter(|d| d.parent() == Some(nodes.as_path()))
+        .collect();
+    for d in dirs {
+        let _ = std::fs::remove_dir(d);
+    }
+}
+
+/// Makes the namespace's files in `/dev/shm` owner-only. iceoryx2 creates them 0600 (its global
+/// file is an owner-only one in the private directory, [`super::service`]); this is a second line of
 /// defence against a client of the plain `ipc` service that created its own there.
 pub(super) fn restrict_namespace_files(ns: &str) {
     use std::os::unix::fs::PermissionsExt;

@@ -350,6 +350,46 @@ impl RecorderPorts {
     }
 }
 
+/// A sender of every kind of message under its own node name (`vic-raw-sender`), for tests and
+/// `scripts/soak.sh` to play a hostile or broken client beside a running planner (which would
+/// refuse a second [`CentralPorts`]). It publishes whatever it is given, unchecked.
+#[doc(hidden)]
+pub struct RawPorts {
+    commands: Pub<CommandSlice>,
+    controls: Pub<Control>,
+    disturbances: Pub<Disturbance>,
+    session: Session,
+}
+
+#[doc(hidden)]
+impl RawPorts {
+    /// Connects a raw sender to namespace `ns`.
+    pub fn open(ns: &str) -> Result<RawPorts, TransportError> {
+        let session = Session::open(ns, RAW_NODE)?;
+        Ok(RawPorts {
+            commands: session.publisher()?,
+            controls: session.publisher()?,
+            disturbances: session.publisher()?,
+            session,
+        })
+    }
+    /// Publishes a command slice as is.
+    pub fn publish_command(&self, c: &CommandSlice) -> Result<(), TransportError> {
+        send(&self.session, &self.commands, c)
+    }
+    /// Publishes a control request as is.
+    pub fn publish_control(&self, c: &Control) -> Result<(), TransportError> {
+        send(&self.session, &self.controls, c)
+    }
+    /// Publishes a disturbance as is.
+    pub fn publish_disturbance(&self, d: &Disturbance) -> Result<(), TransportError> {
+        send(&self.session, &self.disturbances, d)
+    }
+}
+
+/// The node name of a raw sender ([`RawPorts`]).
+pub const RAW_NODE: &str = "vic-raw-sender";
+
 /// Whether a board is alive in the namespace (it publishes telemetry within `timeout`). Cheap
 /// enough to call from tools, not from a loop.
 pub fn board_present(ns: &str, timeout: Duration) -> Result<bool, TransportError> {
