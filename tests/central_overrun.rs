@@ -159,3 +159,29 @@ fn overruns_leave_the_noiseless_trajectory_unchanged() {
         .fold(0.0, f64::max);
     assert!(worst < 1e-9, "trajectories differ by {worst}");
 }
+
+#[test]
+fn lockstep_on_the_real_clock_decides_no_overrun() {
+    // A budget of 1 ns: every period's real work exceeds it. Live, each would be an overrun;
+    // in lockstep the real clock only measures (a simulation must give the same trajectory
+    // however loaded the machine running it is), while an injected clock still decides (above).
+    let (s, mut set, p) = joint();
+    set.x0[0] += 3f64.to_radians();
+    let x0 = set.x0.clone();
+    let run = |budget_ns: u64| {
+        let mut c = central(&set, &p, 200.0, &x0);
+        c.set_compute_budget_ns(budget_ns);
+        let cfg = vic::tools::launch::board_config(&s, 1_000_000);
+        let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
+        let recs = lockstep(&mut board, &mut c, 1_000_000, PERIOD_NS, 1, 3);
+        (recs, c.compute_timing())
+    };
+    let (tight, timing) = run(1);
+    let (loose, _) = run(u64::MAX / 4);
+    assert_eq!(timing.overruns, 0, "{timing:?}");
+    assert!(
+        timing.compute_us.max > 0.0,
+        "the work is still measured: {timing:?}"
+    );
+    assert_eq!(tight[0].x, loose[0].x);
+}
