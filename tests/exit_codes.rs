@@ -83,6 +83,28 @@ fn bad_flags_are_the_users_input() {
         "vic",
         "--latency-ms 3",
     );
+    // The sweep's typed error: a latency off the plan grid is the user's, found after planning.
+    assert_error(
+        &run(
+            VIC,
+            &[
+                "sweep",
+                "latency",
+                "--config",
+                "config/single_joint_delay.toml",
+                "--latencies",
+                "5",
+                "--strategies",
+                "predictor",
+                "--trials",
+                "2",
+                "--json",
+            ],
+        ),
+        2,
+        "vic",
+        "latency 5 ms",
+    );
     assert_error(
         &run(VIC, &["inject", "pulse", "--torque", "1,2,3"]),
         2,

@@ -99,8 +99,13 @@ impl SweepArgs {
                 eprintln!("sweep: {p}");
             }
         })
-        .map_err(anyhow::Error::msg)
-        .input()?;
+        .map_err(|e| {
+            if e.is_input() {
+                vic::tools::cli::input_error(e)
+            } else {
+                anyhow::Error::new(e)
+            }
+        })?;
         if let Some(dir) = &a.out_dir {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("{}: cannot create", dir.display()))?;

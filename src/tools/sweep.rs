@@ -14,11 +14,36 @@ pub use crate::core::policy::Strategy;
 use crate::planning::evaluation::{predicted_cost, summarize};
 pub use crate::planning::montecarlo::Pulse;
 use crate::planning::montecarlo::run_trials_disturbed;
-use crate::planning::plan::{Method, PlanFile, plan, setup};
-use crate::planning::scenario::Scenario;
+use crate::planning::plan::{Method, PlanError, PlanFile, plan, setup};
+use crate::planning::scenario::{ConfigError, Scenario};
 use crate::planning::unit::Unit;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// Why a sweep stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    /// The scenario (with the strategy's overrides) does not load: bad input.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// A latency that is not a whole number of plan steps: bad input.
+    #[error("latency {latency_ms} ms: not a whole number of {dt_ms} ms plan steps")]
+    Latency { latency_ms: f64, dt_ms: f64 },
+    /// Planning or executing a strategy's plan failed.
+    #[error("{strategy} at {latency_ms} ms: {source}")]
+    Plan {
+        strategy: &'static str,
+        latency_ms: f64,
+        source: PlanError,
+    },
+}
+
+impl SweepError {
+    /// Whether the user's input (scenario, overrides, latencies) is at fault, not the run.
+    pub fn is_input(&self) -> bool {
+        matches!(self, SweepError::Config(_) | SweepError::Latency { .. })
+    }
+}
 
 /// How a strategy's plan is made.
 pub fn method(strategy: Strategy) -> Method {
@@ -46,11 +71,6 @@ pub fn plan_overrides(strategy: Strategy, latency_ms: f64) -> Vec<String> {
         _ => "task.delay_ms=0".into(),
     });
     o
-}
-
-/// Whether a strategy's plan depends on the latency.
-fn plan_per_latency(strategy: Strategy) -> bool {
-    strategy == Strategy::NaiveDelayed
 }
 
 /// What to sweep.
@@ -102,31 +122,44 @@ pub struct Sweep {
 }
 
 /// Runs the sweep on the scenario at `path` (with `overrides`); `progress` is told each point.
+///
+/// A plan is made once per distinct (method, overrides): `stiffness`, `stiffness+predictor` and
+/// `replan` share the one SOOC plan, the predictor strategies the one undelayed ILQG plan, and
+/// only `naive-delayed` is planned again for each latency (Eq. 13 needs the augmented plan).
 pub fn sweep_latency(
     path: &Path,
     overrides: &[String],
     opts: &SweepOptions,
     progress: &dyn Fn(&str),
-) -> Result<Sweep, String> {
-    let load = |extra: Vec<String>| -> Result<Scenario, String> {
-        let all: Vec<String> = overrides.iter().cloned().chain(extra).collect();
-        Scenario::load(path, &all).map_err(|e| e.to_string())
-    };
+) -> Result<Sweep, SweepError> {
+    // (method, plan overrides) → the scenario and its plan; a handful of entries at most.
+    type PlanKey = (Method, Vec<String>);
+    let mut plans: Vec<(PlanKey, (Scenario, PlanFile))> = Vec::new();
     let mut points = Vec::new();
     for &strategy in &opts.strategies {
-        let mut cached: Option<(Scenario, PlanFile)> = None;
         for &latency_ms in &opts.latencies_ms {
             progress(&format!("{} at {latency_ms} ms", strategy.name()));
-            if cached.is_none() || plan_per_latency(strategy) {
-                let s = load(plan_overrides(strategy, latency_ms))?;
-                let p = plan(&s, method(strategy), None).map_err(|e| e.to_string())?;
-                cached = Some((s, p));
-            }
-            let (s, p) = cached.as_ref().expect("planned above");
-            let set = setup(s).map_err(|e| e.to_string())?;
+            let plan_error = |source| SweepError::Plan {
+                strategy: strategy.name(),
+                latency_ms,
+                source,
+            };
+            let key = (method(strategy), plan_overrides(strategy, latency_ms));
+            let i = match plans.iter().position(|(k, _)| *k == key) {
+                Some(i) => i,
+                None => {
+                    let all: Vec<String> = overrides.iter().chain(&key.1).cloned().collect();
+                    let s = Scenario::load(path, &all)?;
+                    let p = plan(&s, key.0, None).map_err(plan_error)?;
+                    plans.push((key, (s, p)));
+                    plans.len() - 1
+                }
+            };
+            let (s, p) = &plans[i].1;
+            let set = setup(s).map_err(plan_error)?;
             let steps = latency_steps(latency_ms, s.task.dt)?;
             let feedback = strategy.feedback(steps);
-            let policy = p.policy(&set).map_err(|e| e.to_string())?;
+            let policy = p.policy(&set).map_err(plan_error)?;
             let trials = run_trials_disturbed(
                 &set,
                 &policy,
@@ -164,13 +197,13 @@ pub fn sweep_latency(
 }
 
 /// A latency in whole plan steps.
-fn latency_steps(latency_ms: f64, dt: f64) -> Result<usize, String> {
+fn latency_steps(latency_ms: f64, dt: f64) -> Result<usize, SweepError> {
     let steps = latency_ms / 1000.0 / dt;
     if steps.is_nan() || steps < 0.0 || (steps - steps.round()).abs() > 1e-6 {
-        return Err(format!(
-            "latency {latency_ms} ms: not a whole number of {} ms steps",
-            dt * 1000.0
-        ));
+        return Err(SweepError::Latency {
+            latency_ms,
+            dt_ms: dt * 1000.0,
+        });
     }
     Ok(steps.round() as usize)
 }

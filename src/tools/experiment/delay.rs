@@ -28,8 +28,11 @@ pub struct DelaySweep {
 /// Why the section could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum DelaySweepError {
-    #[error("{}: {message}", scenario.display())]
-    Sweep { scenario: PathBuf, message: String },
+    #[error("{}: {source}", scenario.display())]
+    Sweep {
+        scenario: PathBuf,
+        source: Box<crate::tools::sweep::SweepError>,
+    },
     #[error(transparent)]
     Plot(#[from] crate::tools::plot::PlotError),
     #[error("cannot write {}: {source}", path.display())]
@@ -70,10 +73,10 @@ pub fn run_delay_sweeps(
         .iter()
         .map(|&(name, title, file)| {
             let path = config_dir.join(file);
-            let sweep = sweep_latency(&path, &[], &opts, progress).map_err(|message| {
+            let sweep = sweep_latency(&path, &[], &opts, progress).map_err(|source| {
                 DelaySweepError::Sweep {
                     scenario: path.clone(),
-                    message,
+                    source: Box::new(source),
                 }
             })?;
             Ok(DelaySweep { name, title, sweep })
