@@ -1,11 +1,11 @@
 //! `vic`: the command-line front end. Each subcommand's file parses its flags and makes one call
-//! into `vic::tools`; errors end the process with exit code 2 (bad input) or 1 (a failure).
+//! into `vic::tools` (where the flags are a `vic::tools` type, that type is the subcommand);
+//! errors end the process with exit code 2 (bad input) or 1 (a failure).
 
 mod bench;
 #[cfg(feature = "zenoh")]
 mod bridge;
 mod convert;
-mod demo;
 mod experiment;
 mod identify;
 mod inject;
@@ -13,7 +13,6 @@ mod monitor;
 mod plan;
 mod record;
 mod results;
-mod simulate;
 mod status;
 mod sweep;
 
@@ -43,7 +42,7 @@ enum Command {
     /// divergence and the expected cost, next to the plan's prediction.
     ///
     /// Example: vic simulate --config config/two_link_divergent.toml --plan plan.json --policy open-loop
-    Simulate(simulate::SimulateArgs),
+    Simulate(vic::tools::simulate::SimulateOptions),
     /// Reproduce a figure of the paper: plan and simulate every column, write the plots (PNG and
     /// SVG) and a JSON of the numbers into --out-dir, print a table.
     ///
@@ -66,7 +65,7 @@ enum Command {
     /// comparison and the board's timing, and shut everything down.
     ///
     /// Example: vic demo --latency-ms 200 --trials 3
-    Demo(demo::DemoArgs),
+    Demo(vic::tools::demo::DemoOptions),
     /// Send a disturbance to a running board and report the tick that applied it (read from its
     /// state stream), or fail (exit 1) when no board answers or it rejects the disturbance.
     ///
@@ -124,10 +123,10 @@ impl Command {
     fn run(self) -> anyhow::Result<()> {
         match self {
             Command::Plan(a) => a.run(),
-            Command::Simulate(a) => a.run(),
+            Command::Simulate(o) => vic::tools::simulate::run(&o),
             Command::Experiment(a) => a.run(),
             Command::Results(a) => a.run(),
-            Command::Demo(a) => a.run(),
+            Command::Demo(o) => vic::tools::demo::run(&o),
             Command::Inject(a) => a.run(),
             Command::Status(a) => a.run(),
             Command::Monitor(a) => a.run(),

@@ -9,35 +9,90 @@ use crate::planning::scenario::{ConfigError, Scenario};
 use crate::rt::board::Board;
 use crate::rt::realtime::{BoardLoopOptions, BoardStats, PercentilesJson, run_board};
 use crate::rt::record::{RecordOptions, Recorder};
+use crate::rt::sched::RtRequest;
 use crate::rt::transport::BoardPorts;
-use crate::tools::cli::{Classify, input_error, non_negative_seconds, print_json, stop_on_signal};
+use crate::tools::cli::{
+    Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, input_error, non_negative_seconds,
+    print_json, stop_on_signal,
+};
 use std::path::PathBuf;
 
-/// What `vic-board` was asked for.
-#[derive(Debug, Clone)]
+/// The simulated board: plant, impedance law and disturbances at 1 kHz.
+///
+/// Example: vic-board --config config/two_link_divergent.toml --namespace lab1
+#[derive(Debug, Clone, clap::Parser)]
+#[command(name = "vic-board", version, about, long_about)]
+#[command(
+    mut_arg("config", |a| a.help("Scenario file (TOML): plant, actuator (type 2), field and noise")),
+    mut_arg("json", |a| a.help("Print the final statistics as one JSON object")),
+)]
 pub struct BoardOptions {
-    pub config: PathBuf,
-    pub overrides: Vec<String>,
-    pub namespace: String,
-    /// Tick rate [Hz], 1 to 10 000.
+    #[command(flatten)]
+    pub scenario: DefaultScenarioArgs,
+    #[command(flatten)]
+    pub namespace: NamespaceArgs,
+    /// Tick rate [Hz].
+    #[arg(long, default_value_t = 1000)]
     pub rate_hz: u64,
-    /// Spin before each deadline [µs] (0: sleep only).
-    pub spin_us: u64,
-    /// Stiffness of the safe hold [N m/rad] (default: the scenario's `board.hold_stiffness`).
+    #[command(flatten)]
+    pub rt: RtArgs,
+    /// Stiffness of the safe hold [N m/rad] (default: the scenario's board.hold_stiffness, 100).
+    /// The other limits (watchdog, ramp, joint and speed limits, disturbance limits) are keys
+    /// of the scenario's [board] section: --set board.watchdog=0.1
+    #[arg(long, value_name = "N_M_PER_RAD")]
     pub hold_stiffness: Option<f64>,
-    /// SCHED_FIFO priority of the loop.
-    pub fifo: Option<i32>,
-    /// The CPU the loop is pinned to (None: the last CPU when there are several, unless no_rt).
-    pub cpu: Option<usize>,
-    /// The old behaviour: no SCHED_FIFO, no pinning (and no spin unless spin_us says so).
-    pub no_rt: bool,
-    /// Run this long [s] (0: until SIGINT/SIGTERM).
+    /// Stop after this many seconds (0: run until SIGINT/SIGTERM).
+    #[arg(long, default_value_t = 0.0)]
     pub duration_s: f64,
-    pub json: bool,
-    /// Record every tick to this file (CSV or MCAP, by its extension).
+    #[command(flatten)]
+    pub json: JsonArg,
+    /// Record every tick (state, command in use, disturbances) from a thread outside the loop:
+    /// FILE.csv is the log `vic identify --log` reads, FILE.mcap opens in Foxglove and
+    /// PlotJuggler (and `vic convert` turns it into the CSV). Gaps (queue full) are marked in
+    /// the file and counted in the statistics.
+    #[arg(long, value_name = "FILE.csv|FILE.mcap")]
     pub record: Option<PathBuf>,
     /// Capacity of the recording queue [ticks].
+    #[arg(long, value_name = "TICKS", default_value_t = crate::rt::record::DEFAULT_CAPACITY)]
     pub record_queue: usize,
+}
+
+/// The board loop's real-time flags: what to ask the OS for ([`RtArgs::request`]).
+#[derive(Debug, Clone, clap::Args)]
+pub struct RtArgs {
+    /// Spin this long before each deadline [µs] (0: sleep only). Default 100 (10 % of a CPU,
+    /// never enough to trip the kernel's real-time throttling), 0 with --no-rt.
+    #[arg(long, value_name = "US")]
+    pub spin_us: Option<u64>,
+    /// SCHED_FIFO priority of the loop (1–99). Real-time is the default: the board asks for
+    /// SCHED_FIFO, mlockall, a CPU of its own (the last one, where there are several) and a
+    /// spin before each deadline, prints what it got and runs on with a warning when refused.
+    #[arg(long, value_name = "PRIO", default_value_t = crate::rt::sched::DEFAULT_FIFO_PRIORITY,
+          value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub fifo: i32,
+    /// Pin the loop to this CPU (default: the last CPU, where there are several).
+    #[arg(long, value_name = "N")]
+    pub cpu: Option<usize>,
+    /// The old behaviour: the normal scheduler, no pinning, no spin (memory locking is still
+    /// tried).
+    #[arg(long)]
+    pub no_rt: bool,
+}
+
+impl RtArgs {
+    /// The request: the real-time defaults ([`RtRequest::default_rt`]) with the flags given, or
+    /// with `--no-rt` the normal scheduler, no pinning and no spin unless `--spin-us` asks.
+    pub fn request(&self) -> RtRequest {
+        let mut req = if self.no_rt {
+            RtRequest::none()
+        } else {
+            RtRequest::default_rt()
+        };
+        req.fifo = if self.no_rt { None } else { Some(self.fifo) };
+        req.cpu = self.cpu;
+        req.spin_us = self.spin_us.unwrap_or(req.spin_us);
+        req
+    }
 }
 
 /// Runs the board until the duration ends or a signal stops it, then prints its statistics.
@@ -49,22 +104,23 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
         )));
     }
     non_negative_seconds("--duration-s", o.duration_s)?;
-    crate::rt::transport::validate_namespace(&o.namespace).input()?;
+    let namespace = o.namespace.validated()?;
     let scenario = load_with_hold_stiffness(o)?;
     let period_ns = 1_000_000_000 / o.rate_hz;
     let mut board = board_of(&scenario, period_ns)?;
     let stop = stop_on_signal()?;
-    let ep = BoardPorts::open(&o.namespace)?;
+    let ep = BoardPorts::open(namespace)?;
     let cleaned_dead_nodes = ep.session().cleaned_dead_nodes();
     if cleaned_dead_nodes > 0 {
         eprintln!(
             "vic-board: removed the resources of {} dead process(es) in namespace \"{}\"",
-            cleaned_dead_nodes, o.namespace
+            cleaned_dead_nodes, namespace
         );
     }
     let memory_locked = crate::rt::realtime::lock_memory();
+    let request = o.rt.request();
     let loop_options = BoardLoopOptions {
-        spin_ns: o.spin_us * 1000,
+        spin_ns: request.spin_us * 1000,
         max_ticks: (o.duration_s * o.rate_hz as f64) as u64,
         ..BoardLoopOptions::default()
     };
@@ -73,7 +129,7 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
         None => None,
     };
     // After the recorder's writer thread exists: it must not inherit the real-time policy.
-    let realtime = apply_scheduling(o, memory_locked);
+    let realtime = apply_scheduling(&request, memory_locked);
     let mut stats = run_board(
         &ep,
         &mut board,
@@ -92,7 +148,7 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
         stats.dropped = Some(summary.dropped);
     }
     stats.realtime = Some(realtime);
-    if o.json {
+    if o.json.json {
         print_json(&stats)
     } else {
         print_stats(&stats);
@@ -103,9 +159,9 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
 /// The scenario with `--hold-stiffness` applied as `board.hold_stiffness`, so that the flag is
 /// checked like the key (range, damping law, stability) and its error names the flag.
 fn load_with_hold_stiffness(o: &BoardOptions) -> anyhow::Result<Scenario> {
-    let mut overrides = o.overrides.clone();
+    let (config, mut overrides) = (&o.scenario.config, o.scenario.set.overrides.clone());
     let Some(k) = o.hold_stiffness else {
-        return Scenario::load(&o.config, &overrides).input();
+        return Scenario::load(config, &overrides).input();
     };
     let value = match k {
         k if k.is_nan() => "nan".to_string(),
@@ -113,7 +169,7 @@ fn load_with_hold_stiffness(o: &BoardOptions) -> anyhow::Result<Scenario> {
         k => format!("{k:e}"),
     };
     overrides.push(format!("board.hold_stiffness={value}"));
-    Scenario::load(&o.config, &overrides).map_err(|e| match &e {
+    Scenario::load(config, &overrides).map_err(|e| match &e {
         ConfigError::Invalid { key, .. } if key == "hold_stiffness" => {
             input_error(format!("--hold-stiffness {k}: {e}"))
         }
@@ -138,17 +194,17 @@ fn start_recorder(
         joints,
         banner: format!(
             "{} {}, {} Hz, namespace {}",
-            o.config.display(),
-            o.overrides.join(" "),
+            o.scenario.config.display(),
+            o.scenario.set.overrides.join(" "),
             o.rate_hz,
-            o.namespace
+            o.namespace.namespace
         ),
         start_paused: false,
         metadata: [
-            ("scenario", o.config.display().to_string()),
-            ("overrides", o.overrides.join(" ")),
+            ("scenario", o.scenario.config.display().to_string()),
+            ("overrides", o.scenario.set.overrides.join(" ")),
             ("rate_hz", o.rate_hz.to_string()),
-            ("namespace", o.namespace.clone()),
+            ("namespace", o.namespace.namespace.clone()),
             (
                 "command_line",
                 std::env::args().collect::<Vec<_>>().join(" "),
@@ -166,18 +222,9 @@ fn start_recorder(
 
 /// Applies the real-time settings to the calling thread (the loop's) and says on stderr what
 /// is in force and what the OS refused (the loop runs on either way).
-fn apply_scheduling(o: &BoardOptions, memory_locked: bool) -> crate::rt::sched::RtSettings {
-    use crate::rt::sched::{RtRequest, apply_realtime};
-    let mut req = if o.no_rt {
-        RtRequest::none()
-    } else {
-        RtRequest::default_rt()
-    };
-    req.fifo = if o.no_rt { None } else { o.fifo };
-    req.cpu = o.cpu;
-    req.spin_us = o.spin_us;
+fn apply_scheduling(req: &RtRequest, memory_locked: bool) -> crate::rt::sched::RtSettings {
     let slack = crate::rt::realtime::set_timer_slack_1ns();
-    let got = apply_realtime(&req, memory_locked, slack);
+    let got = crate::rt::sched::apply_realtime(req, memory_locked, slack);
     let label = if got.refused.is_empty() {
         "real-time"
     } else {
@@ -210,4 +257,15 @@ fn print_stats(stats: &BoardStats) {
     p("jitter", &stats.jitter_us);
     p("work", &stats.work_us);
     p("command age", &stats.command_age_us);
+}
+
+#[cfg(test)]
+mod flags {
+    /// clap's own consistency checks (every `mut_arg` names an argument that exists, no two
+    /// flags clash), which it otherwise runs only when a command is parsed.
+    #[test]
+    fn are_consistent() {
+        use clap::CommandFactory;
+        super::BoardOptions::command().debug_assert();
+    }
 }

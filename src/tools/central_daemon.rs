@@ -12,41 +12,82 @@ use crate::rt::central::{
 };
 use crate::rt::transport::CentralPorts;
 use crate::tools::cli::{
-    Classify, divergence_or_default, input_error, print_json, stop_on_signal, whole_steps,
+    Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, SeedArgs, divergence_or_default,
+    input_error, non_negative_seconds, print_json, stop_on_signal, whole_steps,
 };
 use crate::tools::plan_command::read_plan;
 use crate::tools::report::{StrategyResult, Trajectories};
 use std::path::PathBuf;
 use std::time::Duration;
 
-/// What `vic-planner` was asked for.
-#[derive(Debug, Clone)]
+/// The central controller: streams a plan's commands to the board at 50 Hz and runs trials.
+///
+/// Example: vic-planner --config config/two_link_divergent.toml --plan sooc.json --strategy stiffness
+#[derive(Debug, Clone, clap::Parser)]
+#[command(name = "vic-planner", version, about, long_about)]
+#[command(
+    mut_arg("config", |a| a.help("Scenario file (TOML) the plan runs on")),
+    mut_arg("seed", |a| a.help("Seed of the board's noise (trial i uses the stream of (seed, i))")),
+    mut_arg("json", |a| a.help("Print one JSON object")),
+)]
 pub struct CentralOptions {
-    pub config: PathBuf,
-    pub overrides: Vec<String>,
-    /// The plan to play (default: plan at start-up for the strategy).
+    #[command(flatten)]
+    pub scenario: DefaultScenarioArgs,
+    /// Plan file from `vic plan --out` (default: plan at start-up: SOOC for `stiffness`, ILQG
+    /// for the latency for `naive-delayed`, undelayed ILQG for the predictor strategies; no
+    /// stiffness for `naive-delayed` and `predictor`).
+    #[arg(long, value_name = "FILE")]
     pub plan: Option<PathBuf>,
+    /// How the plan is played: `naive-delayed` (the plan's gains on the state seen
+    /// --latency-ms late, Eq. 13, no stiffness), `predictor` (the gains on the present state
+    /// predicted from the delayed one over the commands in flight, no stiffness), `stiffness`
+    /// (the plan's torque and stiffness, no central feedback), `stiffness+predictor` (both) or
+    /// `replan` (SOOC re-solved every period from the predicted present, warm-started from the
+    /// previous plan; a re-solve takes tens of ms, so at 50 Hz it can overrun on a slow machine).
+    #[arg(long, default_value = "stiffness", value_parser = Strategy::from_name)]
     pub strategy: Strategy,
-    /// Feedback latency [ms] (default: the plan's delay).
+    /// Feedback latency [ms]: knot k feeds back the state of k − latency (default: the plan's
+    /// delay; a whole number of plan steps).
+    #[arg(long, value_name = "MS")]
     pub latency_ms: Option<f64>,
     /// Delay line on the state path [ms] (default: half of latency − lookahead).
+    #[arg(long, value_name = "MS")]
     pub sensor_latency_ms: Option<f64>,
     /// Delay line on the command path [ms] (default: half of latency − lookahead).
+    #[arg(long, value_name = "MS")]
     pub command_latency_ms: Option<f64>,
-    /// Loop rate [Hz], 1 to 1000.
+    /// Loop rate [Hz].
+    #[arg(long, default_value_t = 50)]
     pub rate_hz: u64,
+    /// Number of trials.
+    #[arg(long, default_value_t = 5)]
     pub trials: usize,
-    pub seed: u64,
-    pub namespace: String,
-    /// Divergence distance [mm arm, deg joint].
+    #[command(flatten)]
+    pub seed: SeedArgs,
+    #[command(flatten)]
+    pub namespace: NamespaceArgs,
+    /// A trial diverged when it ends further than this from the target [mm arm, deg joint].
+    #[arg(long, value_name = "DIST")]
     pub divergence: Option<f64>,
-    /// Run with a board in this process on a simulated clock.
+    /// Run board and planner in lockstep on a simulated clock in this process (no daemon).
+    #[arg(long)]
     pub lockstep: bool,
-    /// How long to wait for a board.
-    pub board_timeout: Duration,
-    /// Write the trials' recorded states and commands here.
+    /// Seconds to wait for a board before giving up.
+    #[arg(long, default_value_t = 5.0)]
+    pub board_timeout_s: f64,
+    /// Also write the trials' recorded states and commands here (JSON: `x` per trial per knot,
+    /// `u` per trial per step), e.g. for a figure.
+    #[arg(long, value_name = "FILE")]
     pub trajectories: Option<PathBuf>,
-    pub json: bool,
+    #[command(flatten)]
+    pub json: JsonArg,
+}
+
+impl CentralOptions {
+    /// How long to wait for a board (`--board-timeout-s`, checked).
+    fn board_timeout(&self) -> anyhow::Result<Duration> {
+        non_negative_seconds("--board-timeout-s", self.board_timeout_s)
+    }
 }
 
 /// The delay lines of a run, in ms.
@@ -57,21 +98,22 @@ struct Delays {
 
 /// Plays the plan for the trials and prints their summary.
 pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
+    o.board_timeout()?;
     if o.rate_hz == 0 || o.rate_hz > 1000 || o.trials == 0 {
         return Err(input_error("--rate-hz must be 1..1000 and --trials ≥ 1"));
     }
-    crate::rt::transport::validate_namespace(&o.namespace).input()?;
+    let namespace = o.namespace.validated()?;
     // The namespace is claimed before planning: a second central process is refused at once
     // (naming the first), not after minutes of planning, and the first is never disturbed.
     let ports = match o.lockstep {
         true => None,
-        false => Some(CentralPorts::open(&o.namespace).runtime()?),
+        false => Some(CentralPorts::open(namespace).runtime()?),
     };
-    let mut overrides = o.overrides.clone();
+    let mut overrides = o.scenario.set.overrides.clone();
     if !o.strategy.uses_stiffness() {
         overrides.push("actuator.stiffness_max=0".into());
     }
-    let base = Scenario::load(&o.config, &overrides).input()?;
+    let base = Scenario::load(&o.scenario.config, &overrides).input()?;
     let plan = match &o.plan {
         Some(path) => read_plan(path)?,
         None => plan_at_start(o, &overrides)?,
@@ -103,7 +145,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
     if !records.is_empty() || lost.is_none() {
         let result = crate::tools::report::summarize(&setup, &central, &records, divergence);
-        if o.json {
+        if o.json.json {
             print_json(&result)?;
         } else {
             print_result(&result, &delays);
@@ -128,11 +170,16 @@ fn run_trials(
     period_ns: u64,
 ) -> anyhow::Result<Result<Vec<TrialRecord>, LiveError>> {
     let Some(ep) = ports.filter(|_| !o.lockstep) else {
-        let s = Scenario::load(&o.config, &o.overrides).input()?;
+        let s = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
         let cfg = crate::tools::launch::board_config(&s, 1_000_000);
         let mut board = crate::rt::board::Board::new(s.model.clone(), cfg, x0).input()?;
         return Ok(Ok(lockstep(
-            &mut board, central, 1_000_000, period_ns, o.trials, o.seed,
+            &mut board,
+            central,
+            1_000_000,
+            period_ns,
+            o.trials,
+            o.seed.seed,
         )));
     };
     let stop = stop_on_signal()?;
@@ -143,9 +190,9 @@ fn run_trials(
         ep,
         central,
         o.trials,
-        o.seed,
+        o.seed.seed,
         period_ns,
-        o.board_timeout,
+        o.board_timeout()?,
         &stop,
     ) {
         Err(LiveError::Transport(e)) => Err(e).runtime(),
@@ -169,7 +216,7 @@ fn plan_at_start(o: &CentralOptions, overrides: &[String]) -> anyhow::Result<Pla
             Method::Ilqg
         }
     };
-    let s = Scenario::load(&o.config, &overrides).input()?;
+    let s = Scenario::load(&o.scenario.config, &overrides).input()?;
     eprintln!("vic-planner: planning ({}) ...", method.name());
     plan(&s, method, None).runtime()
 }
@@ -236,4 +283,15 @@ fn print_result(result: &StrategyResult, delays: &Delays) {
         c.overruns,
         c.budget_us
     );
+}
+
+#[cfg(test)]
+mod flags {
+    /// clap's own consistency checks (every `mut_arg` names an argument that exists, no two
+    /// flags clash), which it otherwise runs only when a command is parsed.
+    #[test]
+    fn are_consistent() {
+        use clap::CommandFactory;
+        super::CentralOptions::command().debug_assert();
+    }
 }

@@ -12,7 +12,9 @@ use crate::planning::plan::{Method, PLAN_VERSION, plan};
 use crate::planning::scenario::Scenario;
 use crate::rt::central::Strategy;
 use crate::rt::daemon::Children;
-use crate::tools::cli::{Classify, sibling_binary, whole_steps};
+use crate::tools::cli::{
+    Classify, DefaultScenarioArgs, JsonArg, SeedArgs, sibling_binary, whole_steps,
+};
 use crate::tools::experiment::column_plot;
 use crate::tools::plan_command::{read_plan, write_plan};
 use crate::tools::report::{StrategyResult, Trajectories};
@@ -22,31 +24,51 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
-/// What `vic demo` was asked for.
-#[derive(Debug, Clone)]
+/// What `vic demo` was asked for: its flags.
+#[derive(clap::Args)]
+#[command(
+    mut_arg("config", |a| a.help(
+        "Scenario file (TOML): a two-link or single-joint plant with the impedance actuator"
+    )),
+    mut_arg("overrides", |a| a.help(
+        "Override a configuration key (repeatable), for the plans and the board alike"
+    )),
+    mut_arg("seed", |a| a.help("Seed of the board's noise (the same for every strategy)")),
+    mut_arg("json", |a| a.help("Print one JSON object instead of the table")),
+)]
 pub struct DemoOptions {
-    /// A two-link or single-joint scenario with the impedance actuator.
-    pub config: PathBuf,
-    /// Overrides for the plans and the board alike.
-    pub overrides: Vec<String>,
+    #[command(flatten)]
+    pub scenario: DefaultScenarioArgs,
     /// Feedback latency of the central controller [ms] (a whole number of plan steps).
+    #[arg(long, default_value_t = 200.0)]
     pub latency_ms: f64,
     /// Trials per strategy.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
     pub trials: u64,
-    /// Seed of the board's noise (the same for every strategy).
-    pub seed: u64,
-    /// Keep the plans here and reuse them on the next run (default: plan afresh).
+    #[command(flatten)]
+    pub seed: SeedArgs,
+    /// Keep the plans in this folder and reuse them on the next run (default: plan afresh).
+    #[arg(long, value_name = "DIR")]
     pub plans_dir: Option<PathBuf>,
-    /// Plan files to use instead of planning.
+    /// Use this plan for the `stiffness` strategy instead of planning (SOOC, `vic plan --out`).
+    #[arg(long, value_name = "FILE")]
     pub stiffness_plan: Option<PathBuf>,
+    /// Use this plan for `naive-delayed` instead of planning (ILQG for the latency, zero
+    /// stiffness).
+    #[arg(long, value_name = "FILE")]
     pub feedback_plan: Option<PathBuf>,
-    /// Board spin before each deadline [µs] (None: the board's default).
-    pub spin_us: Option<u64>,
-    /// Start the board with `--no-rt`.
-    pub no_rt: bool,
-    /// The figure, the JSON document and the trajectories go here.
+    /// Folder for the trajectories figure (trajectories.png and .svg: hand paths per strategy,
+    /// like the paper's Fig. 1), the table as JSON (demo.json) and each strategy's trials.
+    #[arg(long, value_name = "DIR", default_value = "vic-demo")]
     pub out_dir: PathBuf,
-    pub json: bool,
+    /// Board spin before each deadline [µs] (default: the board's, 100; 0 with --no-rt).
+    #[arg(long, value_name = "US")]
+    pub spin_us: Option<u64>,
+    /// Run the board without its real-time settings (no SCHED_FIFO, pinning or spin).
+    #[arg(long)]
+    pub no_rt: bool,
+    #[command(flatten)]
+    pub json: JsonArg,
 }
 
 /// The plan files of the strategies.
@@ -68,7 +90,7 @@ struct StrategyRun<'a> {
 /// Plans, runs every strategy against one board, draws the trajectories, prints the comparison
 /// and the board's timing.
 pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
-    let scenario = Scenario::load(&o.config, &o.overrides).input()?;
+    let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
     whole_steps("--latency-ms", o.latency_ms, scenario.task.dt * 1000.0)?;
     let board_bin = sibling_binary("vic-board")?;
     let planner_bin = sibling_binary("vic-planner")?;
@@ -97,7 +119,7 @@ pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
     let json_path = o.out_dir.join("demo.json");
     std::fs::write(&json_path, format!("{doc:#}"))
         .map_err(|e| anyhow!("cannot write {}: {e}", json_path.display()))?;
-    if o.json {
+    if o.json.json {
         println!("{doc}");
         return Ok(());
     }
@@ -205,7 +227,7 @@ impl Drop for PlanStore {
 
 /// The plans of the strategies, the SOOC plan beside the ILQG ones on another thread.
 fn plan_strategies(o: &DemoOptions, store: &PlanStore) -> anyhow::Result<DemoPlans> {
-    let mut feedback_overrides = o.overrides.clone();
+    let mut feedback_overrides = o.scenario.set.overrides.clone();
     feedback_overrides.push("actuator.stiffness_max=0".into());
     // The reference row: central feedback without latency (planned for none, the planner at
     // 250 Hz so that its own loop adds only a few ms): with 0 ms latency, delayed feedback works.
@@ -217,16 +239,17 @@ fn plan_strategies(o: &DemoOptions, store: &PlanStore) -> anyhow::Result<DemoPla
     }
     let given_or_planned = |given: &Option<PathBuf>, overrides: &[String], method| match given {
         Some(p) => Ok(p.clone()),
-        None => store.plan(&o.config, overrides, method),
+        None => store.plan(&o.scenario.config, overrides, method),
     };
     std::thread::scope(|s| {
-        let stiffness = s.spawn(|| given_or_planned(&o.stiffness_plan, &o.overrides, Method::Sooc));
+        let stiffness = s
+            .spawn(|| given_or_planned(&o.stiffness_plan, &o.scenario.set.overrides, Method::Sooc));
         let feedback = given_or_planned(&o.feedback_plan, &feedback_overrides, Method::Ilqg);
         let feedback_at_zero = if o.latency_ms == 0.0 {
             Ok(None)
         } else {
             store
-                .plan(&o.config, &zero_overrides, Method::Ilqg)
+                .plan(&o.scenario.config, &zero_overrides, Method::Ilqg)
                 .map(Some)
         };
         let stiffness = stiffness.join().map_err(|_| anyhow!("planning panicked"))?;
@@ -281,8 +304,8 @@ impl StrategyRun<'_> {
 
 /// `--config FILE --set ...` for a child process.
 fn scenario_args(cmd: &mut Command, o: &DemoOptions) {
-    cmd.arg("--config").arg(&o.config);
-    for s in &o.overrides {
+    cmd.arg("--config").arg(&o.scenario.config);
+    for s in &o.scenario.set.overrides {
         cmd.args(["--set", s]);
     }
 }
@@ -324,7 +347,7 @@ fn run_planner(
         .arg("--trajectories")
         .arg(o.out_dir.join(format!("{}.json", run.stem())))
         .args(["--trials", &o.trials.to_string()])
-        .args(["--seed", &o.seed.to_string()])
+        .args(["--seed", &o.seed.seed.to_string()])
         .args(["--latency-ms", &run.latency_ms.to_string()])
         .args(["--rate-hz", &run.rate_hz.to_string()])
         .stdout(Stdio::piped())
@@ -373,11 +396,11 @@ fn document(
         })
         .collect();
     serde_json::json!({
-        "config": o.config.display().to_string(),
-        "overrides": o.overrides,
+        "config": o.scenario.config.display().to_string(),
+        "overrides": o.scenario.set.overrides,
         "latency_ms": o.latency_ms,
         "trials": o.trials,
-        "seed": o.seed,
+        "seed": o.seed.seed,
         "strategies": strategies,
         "board": stats,
         "leftover_shm_files": leftover,
@@ -453,21 +476,13 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
 mod tests {
     use super::*;
 
+    /// `vic demo --latency-ms LATENCY --trials 1 --json`, the other flags at their defaults.
     fn options(latency_ms: f64) -> DemoOptions {
-        DemoOptions {
-            config: "config/two_link_divergent.toml".into(),
-            overrides: vec![],
-            latency_ms,
-            trials: 1,
-            seed: 1,
-            plans_dir: None,
-            stiffness_plan: None,
-            feedback_plan: None,
-            spin_us: None,
-            no_rt: false,
-            out_dir: "vic-demo".into(),
-            json: true,
-        }
+        use clap::{Args, FromArgMatches};
+        let latency = latency_ms.to_string();
+        let args = ["demo", "--latency-ms", &latency, "--trials", "1", "--json"];
+        let matches = DemoOptions::augment_args(clap::Command::new("demo")).get_matches_from(args);
+        DemoOptions::from_arg_matches(&matches).expect("the flags parse")
     }
 
     #[test]

@@ -8,7 +8,9 @@ use crate::planning::evaluation::{Report, summarize};
 use crate::planning::montecarlo::{Trial, run_trials};
 use crate::planning::plan::{PlanFile, setup};
 use crate::planning::scenario::Scenario;
-use crate::tools::cli::{Classify, divergence_or_default, whole_steps};
+use crate::tools::cli::{
+    Classify, JsonArg, ScenarioArgs, SeedArgs, divergence_or_default, whole_steps,
+};
 use crate::tools::plan_command::read_plan;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -30,37 +32,99 @@ pub enum Execution {
     Replan { delay_ms: f64 },
 }
 
-/// What `vic simulate` was asked for.
-#[derive(Debug, Clone)]
+/// `--policy`: how the plan is executed (the central strategies by their names too).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PolicyArg {
+    /// The planned commands, no feedback at all.
+    OpenLoop,
+    /// The plan's gains on the current state.
+    Feedback,
+    /// The plan's gains on the state seen --delay-ms late (Eq. 13; default: the plan's delay).
+    #[value(alias = "delayed-feedback")]
+    NaiveDelayed,
+    /// The gains of an undelayed plan on the present state predicted from the one seen
+    /// --delay-ms late, over the commands applied since (a Smith predictor).
+    Predictor,
+    /// The central strategy `stiffness`: the plan's commands with no feedback (as open-loop).
+    Stiffness,
+    /// The central strategy `stiffness+predictor`: the plan's torque and stiffness plus the
+    /// predictor's feedback (as predictor; give it a plan with stiffness).
+    #[value(name = "stiffness+predictor")]
+    StiffnessPredictor,
+    /// The central strategy `replan`: the plan (give it a SOOC plan) re-solved every 20 ms from
+    /// the present predicted from the state seen --delay-ms late (default 0), played open loop
+    /// between re-solves. Slow: seconds per trial on the arm.
+    Replan,
+}
+
+/// What `vic simulate` was asked for: its flags.
+#[derive(Debug, Clone, clap::Args)]
+#[command(mut_arg("config", |a| a.help(
+    "Scenario file (TOML): the plant the plan runs on (it may differ from the plan's, e.g. in noise)"
+)))]
 pub struct SimulateOptions {
-    /// The scenario the plan runs on (it may differ from the plan's, e.g. in noise).
-    pub config: PathBuf,
-    pub overrides: Vec<String>,
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// Plan file written by `vic plan --out`.
+    #[arg(long, value_name = "FILE")]
     pub plan: PathBuf,
-    pub execution: Execution,
-    pub trials: usize,
-    pub seed: u64,
-    /// Divergence distance [mm for the arm, degrees for a joint] (default 50 mm / 10°).
+    /// How the plan is executed.
+    #[arg(long, value_enum, default_value = "open-loop")]
+    pub policy: PolicyArg,
+    /// Number of trials.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
+    pub trials: u64,
+    #[command(flatten)]
+    pub seed: SeedArgs,
+    /// Feedback latency for --policy delayed-feedback [ms] (default: the plan's delay) and for
+    /// --policy predictor and replan (default 0).
+    #[arg(long, value_name = "D")]
+    pub delay_ms: Option<f64>,
+    /// A trial has diverged when it ends further than this from the target [mm for the arm,
+    /// degrees for a single joint] (default 50 mm / 10°).
+    #[arg(long, value_name = "DIST")]
     pub divergence: Option<f64>,
-    /// Write every trial's states and commands here.
+    /// Write every trial's states and commands to this CSV file.
+    #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
-    /// Plot the trials to this PNG (and an SVG beside it).
+    /// Plot the trials (paths or angles, velocities, commands) to this PNG (and an SVG beside it).
+    #[arg(long, value_name = "FILE.png")]
     pub plot: Option<PathBuf>,
-    pub json: bool,
+    #[command(flatten)]
+    pub json: JsonArg,
+}
+
+impl SimulateOptions {
+    /// The execution `--policy` and `--delay-ms` ask for.
+    pub fn execution(&self) -> Execution {
+        match self.policy {
+            PolicyArg::OpenLoop | PolicyArg::Stiffness => Execution::OpenLoop,
+            PolicyArg::Feedback => Execution::Feedback,
+            PolicyArg::NaiveDelayed => Execution::DelayedFeedback {
+                delay_ms: self.delay_ms,
+            },
+            PolicyArg::Predictor | PolicyArg::StiffnessPredictor => Execution::Predictor {
+                delay_ms: self.delay_ms.unwrap_or(0.0),
+            },
+            PolicyArg::Replan => Execution::Replan {
+                delay_ms: self.delay_ms.unwrap_or(0.0),
+            },
+        }
+    }
 }
 
 /// Runs the trials, writes the CSV and the plot if asked, prints the report.
 pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
-    let scenario = Scenario::load(&o.config, &o.overrides).input()?;
+    let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
     let plan = read_plan(&o.plan)?;
     let setup = setup(&scenario).input()?;
     let policy = plan
         .policy(&setup)
         .map_err(|e| format!("{}: {e}", o.plan.display()))
         .input()?;
-    let feedback = feedback(o.execution, &plan, scenario.task.dt)?;
+    let feedback = feedback(o.execution(), &plan, scenario.task.dt)?;
     let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
-    let trials = run_trials(&setup, &policy, feedback, o.trials, o.seed);
+    let trials = run_trials(&setup, &policy, feedback, o.trials as usize, o.seed.seed);
     let report = summarize(&setup, &trials, divergence);
     if let Some(path) = &o.csv {
         write_trials_csv(path, &plan, &trials)?;
@@ -72,11 +136,11 @@ pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
     // delayed law, the plan's (that of the augmented policy it was planned as).
     let predicted = crate::planning::evaluation::predicted_cost(&setup, &policy, feedback)
         .unwrap_or(plan.summary.expected_cost);
-    if o.json {
+    if o.json.json {
         let mut v = serde_json::to_value(&report)?;
         v["policy"] = serde_json::to_value(feedback)?;
         v["expected_cost_predicted"] = predicted.into();
-        v["seed"] = o.seed.into();
+        v["seed"] = o.seed.seed.into();
         println!("{v}");
     } else {
         print_report(o, &plan, feedback, &report, divergence, predicted);
@@ -134,10 +198,10 @@ fn print_report(
     println!(
         "simulate   {} with {} ({:?}), {} trials, seed {}",
         plan.scenario,
-        o.config.display(),
+        o.scenario.config.display(),
         feedback,
         report.trials,
-        o.seed
+        o.seed.seed
     );
     println!(
         "final      std {:.3} {u}, 95 % ellipse semi-axes {:?} {u}",

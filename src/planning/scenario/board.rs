@@ -1,11 +1,38 @@
 //! The `[board]` section: the live board's safety limits.
 
 use super::error::{ConfigError, FileCheck};
-use super::raw::RawBoard;
+use serde::Deserialize;
+
+/// The `[board]` section as written (defaults in [`BoardSection`]'s documentation).
+pub(super) type RawBoard = BoardSection<Option<Vec<f64>>>;
+
+impl Default for RawBoard {
+    fn default() -> Self {
+        BoardSection {
+            watchdog: 0.05,
+            ramp: 0.1,
+            hold_stiffness: 100.0,
+            joint_min: None,
+            joint_max: None,
+            velocity_max: 20.0,
+            future_tolerance: 0.005,
+            max_pulse_torque: 20.0,
+            max_load_torque: 10.0,
+            max_pulse_duration: 2.0,
+            max_field_beta: 500.0,
+            max_noise_factor: 10.0,
+        }
+    }
+}
 
 /// The `[board]` section: the live board's safety limits (every key optional; defaults below).
-#[derive(Debug, Clone, PartialEq)]
-pub struct BoardSection {
+///
+/// The file's section is the same struct with the joint range optional (`J = Option<Vec<f64>>`,
+/// `RawBoard`: the number of joints comes from the plant), so that the keys are written once;
+/// `RawBoard::resolve` checks every limit and fills in the joint range.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoardSection<J = Vec<f64>> {
     /// How long the last valid command stays in force once no command covers the present [s]
     /// before the board ramps to its safe hold (default 0.05).
     pub watchdog: f64,
@@ -15,8 +42,8 @@ pub struct BoardSection {
     pub hold_stiffness: f64,
     /// Plant guard: joint range [rad] and speed limit [rad/s]; leaving them latches a fault that
     /// only a reset clears (defaults ±π, 20 rad/s).
-    pub joint_min: Vec<f64>,
-    pub joint_max: Vec<f64>,
+    pub joint_min: J,
+    pub joint_max: J,
     pub velocity_max: f64,
     /// A message stamped later than the board's clock by more than this is rejected [s]
     /// (default 0.005).

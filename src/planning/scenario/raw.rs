@@ -1,6 +1,8 @@
 //! The scenario file as written: plain serde types that reject unknown keys and hold the one set
 //! of defaults. A section whose variant a key selects (`[actuator] type = "vsa"`) is an enum: the
 //! loader turns the key into serde's external tagging ([`retag`]) so that errors keep their key.
+//! The `[board]` section is the validated [`BoardSection`](super::BoardSection) with its joint
+//! range optional ([`RawBoard`](super::board::RawBoard)), its defaults beside it.
 
 use crate::core::dynamics::Integrator;
 use crate::core::solver::IlqgOptions;
@@ -19,7 +21,7 @@ pub(super) struct RawConfig {
     #[serde(default)]
     pub solver: RawSolver,
     #[serde(default)]
-    pub board: RawBoard,
+    pub board: super::board::RawBoard,
 }
 
 /// The sections of a scenario file, in the order they are usually written.
@@ -275,45 +277,6 @@ impl Default for RawSolver {
             stochastic: d.stochastic,
             damp_short_steps: d.damp_short_steps,
             noise_continuation: vec![1.0],
-        }
-    }
-}
-
-/// `[board]`: the live board's limits, every key optional (defaults in
-/// [`BoardSection`](super::BoardSection)'s documentation).
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub(super) struct RawBoard {
-    pub watchdog: f64,
-    pub ramp: f64,
-    pub hold_stiffness: f64,
-    /// Default ±π for every joint (the number of joints comes from the plant).
-    pub joint_min: Option<Vec<f64>>,
-    pub joint_max: Option<Vec<f64>>,
-    pub velocity_max: f64,
-    pub future_tolerance: f64,
-    pub max_pulse_torque: f64,
-    pub max_load_torque: f64,
-    pub max_pulse_duration: f64,
-    pub max_field_beta: f64,
-    pub max_noise_factor: f64,
-}
-
-impl Default for RawBoard {
-    fn default() -> Self {
-        RawBoard {
-            watchdog: 0.05,
-            ramp: 0.1,
-            hold_stiffness: 100.0,
-            joint_min: None,
-            joint_max: None,
-            velocity_max: 20.0,
-            future_tolerance: 0.005,
-            max_pulse_torque: 20.0,
-            max_load_torque: 10.0,
-            max_pulse_duration: 2.0,
-            max_field_beta: 500.0,
-            max_noise_factor: 10.0,
         }
     }
 }

@@ -12,7 +12,7 @@
 //! `CLOCK_MONOTONIC` (the clock every process of the machine shares), so the board's file and
 //! an external recording of the same run (`vic record`) share one time axis.
 
-use super::schema::{ChannelSpec, Field, Kind, gap_json};
+use super::schema::{ChannelSpec, Field, Kind, fields, gap_json};
 use super::{RecordOptions, Sample, Sink};
 use crate::rt::transport::MAX_JOINTS;
 use mcap::records::{MessageHeader, Metadata};
@@ -30,64 +30,32 @@ pub const METADATA_NAME: &str = "vic";
 /// The MCAP profile field: none of the standard profiles (ros1, ros2) applies.
 const PROFILE: &str = "";
 
-const fn f(name: &'static str, kind: Kind, doc: &'static str) -> Field {
-    Field { name, kind, doc }
-}
-
 /// The board's tick channel.
 pub const TICK: ChannelSpec = ChannelSpec {
     topic: TICK_TOPIC,
     schema: "vic.BoardTick",
     doc: "One tick of the board's 1 kHz loop: state, the impedance-law inputs in use (Eq. 4), disturbances",
-    fields: &[
-        f(
-            "tick",
-            Kind::Int,
-            "loop tick, 1 for the first; consecutive unless a gap is marked",
-        ),
-        f(
-            "dropped_before",
-            Kind::Int,
-            "ticks dropped just before this one (queue full)",
-        ),
-        f(
-            "deadline_ns",
-            Kind::Int,
-            "tick deadline [ns, CLOCK_MONOTONIC]",
-        ),
-        f("t", Kind::Num, "deadline since the first recorded tick [s]"),
-        f("trial", Kind::Int, "trial"),
-        f("mode", Kind::Int, "0 idle, 1 running, 2 safe-hold, 3 fault"),
-        f("trial_time", Kind::Num, "plant time of the trial [s]"),
-        f("periods", Kind::Int, "plant periods integrated by the tick"),
-        f(
-            "command_seq",
-            Kind::Int,
-            "sequence number of the command slice in use",
-        ),
-        f("disturbance_seq", Kind::Int, "last disturbance in use"),
-        f("q", Kind::Nums, "joint angles [rad]"),
-        f("qd", Kind::Nums, "joint velocities [rad/s]"),
-        f(
-            "qdd",
-            Kind::Nums,
-            "joint accelerations over the period [rad/s^2]",
-        ),
-        f("tau", Kind::Nums, "joint torque applied [N m]"),
-        f("tau_ext", Kind::Nums, "external (disturbance) torque [N m]"),
-        f("tau_ff", Kind::Nums, "feedforward torque of the law [N m]"),
-        f(
-            "stiffness",
-            Kind::Nums,
-            "stiffness K_P of the law [N m/rad]",
-        ),
-        f("damping", Kind::Nums, "damping K_D of the law [N m s/rad]"),
-        f("q_d", Kind::Nums, "equilibrium of the law [rad]"),
-        f(
-            "qd_d",
-            Kind::Nums,
-            "equilibrium velocity of the law [rad/s]",
-        ),
+    fields: fields![
+        tick: Int "loop tick, 1 for the first; consecutive unless a gap is marked",
+        dropped_before: Int "ticks dropped just before this one (queue full)",
+        deadline_ns: Int "tick deadline [ns, CLOCK_MONOTONIC]",
+        t: Num "deadline since the first recorded tick [s]",
+        trial: Int "trial",
+        mode: Int "0 idle, 1 running, 2 safe-hold, 3 fault",
+        trial_time: Num "plant time of the trial [s]",
+        periods: Int "plant periods integrated by the tick",
+        command_seq: Int "sequence number of the command slice in use",
+        disturbance_seq: Int "last disturbance in use",
+        q: Nums "joint angles [rad]",
+        qd: Nums "joint velocities [rad/s]",
+        qdd: Nums "joint accelerations over the period [rad/s^2]",
+        tau: Nums "joint torque applied [N m]",
+        tau_ext: Nums "external (disturbance) torque [N m]",
+        tau_ff: Nums "feedforward torque of the law [N m]",
+        stiffness: Nums "stiffness K_P of the law [N m/rad]",
+        damping: Nums "damping K_D of the law [N m s/rad]",
+        q_d: Nums "equilibrium of the law [rad]",
+        qd_d: Nums "equilibrium velocity of the law [rad/s]",
     ],
 };
 

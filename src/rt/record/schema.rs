@@ -35,10 +35,6 @@ pub struct Field {
     pub doc: &'static str,
 }
 
-const fn f(name: &'static str, kind: Kind, doc: &'static str) -> Field {
-    Field { name, kind, doc }
-}
-
 /// A channel of an MCAP recording: its topic, schema name and fields.
 #[derive(Debug, Clone, Copy)]
 pub struct ChannelSpec {
@@ -83,11 +79,21 @@ impl ChannelSpec {
     }
 }
 
-const HEADER_FIELDS: [Field; 4] = [
-    f("session", Kind::Int, "session id of the sending process"),
-    f("seq", Kind::Int, "sequence number of the sender"),
-    f("time_ns", Kind::Int, "publish time [ns, CLOCK_MONOTONIC]"),
-    f("version", Kind::Int, "protocol version of the sender"),
+/// A field table written one line a field, `name: Kind "doc"` (`Kind(FIELDS)` for the nested
+/// kinds).
+macro_rules! fields {
+    ($($name:ident: $kind:ident$(($sub:expr))? $doc:literal),* $(,)?) => {
+        &[$(Field { name: stringify!($name), kind: Kind::$kind$(($sub))?, doc: $doc }),*]
+    };
+}
+pub(super) use fields;
+
+/// The fields every message with a [`Header`] starts with.
+const HEADER_FIELDS: &[Field] = fields![
+    session: Int "session id of the sending process",
+    seq: Int "sequence number of the sender",
+    time_ns: Int "publish time [ns, CLOCK_MONOTONIC]",
+    version: Int "protocol version of the sender",
 ];
 
 fn header_json(h: &Header, m: &mut Map<String, Value>) {
@@ -97,302 +103,171 @@ fn header_json(h: &Header, m: &mut Map<String, Value>) {
     m.insert("version".into(), json!(h.version));
 }
 
-/// Joints a message claims, bounded by what it can carry (a message is hostile).
-fn joints(n: u32) -> usize {
-    (n as usize).clamp(1, MAX_JOINTS)
+/// The first `joints` entries of a per-joint array, `joints` bounded by what the message can
+/// carry (a message is hostile).
+fn per_joint(v: &[f64; MAX_JOINTS], joints: u32) -> &[f64] {
+    &v[..(joints as usize).clamp(1, MAX_JOINTS)]
 }
 
-macro_rules! with_header {
-    ($($field:expr),* $(,)?) => {
-        &[HEADER_FIELDS[0], HEADER_FIELDS[1], HEADER_FIELDS[2], HEADER_FIELDS[3], $($field),*]
+/// Nanoseconds as seconds.
+fn seconds(ns: u64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+/// A channel of messages that carry a [`Header`]: its [`ChannelSpec`] and its JSON encoder, both
+/// from one table of `name: Kind = value, "doc";` lines, so that the schema a reader decodes
+/// with and the JSON written cannot disagree on a name or a field.
+macro_rules! header_channel {
+    (
+        $(#[$spec_doc:meta])*
+        const $spec:ident = ($topic:literal, $schema:literal, $doc:literal);
+        $(#[$encode_doc:meta])*
+        fn $encode:ident($s:ident: &$msg:ty) {
+            $($name:ident: $kind:ident$(($sub:expr))? = $value:expr, $field_doc:literal;)*
+        }
+    ) => {
+        $(#[$spec_doc])*
+        pub const $spec: ChannelSpec = ChannelSpec {
+            topic: $topic,
+            schema: $schema,
+            doc: $doc,
+            fields: &[
+                HEADER_FIELDS[0], HEADER_FIELDS[1], HEADER_FIELDS[2], HEADER_FIELDS[3],
+                $(Field { name: stringify!($name), kind: Kind::$kind$(($sub))?, doc: $field_doc }),*
+            ],
+        };
+        $(#[$encode_doc])*
+        pub fn $encode($s: &$msg) -> Value {
+            let mut m = Map::new();
+            header_json(&$s.header, &mut m);
+            $(m.insert(stringify!($name).into(), json!($value));)*
+            Value::Object(m)
+        }
     };
 }
 
-/// The board's state, one message per tick (`vic record`).
-pub const STATE: ChannelSpec = ChannelSpec {
-    topic: "/state",
-    schema: "vic.State",
-    doc: "The board's plant state, published every tick",
-    fields: with_header![
-        f("tick", Kind::Int, "board tick"),
-        f("trial", Kind::Int, "trial (from the last reset)"),
-        f("mode", Kind::Int, "0 idle, 1 running, 2 safe-hold, 3 fault"),
-        f(
-            "trial_time",
-            Kind::Num,
-            "plant time since the trial start [s]"
-        ),
-        f("q", Kind::Nums, "joint angles [rad]"),
-        f("qd", Kind::Nums, "joint velocities [rad/s]"),
-        f("tau", Kind::Nums, "joint torque applied [N m]"),
-        f(
-            "tau_ext",
-            Kind::Nums,
-            "external torque of the disturbances in force [N m]"
-        ),
-        f("stiffness", Kind::Nums, "stiffness in use [N m/rad]"),
-        f(
-            "command_seq",
-            Kind::Int,
-            "sequence number of the command slice in use"
-        ),
-        f("disturbance_seq", Kind::Int, "last disturbance applied"),
-        f("disturbance_tick", Kind::Int, "tick it was applied at"),
-        f(
-            "watchdog_deadline_ns",
-            Kind::Int,
-            "trial time the watchdog expires [ns]"
-        ),
-        f(
-            "reset_seq",
-            Kind::Int,
-            "sequence number of the reset of this trial"
-        ),
-    ],
-};
-
-/// Encodes a state message.
-pub fn state_json(s: &StateMsg) -> Value {
-    let mut m = Map::new();
-    header_json(&s.header, &mut m);
-    let n = joints(s.joints);
-    m.insert("tick".into(), json!(s.tick));
-    m.insert("trial".into(), json!(s.trial));
-    m.insert("mode".into(), json!(s.mode));
-    m.insert("trial_time".into(), json!(s.trial_time_ns as f64 * 1e-9));
-    for (k, v) in [
-        ("q", &s.q),
-        ("qd", &s.qd),
-        ("tau", &s.tau),
-        ("tau_ext", &s.tau_ext),
-        ("stiffness", &s.stiffness),
-    ] {
-        m.insert(k.into(), json!(&v[..n]));
+header_channel! {
+    /// The board's state, one message per tick (`vic record`).
+    const STATE = ("/state", "vic.State", "The board's plant state, published every tick");
+    /// Encodes a state message.
+    fn state_json(s: &StateMsg) {
+        tick: Int = s.tick, "board tick";
+        trial: Int = s.trial, "trial (from the last reset)";
+        mode: Int = s.mode, "0 idle, 1 running, 2 safe-hold, 3 fault";
+        trial_time: Num = seconds(s.trial_time_ns), "plant time since the trial start [s]";
+        q: Nums = per_joint(&s.q, s.joints), "joint angles [rad]";
+        qd: Nums = per_joint(&s.qd, s.joints), "joint velocities [rad/s]";
+        tau: Nums = per_joint(&s.tau, s.joints), "joint torque applied [N m]";
+        tau_ext: Nums = per_joint(&s.tau_ext, s.joints),
+            "external torque of the disturbances in force [N m]";
+        stiffness: Nums = per_joint(&s.stiffness, s.joints), "stiffness in use [N m/rad]";
+        command_seq: Int = s.command_seq, "sequence number of the command slice in use";
+        disturbance_seq: Int = s.disturbance_seq, "last disturbance applied";
+        disturbance_tick: Int = s.disturbance_tick, "tick it was applied at";
+        watchdog_deadline_ns: Int = s.watchdog_deadline_ns, "trial time the watchdog expires [ns]";
+        reset_seq: Int = s.reset_seq, "sequence number of the reset of this trial";
     }
-    m.insert("command_seq".into(), json!(s.command_seq));
-    m.insert("disturbance_seq".into(), json!(s.disturbance_seq));
-    m.insert("disturbance_tick".into(), json!(s.disturbance_tick));
-    m.insert("watchdog_deadline_ns".into(), json!(s.watchdog_deadline_ns));
-    m.insert("reset_seq".into(), json!(s.reset_seq));
-    Value::Object(m)
 }
 
-const KNOT_FIELDS: [Field; 4] = [
-    f("tau_ff", Kind::Nums, "feedforward torque [N m]"),
-    f("stiffness", Kind::Nums, "stiffness K_P [N m/rad]"),
-    f("q_d", Kind::Nums, "equilibrium [rad]"),
-    f("qd_d", Kind::Nums, "equilibrium velocity [rad/s]"),
+const KNOT_FIELDS: &[Field] = fields![
+    tau_ff: Nums "feedforward torque [N m]",
+    stiffness: Nums "stiffness K_P [N m/rad]",
+    q_d: Nums "equilibrium [rad]",
+    qd_d: Nums "equilibrium velocity [rad/s]",
 ];
 
-/// The central controller's command slices.
-pub const COMMAND: ChannelSpec = ChannelSpec {
-    topic: "/command",
-    schema: "vic.CommandSlice",
-    doc: "A slice of impedance-law inputs (Eq. 4) covering start + count * knot_dt of a trial",
-    fields: with_header![
-        f("joints", Kind::Int, "joints"),
-        f("trial", Kind::Int, "trial the slice is for"),
-        f("interpolation", Kind::Int, "0 zero-order hold, 1 linear"),
-        f("count", Kind::Int, "valid knots"),
-        f("start", Kind::Num, "trial time of the first knot [s]"),
-        f("knot_dt", Kind::Num, "time between knots [s]"),
-        f("knots", Kind::Objs(&KNOT_FIELDS), "the knots"),
-    ],
-};
-
-/// Encodes a command slice (its valid knots only).
-pub fn command_json(c: &CommandSlice) -> Value {
-    let mut m = Map::new();
-    header_json(&c.header, &mut m);
-    let n = joints(c.joints);
-    m.insert("joints".into(), json!(c.joints));
-    m.insert("trial".into(), json!(c.trial));
-    m.insert("interpolation".into(), json!(c.interpolation));
-    m.insert("count".into(), json!(c.count));
-    m.insert("start".into(), json!(c.start_ns as f64 * 1e-9));
-    m.insert("knot_dt".into(), json!(c.knot_dt_ns as f64 * 1e-9));
-    let knots: Vec<Value> = c.knots[..(c.count as usize).min(MAX_KNOTS)]
+/// The valid knots of a command slice (a hostile count bounded by the slice's capacity).
+fn knots_json(c: &CommandSlice) -> Vec<Value> {
+    let n = c.joints;
+    c.knots[..(c.count as usize).min(MAX_KNOTS)]
         .iter()
         .map(|k| {
-            json!({"tau_ff": &k.tau_ff[..n], "stiffness": &k.stiffness[..n],
-                   "q_d": &k.q_d[..n], "qd_d": &k.qd_d[..n]})
+            json!({"tau_ff": per_joint(&k.tau_ff, n), "stiffness": per_joint(&k.stiffness, n),
+                   "q_d": per_joint(&k.q_d, n), "qd_d": per_joint(&k.qd_d, n)})
         })
-        .collect();
-    m.insert("knots".into(), Value::Array(knots));
-    Value::Object(m)
+        .collect()
 }
 
-/// Control requests (reset, stop).
-pub const CONTROL: ChannelSpec = ChannelSpec {
-    topic: "/control",
-    schema: "vic.Control",
-    doc: "A control request to the board",
-    fields: with_header![
-        f("kind", Kind::Int, "0 reset, 1 stop"),
-        f("kind_name", Kind::Str, "reset, stop or unknown"),
-        f("trial", Kind::Int, "trial"),
-        f("seed", Kind::Int, "noise seed"),
-        f("start_ns", Kind::Int, "trial start [ns, CLOCK_MONOTONIC]"),
-        f("q0", Kind::Nums, "initial joint angles [rad]"),
-        f("qd0", Kind::Nums, "initial joint velocities [rad/s]"),
-    ],
-};
+header_channel! {
+    /// The central controller's command slices.
+    const COMMAND = (
+        "/command",
+        "vic.CommandSlice",
+        "A slice of impedance-law inputs (Eq. 4) covering start + count * knot_dt of a trial"
+    );
+    /// Encodes a command slice (its valid knots only).
+    fn command_json(c: &CommandSlice) {
+        joints: Int = c.joints, "joints";
+        trial: Int = c.trial, "trial the slice is for";
+        interpolation: Int = c.interpolation, "0 zero-order hold, 1 linear";
+        count: Int = c.count, "valid knots";
+        start: Num = seconds(c.start_ns), "trial time of the first knot [s]";
+        knot_dt: Num = seconds(c.knot_dt_ns), "time between knots [s]";
+        knots: Objs(KNOT_FIELDS) = knots_json(c), "the knots";
+    }
+}
 
-/// Encodes a control request.
-pub fn control_json(c: &Control) -> Value {
-    let mut m = Map::new();
-    header_json(&c.header, &mut m);
-    let name = match c.kind {
+fn control_kind_name(kind: u32) -> &'static str {
+    match kind {
         k if k == ControlKind::Reset as u32 => "reset",
         k if k == ControlKind::Stop as u32 => "stop",
         _ => "unknown",
-    };
-    m.insert("kind".into(), json!(c.kind));
-    m.insert("kind_name".into(), json!(name));
-    m.insert("trial".into(), json!(c.trial));
-    m.insert("seed".into(), json!(c.seed));
-    m.insert("start_ns".into(), json!(c.start_ns));
-    m.insert("q0".into(), json!(c.q0));
-    m.insert("qd0".into(), json!(c.qd0));
-    Value::Object(m)
+    }
 }
 
-/// Disturbances sent to the board.
-pub const DISTURBANCE: ChannelSpec = ChannelSpec {
-    topic: "/disturbance",
-    schema: "vic.Disturbance",
-    doc: "A disturbance for the board to apply",
-    fields: with_header![
-        f("kind", Kind::Int, "0 pulse, 1 load, 2 field, 3 noise"),
-        f(
-            "kind_name",
-            Kind::Str,
-            "pulse, load, field, noise or unknown"
-        ),
-        f("torque", Kind::Nums, "joint torque [N m] (pulse, load)"),
-        f("duration", Kind::Num, "pulse duration [s]"),
-        f("value", Kind::Num, "field beta [N/m] or noise factor"),
-    ],
-};
+header_channel! {
+    /// Control requests (reset, stop).
+    const CONTROL = ("/control", "vic.Control", "A control request to the board");
+    /// Encodes a control request.
+    fn control_json(c: &Control) {
+        kind: Int = c.kind, "0 reset, 1 stop";
+        kind_name: Str = control_kind_name(c.kind), "reset, stop or unknown";
+        trial: Int = c.trial, "trial";
+        seed: Int = c.seed, "noise seed";
+        start_ns: Int = c.start_ns, "trial start [ns, CLOCK_MONOTONIC]";
+        q0: Nums = c.q0, "initial joint angles [rad]";
+        qd0: Nums = c.qd0, "initial joint velocities [rad/s]";
+    }
+}
 
-/// Encodes a disturbance.
-pub fn disturbance_json(d: &Disturbance) -> Value {
-    let mut m = Map::new();
-    header_json(&d.header, &mut m);
-    let name = match DisturbanceKind::from_u32(d.kind) {
+fn disturbance_kind_name(kind: u32) -> &'static str {
+    match DisturbanceKind::from_u32(kind) {
         Some(DisturbanceKind::Pulse) => "pulse",
         Some(DisturbanceKind::Load) => "load",
         Some(DisturbanceKind::Field) => "field",
         Some(DisturbanceKind::Noise) => "noise",
         None => "unknown",
-    };
-    m.insert("kind".into(), json!(d.kind));
-    m.insert("kind_name".into(), json!(name));
-    m.insert("torque".into(), json!(d.torque));
-    m.insert("duration".into(), json!(d.duration_ns as f64 * 1e-9));
-    m.insert("value".into(), json!(d.value));
-    Value::Object(m)
+    }
 }
 
-const PERCENTILE_FIELDS: [Field; 5] = [
-    f("p50", Kind::Num, "median [µs]"),
-    f("p99", Kind::Num, "99th percentile [µs]"),
-    f("p999", Kind::Num, "99.9th percentile [µs]"),
-    f("max", Kind::Num, "maximum [µs]"),
-    f("count", Kind::Int, "values recorded"),
+header_channel! {
+    /// Disturbances sent to the board.
+    const DISTURBANCE = ("/disturbance", "vic.Disturbance", "A disturbance for the board to apply");
+    /// Encodes a disturbance.
+    fn disturbance_json(d: &Disturbance) {
+        kind: Int = d.kind, "0 pulse, 1 load, 2 field, 3 noise";
+        kind_name: Str = disturbance_kind_name(d.kind), "pulse, load, field, noise or unknown";
+        torque: Nums = d.torque, "joint torque [N m] (pulse, load)";
+        duration: Num = seconds(d.duration_ns), "pulse duration [s]";
+        value: Num = d.value, "field beta [N/m] or noise factor";
+    }
+}
+
+const PERCENTILE_FIELDS: &[Field] = fields![
+    p50: Num "median [µs]",
+    p99: Num "99th percentile [µs]",
+    p999: Num "99.9th percentile [µs]",
+    max: Num "maximum [µs]",
+    count: Int "values recorded",
 ];
 
 fn percentiles_json(p: &Percentiles) -> Value {
     json!({"p50": p.p50, "p99": p.p99, "p999": p.p999, "max": p.max, "count": p.count})
 }
 
-/// The board's telemetry (10 Hz).
-pub const TELEMETRY: ChannelSpec = ChannelSpec {
-    topic: "/telemetry",
-    schema: "vic.Telemetry",
-    doc: "The board's telemetry",
-    fields: with_header![
-        f("mode", Kind::Int, "0 idle, 1 running, 2 safe-hold, 3 fault"),
-        f("trial", Kind::Int, "trial"),
-        f("tick", Kind::Int, "board tick"),
-        f(
-            "tick_rate_hz",
-            Kind::Num,
-            "tick rate over the last interval [Hz]"
-        ),
-        f(
-            "jitter_us",
-            Kind::Obj(&PERCENTILE_FIELDS),
-            "wake-up lateness [µs]"
-        ),
-        f(
-            "work_us",
-            Kind::Obj(&PERCENTILE_FIELDS),
-            "tick work time [µs]"
-        ),
-        f(
-            "command_age_us",
-            Kind::Obj(&PERCENTILE_FIELDS),
-            "age of the command used [µs]"
-        ),
-        f(
-            "late_ticks",
-            Kind::Int,
-            "ticks that woke more than a period late"
-        ),
-        f("missed_periods", Kind::Int, "periods skipped"),
-        f("rejected_messages", Kind::Int, "messages rejected"),
-        f(
-            "rejected_by_reason",
-            Kind::Counts,
-            "messages rejected by reason"
-        ),
-        f(
-            "dropped_messages",
-            Kind::Int,
-            "messages lost before the board read them (sequence gaps per sender)"
-        ),
-        f("safe_hold_ticks", Kind::Int, "ticks in the safe hold"),
-        f(
-            "watchdog_trips",
-            Kind::Int,
-            "times the watchdog ramped to the hold"
-        ),
-        f(
-            "tracking_error",
-            Kind::Num,
-            "distance to the commanded equilibrium [rad]"
-        ),
-        f("stiffness", Kind::Nums, "stiffness [N m/rad]"),
-        f("tau_ext", Kind::Nums, "external torque [N m]"),
-        f("field_beta", Kind::Num, "divergent field beta [N/m]"),
-        f("noise_factor", Kind::Num, "noise factor"),
-        f(
-            "fault_reason",
-            Kind::Int,
-            "why the board is in fault (0: none)"
-        ),
-        f("disturbance_seq", Kind::Int, "last disturbance applied"),
-        f("disturbance_tick", Kind::Int, "tick it was applied at"),
-    ],
-};
-
-/// Encodes telemetry.
-pub fn telemetry_json(t: &Telemetry) -> Value {
-    let mut m = Map::new();
-    header_json(&t.header, &mut m);
-    let n = joints(t.joints);
-    m.insert("mode".into(), json!(t.mode));
-    m.insert("trial".into(), json!(t.trial));
-    m.insert("tick".into(), json!(t.tick));
-    m.insert("tick_rate_hz".into(), json!(t.tick_rate_hz));
-    m.insert("jitter_us".into(), percentiles_json(&t.jitter_us));
-    m.insert("work_us".into(), percentiles_json(&t.work_us));
-    m.insert("command_age_us".into(), percentiles_json(&t.command_age_us));
-    m.insert("late_ticks".into(), json!(t.late_ticks));
-    m.insert("missed_periods".into(), json!(t.missed_periods));
-    m.insert("rejected_messages".into(), json!(t.rejected_messages));
-    let reasons: Map<String, Value> = Rejection::ALL
+/// Rejected messages by the name of their reason.
+fn rejections_json(t: &Telemetry) -> Map<String, Value> {
+    Rejection::ALL
         .iter()
         .map(|r| {
             (
@@ -400,20 +275,39 @@ pub fn telemetry_json(t: &Telemetry) -> Value {
                 json!(t.rejected_by_reason[*r as usize]),
             )
         })
-        .collect();
-    m.insert("rejected_by_reason".into(), Value::Object(reasons));
-    m.insert("dropped_messages".into(), json!(t.dropped_messages));
-    m.insert("safe_hold_ticks".into(), json!(t.safe_hold_ticks));
-    m.insert("watchdog_trips".into(), json!(t.watchdog_trips));
-    m.insert("tracking_error".into(), json!(t.tracking_error));
-    m.insert("stiffness".into(), json!(&t.stiffness[..n]));
-    m.insert("tau_ext".into(), json!(&t.tau_ext[..n]));
-    m.insert("field_beta".into(), json!(t.field_beta));
-    m.insert("noise_factor".into(), json!(t.noise_factor));
-    m.insert("fault_reason".into(), json!(t.fault_reason));
-    m.insert("disturbance_seq".into(), json!(t.disturbance_seq));
-    m.insert("disturbance_tick".into(), json!(t.disturbance_tick));
-    Value::Object(m)
+        .collect()
+}
+
+header_channel! {
+    /// The board's telemetry (10 Hz).
+    const TELEMETRY = ("/telemetry", "vic.Telemetry", "The board's telemetry");
+    /// Encodes telemetry.
+    fn telemetry_json(t: &Telemetry) {
+        mode: Int = t.mode, "0 idle, 1 running, 2 safe-hold, 3 fault";
+        trial: Int = t.trial, "trial";
+        tick: Int = t.tick, "board tick";
+        tick_rate_hz: Num = t.tick_rate_hz, "tick rate over the last interval [Hz]";
+        jitter_us: Obj(PERCENTILE_FIELDS) = percentiles_json(&t.jitter_us), "wake-up lateness [µs]";
+        work_us: Obj(PERCENTILE_FIELDS) = percentiles_json(&t.work_us), "tick work time [µs]";
+        command_age_us: Obj(PERCENTILE_FIELDS) = percentiles_json(&t.command_age_us),
+            "age of the command used [µs]";
+        late_ticks: Int = t.late_ticks, "ticks that woke more than a period late";
+        missed_periods: Int = t.missed_periods, "periods skipped";
+        rejected_messages: Int = t.rejected_messages, "messages rejected";
+        rejected_by_reason: Counts = rejections_json(t), "messages rejected by reason";
+        dropped_messages: Int = t.dropped_messages,
+            "messages lost before the board read them (sequence gaps per sender)";
+        safe_hold_ticks: Int = t.safe_hold_ticks, "ticks in the safe hold";
+        watchdog_trips: Int = t.watchdog_trips, "times the watchdog ramped to the hold";
+        tracking_error: Num = t.tracking_error, "distance to the commanded equilibrium [rad]";
+        stiffness: Nums = per_joint(&t.stiffness, t.joints), "stiffness [N m/rad]";
+        tau_ext: Nums = per_joint(&t.tau_ext, t.joints), "external torque [N m]";
+        field_beta: Num = t.field_beta, "divergent field beta [N/m]";
+        noise_factor: Num = t.noise_factor, "noise factor";
+        fault_reason: Int = t.fault_reason, "why the board is in fault (0: none)";
+        disturbance_seq: Int = t.disturbance_seq, "last disturbance applied";
+        disturbance_tick: Int = t.disturbance_tick, "tick it was applied at";
+    }
 }
 
 /// A gap in a recording: ticks (or states) that did not reach the file.
@@ -421,10 +315,10 @@ pub const GAP: ChannelSpec = ChannelSpec {
     topic: "/gap",
     schema: "vic.Gap",
     doc: "Ticks missing from the recording just before this time",
-    fields: &[
-        f("first_tick", Kind::Int, "first tick missing"),
-        f("ticks", Kind::Int, "ticks missing"),
-        f("reason", Kind::Str, "why"),
+    fields: fields![
+        first_tick: Int "first tick missing",
+        ticks: Int "ticks missing",
+        reason: Str "why",
     ],
 };
 

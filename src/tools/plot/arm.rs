@@ -9,16 +9,10 @@ pub(super) const ARM_HAND_HEIGHT: u32 = 400;
 pub(super) const ARM_TIME_HEIGHT: u32 = 165;
 
 pub(super) struct ArmFigure<'a> {
-    pub(super) columns: &'a [ColumnPlot],
+    pub(super) axes: ColumnAxes<'a>,
     pub(super) stats: Vec<ArmStats>,
     /// Hand-path region shared by all columns (before equalising the axis scales).
     pub(super) hand_view: View,
-    pub(super) time: (f64, f64),
-    pub(super) angle: (f64, f64),
-    pub(super) velocity: (f64, f64),
-    pub(super) torque: (f64, f64),
-    /// None when no column has stiffness commands (the row is left out).
-    pub(super) stiffness: Option<(f64, f64)>,
 }
 
 /// Per knot: mean and standard deviation.
@@ -61,16 +55,10 @@ impl<'a> ArmFigure<'a> {
             false,
         );
         let velocity = shared_range(band_values(|s| &s.velocity), &[], false);
-        let (torque, stiffness) = command_ranges(columns);
         ArmFigure {
-            columns,
+            axes: ColumnAxes::new(columns, angle, velocity),
             hand_view: hand_view(columns, &stats),
             stats,
-            time: time_range(columns),
-            angle,
-            velocity,
-            torque,
-            stiffness,
         }
     }
 
@@ -79,7 +67,7 @@ impl<'a> ArmFigure<'a> {
         area: &DrawingArea<DB, Shift>,
         c: usize,
     ) -> DrawResult<(), DB> {
-        let col = &self.columns[c];
+        let col = &self.axes.columns[c];
         let stats = &self.stats[c];
         let area = titled(area, &col.title)?;
         let (w, h) = hand_chart(&area, self.hand_view)?
@@ -152,7 +140,7 @@ impl<'a> ArmFigure<'a> {
         c: usize,
         angles: bool,
     ) -> DrawResult<(), DB> {
-        let col = &self.columns[c];
+        let col = &self.axes.columns[c];
         let view = View::of(chart);
         let stats = if angles {
             &self.stats[c].angle
@@ -200,17 +188,13 @@ impl<'a> ArmFigure<'a> {
 impl ColumnFigure for ArmFigure<'_> {
     const LETTER_PANELS: [usize; 3] = [0, 1, 3];
 
-    fn columns(&self) -> &[ColumnPlot] {
-        self.columns
+    fn axes(&self) -> &ColumnAxes<'_> {
+        &self.axes
     }
 
     fn own_heights(&self) -> (Vec<u32>, u32) {
         let h = vec![ARM_HAND_HEIGHT, ARM_TIME_HEIGHT, ARM_TIME_HEIGHT];
         (h, ARM_TIME_HEIGHT)
-    }
-
-    fn command_ranges(&self) -> (Span, Span, Option<Span>) {
-        (self.time, self.torque, self.stiffness)
     }
 
     fn draw_own<DB: DrawingBackend>(
@@ -220,11 +204,11 @@ impl ColumnFigure for ArmFigure<'_> {
     ) -> DrawResult<(), DB> {
         self.draw_hand(&panels[0], c)?;
         let rows: [(&str, (f64, f64)); 2] = [
-            ("angle [deg]", self.angle),
-            ("velocity [deg/s]", self.velocity),
+            ("angle [deg]", self.axes.angle),
+            ("velocity [deg/s]", self.axes.velocity),
         ];
         for (r, (desc, range)) in rows.into_iter().enumerate() {
-            let mut chart = time_chart(&panels[1 + r], self.time, range, desc, false)?;
+            let mut chart = time_chart(&panels[1 + r], self.axes.time, range, desc, false)?;
             self.draw_joint_stats(&mut chart, c, r == 0)?;
         }
         Ok(())

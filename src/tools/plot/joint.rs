@@ -6,12 +6,7 @@ pub(super) const JOINT_ANGLE_HEIGHT: u32 = 280;
 pub(super) const JOINT_TIME_HEIGHT: u32 = 235;
 
 pub(super) struct JointFigure<'a> {
-    pub(super) columns: &'a [ColumnPlot],
-    pub(super) time: (f64, f64),
-    pub(super) angle: (f64, f64),
-    pub(super) velocity: (f64, f64),
-    pub(super) torque: (f64, f64),
-    pub(super) stiffness: Option<(f64, f64)>,
+    pub(super) axes: ColumnAxes<'a>,
 }
 
 impl<'a> JointFigure<'a> {
@@ -28,14 +23,10 @@ impl<'a> JointFigure<'a> {
                 })
                 .collect()
         };
-        let (torque, stiffness) = command_ranges(columns);
+        let angle = shared_range(trial_values(|c| &c.q), &reference_degrees(columns), false);
+        let velocity = shared_range(trial_values(|c| &c.qd), &[], false);
         JointFigure {
-            columns,
-            time: time_range(columns),
-            angle: shared_range(trial_values(|c| &c.q), &reference_degrees(columns), false),
-            velocity: shared_range(trial_values(|c| &c.qd), &[], false),
-            torque,
-            stiffness,
+            axes: ColumnAxes::new(columns, angle, velocity),
         }
     }
 
@@ -46,7 +37,7 @@ impl<'a> JointFigure<'a> {
         c: usize,
         angles: bool,
     ) -> DrawResult<(), DB> {
-        let col = &self.columns[c];
+        let col = &self.axes.columns[c];
         let view = View::of(chart);
         let data = if angles { &col.q } else { &col.qd };
         let mut drawn = Vec::new();
@@ -102,8 +93,8 @@ impl<'a> JointFigure<'a> {
 impl ColumnFigure for JointFigure<'_> {
     const LETTER_PANELS: [usize; 3] = [0, 1, 2];
 
-    fn columns(&self) -> &[ColumnPlot] {
-        self.columns
+    fn axes(&self) -> &ColumnAxes<'_> {
+        &self.axes
     }
 
     fn own_heights(&self) -> (Vec<u32>, u32) {
@@ -113,25 +104,16 @@ impl ColumnFigure for JointFigure<'_> {
         )
     }
 
-    fn command_ranges(&self) -> (Span, Span, Option<Span>) {
-        (self.time, self.torque, self.stiffness)
-    }
-
     fn draw_own<DB: DrawingBackend>(
         &self,
         c: usize,
         panels: &[DrawingArea<DB, Shift>],
     ) -> DrawResult<(), DB> {
-        let top = titled(&panels[0], &self.columns[c].title)?;
-        let mut chart = time_chart(&top, self.time, self.angle, "angle [deg]", false)?;
+        let a = &self.axes;
+        let top = titled(&panels[0], &a.columns[c].title)?;
+        let mut chart = time_chart(&top, a.time, a.angle, "angle [deg]", false)?;
         self.draw_trials(&mut chart, c, true)?;
-        let mut chart = time_chart(
-            &panels[1],
-            self.time,
-            self.velocity,
-            "velocity [deg/s]",
-            false,
-        )?;
+        let mut chart = time_chart(&panels[1], a.time, a.velocity, "velocity [deg/s]", false)?;
         self.draw_trials(&mut chart, c, false)
     }
 }

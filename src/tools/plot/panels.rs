@@ -197,17 +197,44 @@ pub(super) fn house_mesh<'m, 'a, 'b, DB: DrawingBackend>(
 /// An axis range `(low, high)`.
 pub(super) type Span = (f64, f64);
 
+/// What every column figure shares: its columns and the axis ranges common to all of them (the
+/// joint angle and velocity rows, and the command rows).
+pub(super) struct ColumnAxes<'a> {
+    pub(super) columns: &'a [ColumnPlot],
+    pub(super) time: Span,
+    pub(super) angle: Span,
+    pub(super) velocity: Span,
+    pub(super) torque: Span,
+    /// None when no column has stiffness commands (the row is left out).
+    pub(super) stiffness: Option<Span>,
+}
+
+impl<'a> ColumnAxes<'a> {
+    /// The time and command ranges of `columns`, with the figure's own angle and velocity ranges
+    /// (the arm's cover the trials' mean ± std bands, the joint's every trial).
+    pub(super) fn new(columns: &'a [ColumnPlot], angle: Span, velocity: Span) -> Self {
+        let (torque, stiffness) = command_ranges(columns);
+        ColumnAxes {
+            columns,
+            time: time_range(columns),
+            angle,
+            velocity,
+            torque,
+            stiffness,
+        }
+    }
+}
+
 /// A figure of plan columns side by side (Fig. 1 and Fig. 2): in each column the figure's own
 /// panels, then the command rows (torque, and stiffness when some column has stiffness
 /// commands), which the bottom panel's time-axis description closes.
 pub(super) trait ColumnFigure {
     /// The panels at which rows A, B and C start.
     const LETTER_PANELS: [usize; 3];
-    fn columns(&self) -> &[ColumnPlot];
+    /// The columns and their shared ranges.
+    fn axes(&self) -> &ColumnAxes<'_>;
     /// Pixel heights of the figure's own panels (above the command rows), and of a command row.
     fn own_heights(&self) -> (Vec<u32>, u32);
-    /// Time, torque and stiffness ranges of the command rows (shared by the columns).
-    fn command_ranges(&self) -> (Span, Span, Option<Span>);
     /// Draws column `c`'s own panels (the first `own_heights().0.len()` of `panels`).
     fn draw_own<DB: DrawingBackend>(
         &self,
@@ -219,7 +246,7 @@ pub(super) trait ColumnFigure {
     fn heights(&self) -> Vec<u32> {
         let (mut h, row) = self.own_heights();
         h.push(row);
-        if self.command_ranges().2.is_some() {
+        if self.axes().stiffness.is_some() {
             h.push(row);
         }
         // The bottom panel also holds the time axis' description.
@@ -230,22 +257,29 @@ pub(super) trait ColumnFigure {
 
 impl<F: ColumnFigure> Figure for F {
     fn size(&self) -> (u32, u32) {
-        columns_size(self.columns().len(), &self.heights())
+        columns_size(self.axes().columns.len(), &self.heights())
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
         let heights = self.heights();
         let own = self.own_heights().0.len();
-        let (time, torque, stiffness) = self.command_ranges();
+        let a = self.axes();
         draw_columns(
             root,
             &heights,
-            self.columns().len(),
+            a.columns.len(),
             F::LETTER_PANELS,
             |c, panels| {
                 self.draw_own(c, panels)?;
-                let column = &self.columns()[c];
-                draw_command_rows(&panels[own..], time, torque, stiffness, column, c == 0)
+                let column = &a.columns[c];
+                draw_command_rows(
+                    &panels[own..],
+                    a.time,
+                    a.torque,
+                    a.stiffness,
+                    column,
+                    c == 0,
+                )
             },
         )
     }

@@ -24,8 +24,9 @@ impl MomentDynamics<'_> {
         e.a.view_mut((0, 0), (n, n)).copy_from(&e.base.a);
         e.b.view_mut((0, 0), (n, m)).copy_from(&e.base.b);
         covariance_transition(e);
-        flow_hessian(base, k, z, u, e);
-        covariance_sensitivity(base, z, u, e);
+        let at = At::new(base, k, z, u);
+        flow_hessian(at, e);
+        covariance_sensitivity(at, e);
     }
 
     /// What the Newton model needs beyond [`MomentDynamics::expand`] (which must have run at the
@@ -52,10 +53,33 @@ impl MomentDynamics<'_> {
         costate_matrix(n, &lam_next[n..], &mut s.lam);
         s.t1.gemm(1.0, &s.lam, &s.base.a, 0.0);
         s.t2.gemm(1.0, &s.t1, &s.p, 0.0);
-        flow_control_hessian(base, k, z, u, s);
-        flow_third_contracted(base, k, z, u, s);
+        let at = At::new(base, k, z, u);
+        flow_control_hessian(at, s);
+        flow_third_contracted(at, s);
         if s.curved_model && base.nw() > 0 {
-            noise_gain_second_order(base, z, u, s);
+            noise_gain_second_order(at, s);
+        }
+    }
+}
+
+/// The point the moment step is differentiated at: knot `k`, the mean state `x` (the first `n`
+/// entries of the moment state `z`) and the control `u`. Every derivative below lifts `(x, u)`
+/// into dual numbers and evaluates the flow of `base` there.
+#[derive(Clone, Copy)]
+struct At<'a> {
+    base: &'a DiscreteDynamics,
+    k: usize,
+    x: &'a [f64],
+    u: &'a [f64],
+}
+
+impl<'a> At<'a> {
+    fn new(base: &'a DiscreteDynamics, k: usize, z: &'a [f64], u: &'a [f64]) -> Self {
+        At {
+            base,
+            k,
+            x: &z[..base.nx()],
+            u,
         }
     }
 }
@@ -97,9 +121,10 @@ fn covariance_transition(s: &mut MomentExpansion) {
 /// `dA_j = ∂A/∂(m,u)_j` from the second derivatives of the flow: column i of `dA_j` is
 /// `∂²Φ/∂v_j ∂x_i`, one nested-dual flow evaluation per pair. The pairs with both indices in the
 /// state are symmetric, so only `i ≤ j` is evaluated.
-fn flow_hessian(base: &DiscreteDynamics, k: usize, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+fn flow_hessian(at: At, s: &mut MomentExpansion) {
+    let At { base, k, x, u } = at;
     let (n, m) = (base.nx(), base.nu());
-    let (mut xdd, mut udd) = lift::<Dual<Dual64>>(&z[..n], u);
+    let (mut xdd, mut udd) = lift::<Dual<Dual64>>(x, u);
     let mut out = [Dual::from_re(Dual64::from(0.0)); MAX_NX];
     for j in 0..n + m {
         for i in 0..n {
@@ -135,13 +160,14 @@ fn seed_inner(x: &mut [Dual<Dual64>], u: &mut [Dual<Dual64>], n: usize, j: usize
 /// `∂P⁺/∂m_j` and `∂P⁺/∂u_j` into the covariance rows of `e.a`, `e.b`: `d(A P Aᵀ) = X + Xᵀ` with
 /// `X = dA (P Aᵀ)`, the same for each `Cx_i`, and `d(c cᵀ) = dc cᵀ + c dcᵀ` (`P Aᵀ` and
 /// `P Cx_iᵀ` do not depend on j).
-fn covariance_sensitivity(base: &DiscreteDynamics, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+fn covariance_sensitivity(at: At, s: &mut MomentExpansion) {
+    let At { base, x, u, .. } = at;
     let (n, m, nw) = (base.nx(), base.nu(), base.nw());
     let noisy = s.base.noise != NoiseKind::None;
     // P Aᵀ = (A P)ᵀ, P being symmetric.
     s.t1.gemm(1.0, &s.base.a, &s.p, 0.0);
     s.t1.transpose_to(&mut s.atl);
-    let (mut xd, mut ud) = lift::<Dual64>(&z[..n], u);
+    let (mut xd, mut ud) = lift::<Dual64>(x, u);
     let zero = Dual64::from(0.0);
     let mut g = [zero; MAX_NX * MAX_NW];
     let mut dgx = [zero; MAX_NX * MAX_NX * MAX_NW];
@@ -214,16 +240,11 @@ fn noise_sensitivity(s: &mut MomentExpansion, j: usize, i: usize, g: &[Dual64], 
 /// in its indices, so one evaluation per multiset `{x_c, v_a, v_b}` with a state index serves
 /// every ordered triple that permutes it (the canonical order: `a ≤ b`, and `c ≤ a` when `a` is
 /// a state).
-fn flow_third_contracted(
-    base: &DiscreteDynamics,
-    k: usize,
-    z: &[f64],
-    u: &[f64],
-    s: &mut MomentExpansion,
-) {
+fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
+    let At { base, k, x, u } = at;
     let (n, m) = (base.nx(), base.nu());
     let nv = n + m;
-    let (mut x3, mut u3) = lift::<Dual<Dual<Dual64>>>(&z[..n], u);
+    let (mut x3, mut u3) = lift::<Dual<Dual<Dual64>>>(x, u);
     let mut out = [Dual::from_re(Dual::from_re(Dual64::from(0.0))); MAX_NX];
     s.h3.fill(0.0);
     let mut d = [0.0; MAX_NX];
@@ -288,15 +309,10 @@ fn contract_triple(s: &mut MomentExpansion, n: usize, [c, a, b]: [usize; 3], d: 
 }
 
 /// `∂²Φ/∂u_a∂u_b` into `s.phi_uu` by nested duals, each unordered pair once.
-fn flow_control_hessian(
-    base: &DiscreteDynamics,
-    k: usize,
-    z: &[f64],
-    u: &[f64],
-    s: &mut MomentExpansion,
-) {
+fn flow_control_hessian(at: At, s: &mut MomentExpansion) {
+    let At { base, k, x, u } = at;
     let (n, m) = (base.nx(), base.nu());
-    let (x2, mut u2) = lift::<Dual<Dual64>>(&z[..n], u);
+    let (x2, mut u2) = lift::<Dual<Dual64>>(x, u);
     let mut out = [Dual::from_re(Dual64::from(0.0)); MAX_NX];
     for a in 0..m {
         for b in a..m {
@@ -316,10 +332,11 @@ fn flow_control_hessian(
 /// The second derivatives of the noise gain `c_i` and of its state Jacobian `Cx_i` over
 /// `v = (m, u)` (a gain nonlinear in the state: torque noise through `M⁻¹(q)`), by nested duals,
 /// each unordered pair once.
-fn noise_gain_second_order(base: &DiscreteDynamics, z: &[f64], u: &[f64], s: &mut MomentExpansion) {
+fn noise_gain_second_order(at: At, s: &mut MomentExpansion) {
+    let At { base, x, u, .. } = at;
     let (n, m, nw) = (base.nx(), base.nu(), base.nw());
     let nv = n + m;
-    let (mut x2, mut u2) = lift::<Dual<Dual64>>(&z[..n], u);
+    let (mut x2, mut u2) = lift::<Dual<Dual64>>(x, u);
     let zero = Dual::from_re(Dual64::from(0.0));
     let mut g = [zero; MAX_NX * MAX_NW];
     let mut dgx = [zero; MAX_NX * MAX_NX * MAX_NW];
