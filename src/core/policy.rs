@@ -80,7 +80,9 @@ pub enum Strategy {
     Predictor,
     /// The open-loop plan of torque and stiffness (SOOC), no central feedback.
     Stiffness,
-    /// The plan's torque and stiffness plus the predictor's feedback on top.
+    /// The plan's torque and stiffness plus the predictor's feedback on top. (In JSON too it is
+    /// called as on the command line.)
+    #[serde(rename = "stiffness+predictor")]
     StiffnessPredictor,
     /// Receding-horizon stiffness planning: the SOOC plan re-solved every central period from
     /// the present predicted over the commands in flight ([`Feedback::Replan`]).
@@ -283,5 +285,20 @@ pub fn predict_present<'a>(
     for (j, u) in applied.into_iter().enumerate() {
         dynamics.step(seen_knot + j, &out[..n], u, &mut next[..n]);
         out[..n].copy_from_slice(&next[..n]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Strategy;
+
+    #[test]
+    fn a_strategy_has_one_name_on_the_command_line_and_in_json() {
+        for s in Strategy::ALL {
+            let json = serde_json::to_string(&s).unwrap();
+            assert_eq!(json, format!("\"{}\"", s.name()));
+            assert_eq!(serde_json::from_str::<Strategy>(&json).unwrap(), s);
+            assert_eq!(Strategy::from_name(s.name()), Ok(s));
+        }
     }
 }
