@@ -293,14 +293,14 @@ give.
 **Replanning and feedback on top of stiffness.** `replan` re-solves the stiffness plan every \
 20 ms from the present predicted over the latency. On the arm in the divergent field it ends \
 closer to the target than the stiffness plan at every latency (2.6–4.3 mm against 5.3 mm) and \
-never loses a trial, and its expected cost stays within about 15 % of the stiffness plan's; its \
-final error even shrinks at the longest latencies, where it re-solves fewer times and later in \
-the movement. On the single joint, without a field, replanning buys a lower expected cost only \
+never loses a trial; its expected cost is lower than the stiffness plan's up to 100 ms and at \
+most 13 % higher beyond. Its final error even shrinks at the longest latencies, where its first \
+re-solve comes later in the movement (why that helps is not analysed yet). On the single joint, without a field, replanning buys a lower expected cost only \
 at short latencies and ends a little farther from the target than the plan it replans: there the \
 plan made in advance is already close to what a re-solve from a stale, noisy prediction can \
 give. `stiffness+predictor` (an undelayed ILQG plan with stiffness, its gains on the predicted \
-present) improves the final error at short latencies, but its feedback also drives the \
-stiffness, which chatters between its bounds: its expected cost is several times the stiffness \
+present) improves the arm's final error at short latencies, but its feedback also drives the \
+stiffness (on the arm it chatters between its bounds): its expected cost is several times the stiffness \
 plan's at every latency, the trap of optimising a feedback policy over the stiffness (the \
 open-loop SOOC plan does better). Live, `replan` re-solves on a worker thread one period ahead, \
 so a re-solve slower than the period delays the new plan rather than the slices (`vic demo`).";
