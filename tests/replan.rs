@@ -6,7 +6,7 @@
 //! the same lead.
 
 use std::path::Path;
-use vic::core::policy::{Feedback, Strategy};
+use vic::core::policy::{Feedback, Policy, Strategy};
 use vic::core::replan::{Executor, ReplanOptions, Replanner};
 use vic::planning::evaluation::summarize;
 use vic::planning::montecarlo::{
@@ -15,7 +15,9 @@ use vic::planning::montecarlo::{
 use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::Board;
-use vic::rt::central::{Central, Timing, Track, lockstep, split_latency_ms};
+use vic::rt::central::{
+    Central, ReplanTiming, Timing, Track, TrialRecord, lockstep, split_latency_ms,
+};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -34,67 +36,96 @@ fn planned(file: &str, method: Method, extra: &[&str]) -> (Scenario, Setup, Plan
     (s, set, p)
 }
 
-#[test]
-fn lockstep_replans_exactly_like_the_monte_carlo() {
-    // No noise: nothing random is left, so the central controller in lockstep and the Monte
-    // Carlo must produce the same trajectory (as for the predictor, tests/central_predictor.rs).
-    // The joint starts 3° off the plan's start: the re-solves have something to correct.
+/// The single joint without noise (nothing random is left), planned by SOOC, its start 3° off the
+/// plan's so that the re-solves have something to correct: the scenario, the setup with that
+/// start and the plan's policy.
+fn quiet_joint_off_start() -> (Scenario, Setup, Policy) {
     let (s, mut set, p) = planned("single_joint_delay.toml", Method::Sooc, &["noise.sigma=0"]);
     set.x0[0] += 3f64.to_radians();
-    let x0 = set.x0.clone();
-    let latency_ms = 100.0;
-    let steps = 10;
     let policy = p.policy(&set).unwrap();
-    let mc = &run_trials(
-        &set,
-        &policy,
-        Feedback::Replan {
-            latency_steps: steps,
-        },
-        1,
-        5,
-    )[0];
-    let open = &run_trials(&set, &policy, Feedback::OpenLoop, 1, 5)[0];
-    let track = Track::new(policy, set.dynamics.clone(), set.cost.clone(), &x0).unwrap();
+    (s, set, policy)
+}
+
+/// Feedback latency of the lockstep tests [ms] and in plan steps.
+const LATENCY_MS: f64 = 100.0;
+const LATENCY_STEPS: usize = 10;
+
+/// One trial of the replanning central controller and the board in lockstep from `set.x0`;
+/// `background`: the re-solves on the worker thread, waited for at each period.
+fn replan_in_lockstep(
+    s: &Scenario,
+    set: &Setup,
+    policy: Policy,
+    background: bool,
+) -> (TrialRecord, ReplanTiming) {
+    let track = Track::new(policy, set.dynamics.clone(), set.cost.clone(), &set.x0).unwrap();
     let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
-    let (sensor, command) = split_latency_ms(latency_ms, lookahead_ms);
+    let (sensor, command) = split_latency_ms(LATENCY_MS, lookahead_ms);
     let timing = Timing {
-        latency_steps: steps,
+        latency_steps: LATENCY_STEPS,
         sensor_latency_ns: (sensor * 1e6) as u64,
         command_latency_ns: (command * 1e6) as u64,
         lookahead_ns: (lookahead_ms * 1e6) as u64,
     };
     let mut central = Central::new(track, Strategy::Replan, timing);
     // On the simulated clock the law is executed whatever a re-solve takes on the real one (a
-    // re-solve takes longer than the 20 ms period on a loaded machine: live, such periods
-    // overrun and resend the previous slice, which this test is not about).
+    // re-solve takes longer than the 20 ms period on a loaded machine, which these tests are
+    // not about).
     central.set_compute_budget_ns(u64::MAX);
-    let cfg = vic::tools::launch::board_config(&s, 1_000_000);
-    let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
-    let rec = &lockstep(&mut board, &mut central, 1_000_000, PLANNER_PERIOD_NS, 1, 5)[0];
+    if background {
+        central.replan_in_background(true);
+    }
+    let cfg = vic::tools::launch::board_config(s, 1_000_000);
+    let mut board = Board::new(s.model.clone(), cfg, &set.x0).expect("board");
+    let rec = lockstep(&mut board, &mut central, 1_000_000, PLANNER_PERIOD_NS, 1, 5).remove(0);
     assert!(!rec.safe_hold && !rec.fault && rec.missing_states == 0);
     assert_eq!(rec.stale_feedback, 0, "states arrived late");
-    let n = mc.x.len() - 1;
-    let target = set.reference[n].q_d[0];
-    let miss = |t: &Trial| (t.x[n][0] - target).abs().to_degrees();
-    let worst = rec
-        .x
+    let replan = central.compute_timing().replan;
+    (
+        rec,
+        replan.expect("the replan strategy reports its re-solves"),
+    )
+}
+
+/// Checks that lockstep sent the Monte Carlo's commands; returns the largest difference of the
+/// joint angle between the two trajectories [deg].
+fn same_execution(rec: &TrialRecord, mc: &Trial) -> f64 {
+    for (a, b) in rec.u.iter().zip(&mc.u) {
+        assert!((a - b).amax() < 1e-6 * (1.0 + b.amax()), "{a} vs {b}");
+    }
+    rec.x
         .iter()
         .zip(&mc.x)
         .map(|(a, b)| (a[0] - b[0]).abs().to_degrees())
-        .fold(0.0, f64::max);
-    let timing = central.compute_timing();
-    let replan = timing
-        .replan
-        .expect("the replan strategy reports its re-solves");
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn lockstep_replans_exactly_like_the_monte_carlo() {
+    // As for the predictor (tests/central_predictor.rs): without noise the central controller in
+    // lockstep and the Monte Carlo must produce the same trajectory.
+    let (s, set, policy) = quiet_joint_off_start();
+    let feedback = Feedback::Replan {
+        latency_steps: LATENCY_STEPS,
+    };
+    let mc = &run_trials(&set, &policy, feedback, 1, 5)[0];
+    let open = &run_trials(&set, &policy, Feedback::OpenLoop, 1, 5)[0];
+    let (rec, replan) = replan_in_lockstep(&s, &set, policy, false);
+    let n = mc.x.len() - 1;
+    let target = set.reference[n].q_d[0];
+    let miss = |t: &Trial| (t.x[n][0] - target).abs().to_degrees();
+    let worst = same_execution(&rec, mc);
     eprintln!(
         "lockstep − Monte Carlo {worst:.2e}°; final miss replan {:.4}°, open loop {:.4}°; \
          {replan:?}",
         miss(mc),
         miss(open)
     );
+    assert!(worst < 1e-3, "trajectories differ by {worst}°");
     // One re-solve per 20 ms period from the first state seen (knot 10) to the last but one.
-    let expected = (steps..n - 1).filter(|k| k % 2 == 0 && *k > 0).count();
+    let expected = (LATENCY_STEPS..n - 1)
+        .filter(|k| k % 2 == 0 && *k > 0)
+        .count();
     assert_eq!(replan.stats.solves, expected);
     assert!(replan.stats.accepted > 0);
     assert!(replan.solve_us.p50 > 0.0 && replan.solve_us.p99 >= replan.solve_us.p50);
@@ -105,26 +136,18 @@ fn lockstep_replans_exactly_like_the_monte_carlo() {
         miss(mc),
         miss(open)
     );
-    assert!(worst < 1e-3, "trajectories differ by {worst}°");
-    for (a, b) in rec.u.iter().zip(&mc.u) {
-        assert!((a - b).amax() < 1e-6 * (1.0 + b.amax()), "{a} vs {b}");
-    }
 }
 
 #[test]
 fn replanning_in_the_background_executes_the_monte_carlo_law_one_period_ahead() {
-    // As above (no noise, 3° off the start), but the central controller re-solves on a worker
-    // thread from the state predicted one period (2 knots) ahead and adopts the result at that
-    // knot; `wait` makes lockstep wait for each re-solve at the next period. The Monte Carlo
-    // with the same lead must then produce the same commands and trajectory.
-    let (s, mut set, p) = planned("single_joint_delay.toml", Method::Sooc, &["noise.sigma=0"]);
-    set.x0[0] += 3f64.to_radians();
-    let x0 = set.x0.clone();
-    let steps = 10;
+    // The central controller re-solves on a worker thread from the state predicted one period
+    // (2 knots) ahead and adopts the result at that knot; lockstep waits for each re-solve at the
+    // next period. The Monte Carlo with the same lead must produce the same commands and
+    // trajectory.
+    let (s, set, policy) = quiet_joint_off_start();
     let feedback = Feedback::Replan {
-        latency_steps: steps,
+        latency_steps: LATENCY_STEPS,
     };
-    let policy = p.policy(&set).unwrap();
     let mc_with_lead = |lead_steps: usize| {
         let options = ReplanOptions {
             lead_steps,
@@ -133,43 +156,19 @@ fn replanning_in_the_background_executes_the_monte_carlo_law_one_period_ahead() 
         let replanner = Replanner::new(&policy, &set.dynamics, &set.cost, options);
         let mut exec = Executor::Replan(Box::new(replanner));
         let d = &set.dynamics;
-        run_trial_on(d, d, &set.cost, &x0, &mut exec, feedback, 5, 0)
+        run_trial_on(d, d, &set.cost, &set.x0, &mut exec, feedback, 5, 0)
     };
     let (mc, mc_at_once) = (mc_with_lead(2), mc_with_lead(0));
-    let track = Track::new(policy.clone(), set.dynamics.clone(), set.cost.clone(), &x0).unwrap();
-    let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
-    let (sensor, command) = split_latency_ms(100.0, lookahead_ms);
-    let timing = Timing {
-        latency_steps: steps,
-        sensor_latency_ns: (sensor * 1e6) as u64,
-        command_latency_ns: (command * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
-    let mut central = Central::new(track, Strategy::Replan, timing);
-    central.set_compute_budget_ns(u64::MAX);
-    central.replan_in_background(true);
-    let cfg = vic::tools::launch::board_config(&s, 1_000_000);
-    let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
-    let rec = &lockstep(&mut board, &mut central, 1_000_000, PLANNER_PERIOD_NS, 1, 5)[0];
-    assert!(!rec.safe_hold && !rec.fault && rec.missing_states == 0);
-    let replan = central.compute_timing().replan.expect("re-solves reported");
+    let (rec, replan) = replan_in_lockstep(&s, &set, policy.clone(), true);
     let n = mc.x.len() - 1;
     eprintln!("{replan:?}");
+    let worst = same_execution(&rec, &mc);
+    assert!(worst < 1e-3, "trajectories differ by {worst}°");
     // One re-solve per period from the first state seen, while its knot (2 ahead) is not the last.
-    let expected = (steps..n - 3).filter(|k| k % 2 == 0).count();
+    let expected = (LATENCY_STEPS..n - 3).filter(|k| k % 2 == 0).count();
     assert_eq!(replan.stats.solves, expected);
     assert!(replan.stats.accepted > 0);
     assert_eq!((replan.late, replan.skipped), (0, 0));
-    let worst = rec
-        .x
-        .iter()
-        .zip(&mc.x)
-        .map(|(a, b)| (a[0] - b[0]).abs().to_degrees())
-        .fold(0.0, f64::max);
-    assert!(worst < 1e-3, "trajectories differ by {worst}°");
-    for (a, b) in rec.u.iter().zip(&mc.u) {
-        assert!((a - b).amax() < 1e-6 * (1.0 + b.amax()), "{a} vs {b}");
-    }
     // The lead matters: re-solving at once executes other commands.
     let moved =
         mc.u.iter()
