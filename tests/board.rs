@@ -347,3 +347,58 @@ fn pulse_shows_in_the_state_at_the_tick_it_is_applied() {
     let o = b.step(5_000_000, &mut inp);
     assert_eq!(o.state.tau_ext, [0.0, 0.0]);
 }
+
+#[test]
+fn an_idle_board_holds_its_posture_and_a_push_springs_back() {
+    // No trial (no central process, or after a stop): the plant runs under the hold law, the
+    // hold stiffness at its posture with gravity compensated, so a push moves the arm and it
+    // springs back; a pending reset freezes it at the reset state.
+    let (mut b, q0) = board();
+    let cfg = b.config().clone();
+    let mut inp = Inputs::default();
+    let ms = 1_000_000;
+    let mut now = 1_000 * ms;
+    let dist = |s: &StateMsg| ((s.q[0] - q0[0]).powi(2) + (s.q[1] - q0[1]).powi(2)).sqrt();
+    let run = |b: &mut Board, inp: &mut Inputs, now: &mut u64, ticks: u64| {
+        let mut peak: f64 = 0.0;
+        let mut last = StateMsg::default();
+        for _ in 0..ticks {
+            *now += ms;
+            last = b.step(*now, inp).state;
+            assert_eq!(last.mode, Mode::Idle as u32);
+            peak = peak.max(dist(&last));
+        }
+        (peak, last)
+    };
+    let (quiet, s) = run(&mut b, &mut inp, &mut now, 300);
+    assert_eq!(s.stiffness[..2], [cfg.hold_stiffness; 2]);
+    inp.push_disturbance(&Disturbance {
+        header: Header::new(7, now),
+        kind: DisturbanceKind::Pulse as u32,
+        torque: [2.0, -1.0],
+        duration_ns: 50 * ms,
+        ..Default::default()
+    });
+    let (pushed, _) = run(&mut b, &mut inp, &mut now, 100);
+    let (_, end) = run(&mut b, &mut inp, &mut now, 1500);
+    eprintln!(
+        "idle: quiet {quiet:.2e} rad, pushed {pushed:.2e} rad, after 1.5 s {:.2e} rad",
+        dist(&end)
+    );
+    assert!(pushed > 10.0 * quiet.max(1e-6), "the push moved nothing");
+    assert!(dist(&end) < 0.1 * pushed, "it did not spring back");
+    assert_eq!(b.counters.watchdog_trips, 0, "idle is no watchdog trip");
+    // A reset pending: frozen at the reset state until the trial starts.
+    now += ms;
+    let mut c = reset(q0, now + 50 * ms);
+    c.header = Header::new(1, now);
+    inp.push_control(&c);
+    let first = b.step(now, &mut inp).state;
+    for _ in 0..20 {
+        now += ms;
+        let s = b.step(now, &mut inp).state;
+        assert_eq!(s.mode, Mode::Idle as u32);
+        assert_eq!((s.q, s.qd), (first.q, first.qd));
+    }
+    assert_eq!(first.q[..2], q0);
+}

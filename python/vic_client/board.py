@@ -380,7 +380,7 @@ class Board:
         return self._ack(header.seq, "reset_seq", wait)
 
     def stop(self):
-        """Freezes the plant (idle) until the next reset."""
+        """Ends the trial: the board goes idle, holding the arm at its posture, until the next reset."""
         self._control_pub.send_copy(Control(header=self._header(), kind=ControlKind.STOP))
 
     # -- lifetime ----------------------------------------------------------------------------

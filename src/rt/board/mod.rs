@@ -386,8 +386,10 @@ impl Board {
             self.supervisor = Supervisor::new(self.plant.hold_target(&self.cfg));
             self.counters.resets += 1;
         } else if self.supervisor.mode != Mode::Fault {
-            // Stop freezes the plant; a latched fault stays latched (and held).
-            self.supervisor.mode = Mode::Idle;
+            // Stop: no trial; the plant ramps into the hold at its present posture and holds it
+            // (idle). A latched fault stays latched (and held).
+            let (from, t) = (self.supervisor.last_knot, self.trial_time_ns);
+            self.supervisor.idle(from, t, &self.plant, &self.cfg);
             self.start_ns = None;
         }
     }
@@ -475,7 +477,17 @@ impl Board {
                 self.plant_ns = now_ns;
             }
             (Mode::Running | Mode::SafeHold | Mode::Fault, _) => self.advance(now_ns, &mut out),
-            _ => {}
+            (Mode::Idle, None) => {
+                // No trial: the plant holds its posture under the hold law (the supervisor's
+                // idle knot), so a push moves the arm and it springs back. The first tick only
+                // starts the plant's clock.
+                if self.plant_ns == 0 {
+                    self.plant_ns = now_ns;
+                }
+                self.advance(now_ns, &mut out);
+            }
+            // A reset is pending: frozen at the reset state, which the trial starts from.
+            (Mode::Idle, Some(_)) => {}
         }
         out.state = self.state_msg(now_ns);
         out

@@ -76,7 +76,8 @@ pub(super) struct Supervisor {
 }
 
 impl Supervisor {
-    /// Idle, with the last knot the hold at the plant's present position.
+    /// Idle, with the last knot the hold at the plant's present position (and the idle plant
+    /// held there).
     pub fn new(last_knot: Knot) -> Self {
         Supervisor {
             mode: Mode::Idle,
@@ -85,10 +86,17 @@ impl Supervisor {
             last_knot,
             last_cover_ns: 0,
             fresh_ns: None,
-            hold_from: Knot::default(),
-            hold_to: Knot::default(),
+            hold_from: last_knot,
+            hold_to: last_knot,
             hold_start_ns: 0,
         }
+    }
+
+    /// No trial (a stop): idle, ramping from the knot `from` into the hold at the plant's
+    /// position from trial time `t` on, as the safe hold does.
+    pub fn idle(&mut self, from: Knot, t: u64, plant: &SimulatedPlant, cfg: &BoardConfig) {
+        self.mode = Mode::Idle;
+        self.begin_hold(from, t, plant, cfg);
     }
 
     /// Starts the ramp from the knot `from` to the safe hold at the plant's position, at trial
@@ -138,7 +146,8 @@ impl Supervisor {
         counters: &mut Counters,
         command_age_ns: &mut Option<u64>,
     ) -> Knot {
-        if self.mode == Mode::Fault {
+        if matches!(self.mode, Mode::Fault | Mode::Idle) {
+            // Idle (no trial) holds as the fault does; neither is a watchdog trip.
             return self.hold_knot(t, cfg);
         }
         let start_ns = now_ns.saturating_sub(cfg.period_ns);

@@ -76,7 +76,8 @@ impl Header {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
 pub enum Mode {
-    /// Plant frozen at its reset state, waiting for the trial start or a command.
+    /// No trial: the plant holds its posture under the hold law (a push moves it, it springs
+    /// back); after a reset, frozen at the reset state until the trial start.
     Idle = 0,
     /// Following a valid command.
     Running = 1,
@@ -285,7 +286,7 @@ pub enum ControlKind {
     /// Put the plant at `q0`, `qd0`, reseed the noise from `(seed, trial)`, wait for the trial to
     /// start at the board tick on or after `start_ns` (monotonic).
     Reset = 0,
-    /// Stop the trial: freeze the plant (idle).
+    /// Stop the trial: idle, the plant ramped into the hold at its posture.
     Stop = 1,
 }
 
