@@ -11,7 +11,8 @@
 //!   `vic monitor` on a terminal, with the `tui` feature), [`experiment`] (the paper's
 //!   figures), [`sweep`] (delay versus stiffness over latencies), [`identify`] (noise
 //!   identification), [`plot`], [`bench`], [`report`] (a live run's results) and [`launch`]
-//!   (turning a scenario into the board's and the central controller's configuration).
+//!   (turning a scenario into the board's and the central controller's configuration), [`logging`]
+//!   (the daemons' `tracing` output).
 
 pub mod bench;
 pub mod bench_command;
@@ -25,6 +26,7 @@ pub mod experiment;
 pub mod identify;
 pub mod identify_command;
 pub mod launch;
+pub mod logging;
 #[cfg(feature = "tui")]
 pub mod monitor;
 pub mod operator;
