@@ -2,11 +2,16 @@
 //! controller in lockstep executes exactly what the Monte Carlo executes, and at 200 ms of latency
 //! in the divergent field it ends no farther from the target than the `stiffness` playback after
 //! a torque pulse it could not know of, and closer than the best delayed feedback (`predictor`).
+//! Re-solving on a worker thread one period ahead (as live) executes the Monte Carlo's law with
+//! the same lead.
 
 use std::path::Path;
 use vic::core::policy::{Feedback, Strategy};
+use vic::core::replan::{Executor, ReplanOptions, Replanner};
 use vic::planning::evaluation::summarize;
-use vic::planning::montecarlo::{Pulse, Trial, position, run_trials, run_trials_disturbed};
+use vic::planning::montecarlo::{
+    Pulse, Trial, position, run_trial_on, run_trials, run_trials_disturbed,
+};
 use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::Board;
@@ -104,6 +109,74 @@ fn lockstep_replans_exactly_like_the_monte_carlo() {
     for (a, b) in rec.u.iter().zip(&mc.u) {
         assert!((a - b).amax() < 1e-6 * (1.0 + b.amax()), "{a} vs {b}");
     }
+}
+
+#[test]
+fn replanning_in_the_background_executes_the_monte_carlo_law_one_period_ahead() {
+    // As above (no noise, 3° off the start), but the central controller re-solves on a worker
+    // thread from the state predicted one period (2 knots) ahead and adopts the result at that
+    // knot; `wait` makes lockstep wait for each re-solve at the next period. The Monte Carlo
+    // with the same lead must then produce the same commands and trajectory.
+    let (s, mut set, p) = planned("single_joint_delay.toml", Method::Sooc, &["noise.sigma=0"]);
+    set.x0[0] += 3f64.to_radians();
+    let x0 = set.x0.clone();
+    let steps = 10;
+    let feedback = Feedback::Replan {
+        latency_steps: steps,
+    };
+    let policy = p.policy(&set).unwrap();
+    let mc_with_lead = |lead_steps: usize| {
+        let options = ReplanOptions {
+            lead_steps,
+            ..ReplanOptions::at_50_hz(set.dynamics.dt)
+        };
+        let replanner = Replanner::new(&policy, &set.dynamics, &set.cost, options);
+        let mut exec = Executor::Replan(Box::new(replanner));
+        let d = &set.dynamics;
+        run_trial_on(d, d, &set.cost, &x0, &mut exec, feedback, 5, 0)
+    };
+    let (mc, mc_at_once) = (mc_with_lead(2), mc_with_lead(0));
+    let track = Track::new(policy.clone(), set.dynamics.clone(), set.cost.clone(), &x0).unwrap();
+    let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
+    let (sensor, command) = split_latency_ms(100.0, lookahead_ms);
+    let timing = Timing {
+        latency_steps: steps,
+        sensor_latency_ns: (sensor * 1e6) as u64,
+        command_latency_ns: (command * 1e6) as u64,
+        lookahead_ns: (lookahead_ms * 1e6) as u64,
+    };
+    let mut central = Central::new(track, Strategy::Replan, timing);
+    central.set_compute_budget_ns(u64::MAX);
+    central.replan_in_background(true);
+    let cfg = vic::tools::launch::board_config(&s, 1_000_000);
+    let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
+    let rec = &lockstep(&mut board, &mut central, 1_000_000, PLANNER_PERIOD_NS, 1, 5)[0];
+    assert!(!rec.safe_hold && !rec.fault && rec.missing_states == 0);
+    let replan = central.compute_timing().replan.expect("re-solves reported");
+    let n = mc.x.len() - 1;
+    eprintln!("{replan:?}");
+    // One re-solve per period from the first state seen, while its knot (2 ahead) is not the last.
+    let expected = (steps..n - 3).filter(|k| k % 2 == 0).count();
+    assert_eq!(replan.stats.solves, expected);
+    assert!(replan.stats.accepted > 0);
+    assert_eq!((replan.late, replan.skipped), (0, 0));
+    let worst = rec
+        .x
+        .iter()
+        .zip(&mc.x)
+        .map(|(a, b)| (a[0] - b[0]).abs().to_degrees())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-3, "trajectories differ by {worst}°");
+    for (a, b) in rec.u.iter().zip(&mc.u) {
+        assert!((a - b).amax() < 1e-6 * (1.0 + b.amax()), "{a} vs {b}");
+    }
+    // The lead matters: re-solving at once executes other commands.
+    let moved =
+        mc.u.iter()
+            .zip(&mc_at_once.u)
+            .map(|(a, b)| (a - b).amax())
+            .fold(0.0, f64::max);
+    assert!(moved > 1e-6, "the lead changed nothing ({moved})");
 }
 
 /// Largest distance of the mean hand path from the reference [mm].

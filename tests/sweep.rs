@@ -2,7 +2,7 @@
 //! ordering the paper's argument rests on.
 
 use std::path::Path;
-use vic::tools::sweep::{Strategy, SweepOptions, sweep_latency, write_figure};
+use vic::tools::sweep::{Execution, Strategy, SweepOptions, sweep_latency, write_figure};
 
 const STRATEGIES: [Strategy; 3] = [
     Strategy::NaiveDelayed,
@@ -20,6 +20,7 @@ fn the_sweep_orders_the_strategies_as_the_paper_argues() {
         seed: 3,
         divergence: None,
         pulse: None,
+        execution: Default::default(),
     };
     let sweep = sweep_latency(&path, &[], &opts, &|_| {}).expect("sweep");
     assert_eq!(sweep.points.len(), 9);
@@ -64,4 +65,68 @@ fn the_sweep_orders_the_strategies_as_the_paper_argues() {
     if std::env::var_os("VIC_KEEP_FIGURES").is_none() {
         std::fs::remove_dir_all(&dir).unwrap();
     }
+}
+
+#[test]
+fn the_lockstep_sweep_runs_the_real_time_code_and_matches_the_monte_carlo_without_noise() {
+    // Without noise nothing random is left: the board and the central controller in lockstep
+    // (the latency in their delay lines, at least the slices' 60 ms of lookahead) must end where
+    // the Monte Carlo ends and cost what it costs, strategy by strategy (the replanner re-solves
+    // inline). The strategies end apart, so a mix-up shows.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/single_joint_delay.toml");
+    let quiet = ["noise.sigma=0".to_string()];
+    let mut opts = SweepOptions {
+        latencies_ms: vec![100.0, 200.0],
+        strategies: vec![Strategy::Predictor, Strategy::Stiffness, Strategy::Replan],
+        trials: 2,
+        seed: 3,
+        divergence: None,
+        pulse: None,
+        execution: Execution::Offline,
+    };
+    let offline = sweep_latency(&path, &quiet, &opts, &|_| {}).expect("offline sweep");
+    opts.execution = Execution::Lockstep;
+    let lockstep = sweep_latency(&path, &quiet, &opts, &|_| {}).expect("lockstep sweep");
+    assert_eq!(lockstep.execution, Execution::Lockstep);
+    assert_eq!(offline.points.len(), 6);
+    let close = |x: Option<f64>, y: Option<f64>| {
+        let (x, y) = (x.unwrap(), y.unwrap());
+        (x - y).abs() <= 1e-6 * x.abs().max(y.abs()) + 1e-9
+    };
+    for (a, b) in offline.points.iter().zip(&lockstep.points) {
+        assert_eq!((a.strategy, a.latency_ms), (b.strategy, b.latency_ms));
+        eprintln!(
+            "{} {} ms: final offline {:?} lockstep {:?}; E[C] {:?} / {:?}",
+            a.strategy.name(),
+            a.latency_ms,
+            a.final_error_mean,
+            b.final_error_mean,
+            a.expected_cost_mc,
+            b.expected_cost_mc
+        );
+        assert_eq!(a.diverged, b.diverged);
+        assert!(close(a.final_error_mean, b.final_error_mean));
+        assert!(close(a.rms_error, b.rms_error));
+        assert!(close(a.expected_cost_mc, b.expected_cost_mc));
+    }
+    // With noise, the paper's claim in the real-time code: at 200 ms Eq. 13 loses its trials,
+    // the stiffness plan none.
+    opts.latencies_ms = vec![200.0];
+    opts.strategies = vec![Strategy::NaiveDelayed, Strategy::Stiffness];
+    opts.trials = 4;
+    let noisy = sweep_latency(&path, &[], &opts, &|_| {}).expect("noisy lockstep sweep");
+    assert!(
+        noisy.points[0].diverged_fraction > 0.5,
+        "{:?}",
+        noisy.points[0]
+    );
+    assert_eq!(noisy.points[1].diverged, 0, "{:?}", noisy.points[1]);
+    // The pulse is the offline plant's: refused in lockstep as bad input.
+    opts.pulse = Some(vic::tools::sweep::Pulse {
+        torque: [1.0, 0.0],
+        start: 0.4,
+        duration: 0.05,
+    });
+    let e = sweep_latency(&path, &[], &opts, &|_| {}).unwrap_err();
+    assert!(e.is_input(), "{e}");
 }

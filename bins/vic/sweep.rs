@@ -3,7 +3,7 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use vic::tools::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
-use vic::tools::sweep::{Pulse, Strategy, SweepOptions, sweep_latency, write_figure};
+use vic::tools::sweep::{Execution, Pulse, Strategy, SweepOptions, sweep_latency, write_figure};
 
 #[derive(clap::Args)]
 pub struct SweepArgs {
@@ -13,7 +13,8 @@ pub struct SweepArgs {
 
 #[derive(clap::Subcommand)]
 enum SweepWhat {
-    /// Final error against the feedback latency, per strategy (Monte Carlo, offline).
+    /// Final error against the feedback latency, per strategy (Monte Carlo, offline; or the
+    /// board and the central controller in lockstep).
     ///
     /// Example: vic sweep latency --config config/single_joint_delay.toml --latencies 0,50,200
     /// --out-dir sweep
@@ -53,6 +54,11 @@ struct LatencyArgs {
     /// How long the pulse lasts [ms].
     #[arg(long, value_name = "MS", default_value_t = 50.0)]
     pulse_ms: f64,
+    /// Run each point's trials through the real-time code instead of the Monte Carlo: the 1 kHz
+    /// board (its own plant integration) and the 50 Hz central controller (the latency in its
+    /// delay lines) in lockstep on a simulated clock. Deterministic; no pulse.
+    #[arg(long)]
+    lockstep: bool,
     /// Write the figure (sweep.png, sweep.svg) and the numbers (sweep.json) into this folder.
     #[arg(long, value_name = "DIR")]
     out_dir: Option<PathBuf>,
@@ -92,6 +98,11 @@ impl SweepArgs {
             seed: a.seed.seed,
             divergence: a.divergence,
             pulse,
+            execution: if a.lockstep {
+                Execution::Lockstep
+            } else {
+                Execution::Offline
+            },
         };
         let quiet = a.json.json;
         let sweep = sweep_latency(&a.scenario.config, &a.scenario.set.overrides, &opts, &|p| {
@@ -121,7 +132,7 @@ impl SweepArgs {
         let unit = sweep.points.first().map_or("", |p| p.unit.name());
         let show = |v: Option<f64>| v.map_or("diverged".to_string(), |v| format!("{v:.3}"));
         println!(
-            "{:<14} {:>8} {:>14} {:>14} {:>10} {:>12} {:>9}",
+            "{:<19} {:>8} {:>14} {:>14} {:>10} {:>12} {:>9}",
             "strategy",
             "latency",
             format!("final [{unit}]"),
@@ -132,7 +143,7 @@ impl SweepArgs {
         );
         for p in &sweep.points {
             println!(
-                "{:<14} {:>5} ms {:>14} {:>14} {:>9.0}% {:>12} {:>9.1}",
+                "{:<19} {:>5} ms {:>14} {:>14} {:>9.0}% {:>12} {:>9.1}",
                 p.strategy.name(),
                 p.latency_ms,
                 show(p.final_error_mean),

@@ -26,6 +26,7 @@
 use crate::core::cost::TrackingCost;
 use crate::core::dynamics::{DiscreteDynamics, Dynamics};
 use crate::core::policy::{Policy, predict_present};
+use crate::core::scalar::MAX_NX;
 use crate::core::solver::Problem;
 use crate::core::solver::sooc::{MomentCost, MomentDynamics};
 use crate::core::solver::sooc_newton::{SoocOptions, SoocProblem, SoocSolver, SoocStop};
@@ -47,6 +48,13 @@ pub struct ReplanOptions {
     pub period_steps: usize,
     /// Newton iterations per re-solve.
     pub max_iterations: usize,
+    /// Knots between the measurement a re-solve starts from and the knot its commands take over
+    /// (0: at once). A controller whose re-solve takes up to a period plans from the state
+    /// predicted `lead_steps` ahead over the commands it will send meanwhile (the old plan's),
+    /// and adopts the result at that knot: the law a background re-solve executes (the live
+    /// central controller, [`Replanner::predict_for`]).
+    #[serde(default)]
+    pub lead_steps: usize,
 }
 
 impl ReplanOptions {
@@ -56,6 +64,7 @@ impl ReplanOptions {
         ReplanOptions {
             period_steps: ((CENTRAL_PERIOD_S / dt).round() as usize).max(1),
             max_iterations: REPLAN_MAX_ITERATIONS,
+            lead_steps: 0,
         }
     }
 }
@@ -74,6 +83,28 @@ pub struct ReplanStats {
     pub kept_old: usize,
     /// Newton iterations over all re-solves.
     pub iterations: usize,
+}
+
+impl ReplanStats {
+    /// What happened between `before` and now.
+    pub fn since(&self, before: &ReplanStats) -> ReplanStats {
+        ReplanStats {
+            solves: self.solves - before.solves,
+            accepted: self.accepted - before.accepted,
+            converged: self.converged - before.converged,
+            kept_old: self.kept_old - before.kept_old,
+            iterations: self.iterations - before.iterations,
+        }
+    }
+
+    /// Adds `other`'s counts.
+    pub fn add(&mut self, other: &ReplanStats) {
+        self.solves += other.solves;
+        self.accepted += other.accepted;
+        self.converged += other.converged;
+        self.kept_old += other.kept_old;
+        self.iterations += other.iterations;
+    }
 }
 
 /// How one re-solve ended.
@@ -142,7 +173,8 @@ impl Replanner {
 
     /// The command of knot `k` for a controller holding the state `x` of knot `seen` (or none
     /// yet), the commands `applied` since (knots `seen..k`): at a replanning knot, predicts the
-    /// present over them into `scratch` (`≥ nx`) and re-solves from it; then the plan's command.
+    /// state of the knot the re-solve takes over at into `scratch` (`≥ nx`, see
+    /// [`Replanner::predict_for`]) and re-solves from it; then the plan's command.
     /// Returns the re-solve's outcome, if one ran.
     pub fn command_into<'a>(
         &mut self,
@@ -152,15 +184,62 @@ impl Replanner {
         scratch: &mut [f64],
         u: &mut [f64],
     ) -> Option<ReplanOutcome> {
-        let outcome = match seen {
-            Some((l, x)) if self.replans_at(k) => {
-                predict_present(&self.dynamics, l, x, applied, scratch);
-                Some(self.replan_from(k, &scratch[..x.len()]))
-            }
-            _ => None,
-        };
+        let nx = seen.map_or(0, |(_, x)| x.len());
+        let outcome = self
+            .predict_for(k, seen, applied, scratch)
+            .map(|k0| self.replan_from(k0, &scratch[..nx]));
         self.plan.control_into(k, None, u);
         outcome
+    }
+
+    /// At a replanning knot `k` with a state seen: the knot `k0 = k + lead_steps` a re-solve
+    /// takes over at, and its predicted state in `scratch` — the present predicted from the state
+    /// of knot `seen` over the commands `applied` since (knots `seen..k`), then over the plan's
+    /// own commands of knots `k..k0` (what the controller sends while it re-solves). `None`
+    /// where no re-solve runs (not a replanning knot, no state yet, or `k0` at the end).
+    pub fn predict_for<'a>(
+        &self,
+        k: usize,
+        seen: Option<(usize, &[f64])>,
+        applied: impl IntoIterator<Item = &'a [f64]>,
+        scratch: &mut [f64],
+    ) -> Option<usize> {
+        let (l, x) = seen.filter(|_| self.replans_at(k))?;
+        let k0 = k + self.options.lead_steps;
+        if k0 + 1 >= self.plan.steps() {
+            return None;
+        }
+        predict_present(&self.dynamics, l, x, applied, scratch);
+        if k0 > k {
+            let n = x.len();
+            let mut present = [0.0; MAX_NX];
+            present[..n].copy_from_slice(&scratch[..n]);
+            let ahead = self.plan.acting[k..k0].iter().map(|u| u.as_slice());
+            predict_present(&self.dynamics, k, &present[..n], ahead, scratch);
+        }
+        Some(k0)
+    }
+
+    /// The plan's command of knot `k` (no re-solve).
+    pub fn plan_command_into(&self, k: usize, u: &mut [f64]) {
+        self.plan.control_into(k, None, u);
+    }
+
+    /// The plan's commands from knot `k0` on: the warm start of a re-solve made elsewhere.
+    pub fn tail(&self, k0: usize) -> &[DVector<f64>] {
+        &self.plan.acting[k0..]
+    }
+
+    /// Writes `commands` (a plan from knot `k0`) over the plan's commands of knots `from..`
+    /// (`from ≥ k0`: the knots before `from` were already sent).
+    pub fn adopt(&mut self, k0: usize, from: usize, commands: &[DVector<f64>]) {
+        let skip = from.saturating_sub(k0);
+        for (a, u) in self.plan.acting[k0 + skip..]
+            .iter_mut()
+            .zip(commands.iter().skip(skip))
+        {
+            a.copy_from(u);
+        }
     }
 
     /// Re-solves the open-loop problem from the state `x` at knot `k0` to the end of the

@@ -64,7 +64,7 @@ pub struct SoocResult {
 /// default is the full noise at once; see the configuration).
 pub fn solve_sooc(
     setup: &Setup,
-    solver: &crate::planning::scenario::IlqgSection,
+    solver: &crate::planning::scenario::SolverSection,
     warm: &[DVector<f64>],
     progress: &Option<ProgressFn>,
 ) -> Result<SoocResult, PlanError> {

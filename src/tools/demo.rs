@@ -1,7 +1,9 @@
 //! `vic demo`: the real-time pair end to end. It plans the strategies of the delay experiment
 //! (SOOC torque and stiffness for `stiffness`; ILQG for the latency with zero stiffness for
 //! `naive-delayed`, Eq. 13; undelayed ILQG with zero stiffness for `predictor`, which predicts
-//! across the latency, and for the reference row: naive-delayed at 0 ms), starts a `vic-board`
+//! across the latency, and for the reference row: naive-delayed at 0 ms; undelayed ILQG with
+//! stiffness for `stiffness+predictor`; `replan` re-solves the SOOC plan every period on a worker
+//! thread beside the 50 Hz loop), starts a `vic-board`
 //! and one `vic-planner` per strategy in a fresh namespace with the same noise seeds, stops the
 //! board so that it prints its timing, and merges everything into one table or JSON document.
 //! The trials' hand paths (joint angles for a single joint) per strategy go into a figure beside
@@ -73,7 +75,10 @@ pub struct DemoOptions {
 
 /// The plan files of the strategies.
 struct DemoPlans {
+    /// SOOC: `stiffness` and `replan`.
     stiffness: PathBuf,
+    /// Undelayed ILQG with stiffness allowed: `stiffness+predictor`.
+    stiffness_feedback: PathBuf,
     feedback: PathBuf,
     /// Delayed feedback planned for, and run at, 0 ms (absent when the latency is 0 already).
     feedback_at_zero: Option<PathBuf>,
@@ -244,6 +249,13 @@ fn plan_strategies(o: &DemoOptions, store: &PlanStore) -> anyhow::Result<DemoPla
     std::thread::scope(|s| {
         let stiffness = s
             .spawn(|| given_or_planned(&o.stiffness_plan, &o.scenario.set.overrides, Method::Sooc));
+        let stiffness_feedback = s.spawn(|| {
+            let strategy = Strategy::StiffnessPredictor;
+            let mut overrides = o.scenario.set.overrides.clone();
+            overrides.extend(crate::tools::sweep::plan_overrides(strategy, o.latency_ms));
+            let method = crate::tools::sweep::method(strategy);
+            store.plan(&o.scenario.config, &overrides, method)
+        });
         let feedback = given_or_planned(&o.feedback_plan, &feedback_overrides, Method::Ilqg);
         let feedback_at_zero = if o.latency_ms == 0.0 {
             Ok(None)
@@ -253,8 +265,12 @@ fn plan_strategies(o: &DemoOptions, store: &PlanStore) -> anyhow::Result<DemoPla
                 .map(Some)
         };
         let stiffness = stiffness.join().map_err(|_| anyhow!("planning panicked"))?;
+        let stiffness_feedback = stiffness_feedback
+            .join()
+            .map_err(|_| anyhow!("planning panicked"))?;
         Ok(DemoPlans {
             stiffness: stiffness?,
+            stiffness_feedback: stiffness_feedback?,
             feedback: feedback?,
             feedback_at_zero: feedback_at_zero?,
         })
@@ -262,7 +278,7 @@ fn plan_strategies(o: &DemoOptions, store: &PlanStore) -> anyhow::Result<DemoPla
 }
 
 /// The rows: naive-delayed at 0 ms (the reference, planner at 250 Hz so that its own loop adds
-/// only a few ms), then naive-delayed, predictor and stiffness at the latency (50 Hz).
+/// only a few ms), then the five strategies at the latency (50 Hz).
 fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'a>> {
     let at = |strategy, plan, latency_ms, rate_hz| StrategyRun {
         strategy,
@@ -285,6 +301,13 @@ fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'
     ));
     runs.push(at(Strategy::Predictor, undelayed, o.latency_ms, 50));
     runs.push(at(Strategy::Stiffness, &plans.stiffness, o.latency_ms, 50));
+    runs.push(at(
+        Strategy::StiffnessPredictor,
+        &plans.stiffness_feedback,
+        o.latency_ms,
+        50,
+    ));
+    runs.push(at(Strategy::Replan, &plans.stiffness, o.latency_ms, 50));
     runs
 }
 
@@ -413,7 +436,7 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
         .first()
         .map_or(crate::planning::unit::Unit::Millimetre, |r| r.unit);
     println!(
-        "{:<17} {:>8} {:>11} {:>12} {:>11} {:>9} {:>26} {:>8}",
+        "{:<19} {:>8} {:>11} {:>12} {:>11} {:>9} {:>26} {:>8}",
         "strategy",
         "latency",
         "RMS error",
@@ -428,7 +451,7 @@ fn print_table(results: &[StrategyResult], stats: &Value) {
     for r in results {
         let c = &r.central.compute_us;
         println!(
-            "{:<17} {:>5} ms {:>11} {:>12} {:>11} {:>5} / {:<2} {:>8.1} /{:>7.1} /{:>8.1} {:>8}",
+            "{:<19} {:>5} ms {:>11} {:>12} {:>11} {:>5} / {:<2} {:>8.1} /{:>7.1} /{:>8.1} {:>8}",
             r.name,
             r.latency_ms,
             f(r.rms_error),

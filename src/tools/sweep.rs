@@ -9,6 +9,10 @@
 //! `replan` (the SOOC plan re-solved at 50 Hz from the predicted present,
 //! [`crate::core::replan`]). With a [`Pulse`], every trial of every strategy receives the same
 //! torque pulse, which no controller knows of.
+//!
+//! Each point's trials run offline (the Monte Carlo on the plan's grid, Eq. 10) or, with
+//! [`Execution::Lockstep`], through the real-time code: the 1 kHz board with its own plant
+//! integration and the 50 Hz central controller with its delay lines, on a simulated clock.
 
 pub use crate::core::policy::Strategy;
 use crate::planning::evaluation::{predicted_cost, summarize};
@@ -36,12 +40,28 @@ pub enum SweepError {
         latency_ms: f64,
         source: PlanError,
     },
+    /// The plan cannot run on the board in lockstep (an actuator the board does not run).
+    #[error("{strategy} at {latency_ms} ms in lockstep: {source}")]
+    Lockstep {
+        strategy: &'static str,
+        latency_ms: f64,
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// A pulse is a disturbance of the offline plant; the board takes its own (`vic inject`).
+    #[error("--pulse runs offline only (the lockstep board takes no scripted pulse yet)")]
+    PulseInLockstep,
 }
 
 impl SweepError {
     /// Whether the user's input (scenario, overrides, latencies) is at fault, not the run.
     pub fn is_input(&self) -> bool {
-        matches!(self, SweepError::Config(_) | SweepError::Latency { .. })
+        matches!(
+            self,
+            SweepError::Config(_)
+                | SweepError::Latency { .. }
+                | SweepError::Lockstep { .. }
+                | SweepError::PulseInLockstep
+        )
     }
 }
 
@@ -85,6 +105,21 @@ pub struct SweepOptions {
     /// A torque pulse on the plant mid-movement, the same for every strategy and unknown to
     /// every controller (the disturbance-rejection variant).
     pub pulse: Option<Pulse>,
+    /// How each point's trials run.
+    pub execution: Execution,
+}
+
+/// How a point's trials run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Execution {
+    /// The Monte Carlo: the plan's model on its grid (Euler–Maruyama, Eq. 10).
+    #[default]
+    Offline,
+    /// The board (1 kHz, paper Eq. 4 and its own plant step) and the central controller
+    /// (50 Hz, the latency split into its sensor and command delay lines) in lockstep on a
+    /// simulated clock: the code that runs live, deterministic and as fast as it computes.
+    Lockstep,
 }
 
 /// One strategy at one latency. The errors and the Monte Carlo cost are over the trials that did
@@ -115,6 +150,9 @@ pub struct Sweep {
     pub scenario: String,
     pub trials: usize,
     pub seed: u64,
+    /// How the trials ran.
+    #[serde(default)]
+    pub execution: Execution,
     /// The pulse every trial received, if any.
     #[serde(default)]
     pub pulse: Option<Pulse>,
@@ -134,6 +172,9 @@ pub fn sweep_latency(
 ) -> Result<Sweep, SweepError> {
     // (method, plan overrides) → the scenario and its plan; a handful of entries at most.
     type PlanKey = (Method, Vec<String>);
+    if opts.execution == Execution::Lockstep && opts.pulse.is_some() {
+        return Err(SweepError::PulseInLockstep);
+    }
     let mut plans: Vec<(PlanKey, (Scenario, PlanFile))> = Vec::new();
     let mut points = Vec::new();
     for &strategy in &opts.strategies {
@@ -160,14 +201,24 @@ pub fn sweep_latency(
             let steps = latency_steps(latency_ms, s.task.dt)?;
             let feedback = strategy.feedback(steps);
             let policy = p.policy(&set).map_err(plan_error)?;
-            let trials = run_trials_disturbed(
-                &set,
-                &policy,
-                feedback,
-                opts.pulse.as_ref(),
-                opts.trials,
-                opts.seed,
-            );
+            let trials = match opts.execution {
+                Execution::Offline => run_trials_disturbed(
+                    &set,
+                    &policy,
+                    feedback,
+                    opts.pulse.as_ref(),
+                    opts.trials,
+                    opts.seed,
+                ),
+                Execution::Lockstep => {
+                    let point = Point {
+                        strategy,
+                        latency_ms,
+                        latency_steps: steps,
+                    };
+                    lockstep_trials(s, &set, p, point, opts)?
+                }
+            };
             let divergence = opts
                 .divergence
                 .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
@@ -191,9 +242,62 @@ pub fn sweep_latency(
         scenario: path.display().to_string(),
         trials: opts.trials,
         seed: opts.seed,
+        execution: opts.execution,
         pulse: opts.pulse,
         points,
     })
+}
+
+/// One point of the sweep.
+#[derive(Debug, Clone, Copy)]
+struct Point {
+    strategy: Strategy,
+    latency_ms: f64,
+    latency_steps: usize,
+}
+
+/// The board's period and the central controller's in lockstep [ns] (1 kHz, 50 Hz).
+const BOARD_PERIOD_NS: u64 = 1_000_000;
+const CENTRAL_PERIOD_NS: u64 = 20_000_000;
+
+/// A point's trials through the board and the central controller in lockstep, as `vic-planner
+/// --lockstep` runs them: the latency split into the sensor and command delay lines beside the
+/// slices' lookahead of two periods.
+fn lockstep_trials(
+    s: &Scenario,
+    set: &crate::planning::plan::Setup,
+    plan: &PlanFile,
+    point: Point,
+    opts: &SweepOptions,
+) -> Result<Vec<crate::planning::montecarlo::Trial>, SweepError> {
+    use crate::rt::central::{Central, Timing, lockstep, split_latency_ms};
+    let fail = |e: Box<dyn std::error::Error + Send + Sync>| SweepError::Lockstep {
+        strategy: point.strategy.name(),
+        latency_ms: point.latency_ms,
+        source: e,
+    };
+    let track = crate::tools::launch::track(plan, set).map_err(|e| fail(e.into()))?;
+    let lookahead_ms = 2.0 * CENTRAL_PERIOD_NS as f64 * 1e-6;
+    let (sensor_ms, command_ms) = split_latency_ms(point.latency_ms, lookahead_ms);
+    let timing = Timing {
+        latency_steps: point.latency_steps,
+        sensor_latency_ns: (sensor_ms * 1e6) as u64,
+        command_latency_ns: (command_ms * 1e6) as u64,
+        lookahead_ns: (lookahead_ms * 1e6) as u64,
+    };
+    let mut central = Central::new(track, point.strategy, timing);
+    let cfg = crate::tools::launch::board_config(s, BOARD_PERIOD_NS);
+    let mut board =
+        crate::rt::board::Board::new(s.model.clone(), cfg, &set.x0).map_err(|e| fail(e.into()))?;
+    let records = lockstep(
+        &mut board,
+        &mut central,
+        BOARD_PERIOD_NS,
+        CENTRAL_PERIOD_NS,
+        opts.trials,
+        opts.seed,
+    );
+    Ok(crate::tools::report::to_trials(set, &records))
 }
 
 /// A latency in whole plan steps.

@@ -17,7 +17,7 @@ mod validate;
 
 pub use board::{BOARD_RANGES, BoardRange, BoardSection, JOINT_LIMIT_RAD};
 pub use error::ConfigError;
-pub use solver::IlqgSection;
+pub use solver::SolverSection;
 
 use crate::core::dynamics::Integrator;
 use crate::core::model::ArmModel;
@@ -79,7 +79,7 @@ pub struct Scenario {
     pub task: Task,
     pub bounds: Bounds,
     pub initial_stiffness: f64,
-    pub solver: IlqgSection,
+    pub solver: SolverSection,
     /// The live board's limits (`[board]`).
     pub board: BoardSection,
     /// The configuration after overrides, as resolved (written into plan files).

@@ -7,7 +7,7 @@ use crate::planning::method::Method;
 
 /// The `[solver]` section: the method and the solver's options (every key optional).
 #[derive(Debug, Clone, PartialEq)]
-pub struct IlqgSection {
+pub struct SolverSection {
     /// The planning method.
     pub method: Method,
     pub options: IlqgOptions,
@@ -18,10 +18,10 @@ pub struct IlqgSection {
     pub noise_continuation: Vec<f64>,
 }
 
-impl Default for IlqgSection {
+impl Default for SolverSection {
     fn default() -> Self {
         let raw = RawSolver::default();
-        IlqgSection {
+        SolverSection {
             method: raw.method,
             options: raw.options(),
             noise_continuation: raw.noise_continuation,
@@ -46,7 +46,7 @@ impl RawSolver {
 
     /// Checks the options: the continuation must end at the full noise, the iteration limit and
     /// the regularisation must leave the solver room to work.
-    pub(super) fn resolve(self, check: &FileCheck) -> Result<IlqgSection, ConfigError> {
+    pub(super) fn resolve(self, check: &FileCheck) -> Result<SolverSection, ConfigError> {
         let fractions = &self.noise_continuation;
         if fractions.last() != Some(&1.0) || fractions.iter().any(|f| !(f.is_finite() && *f > 0.0))
         {
@@ -62,7 +62,7 @@ impl RawSolver {
         check.non_negative(self.tolerance, "solver", "tolerance")?;
         check.non_negative(self.mu_init, "solver", "mu_init")?;
         check.positive(self.mu_max, "solver", "mu_max")?;
-        Ok(IlqgSection {
+        Ok(SolverSection {
             method: self.method,
             options: self.options(),
             noise_continuation: self.noise_continuation,

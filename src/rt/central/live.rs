@@ -52,7 +52,8 @@ impl LiveError {
 
 /// Runs `trials` trials live: waits for a board in the namespace, then for each trial resets it,
 /// checks the reset is acknowledged, streams the slices at the planner period and collects the
-/// states until the movement's end. Stops with [`LiveError::BoardLost`] when the board falls
+/// states until the movement's end. The `replan` strategy re-solves on a worker thread
+/// ([`Central::replan_in_background`]). Stops with [`LiveError::BoardLost`] when the board falls
 /// silent, keeping the trials finished before.
 pub fn run_live(
     ep: &CentralPorts,
@@ -64,6 +65,8 @@ pub fn run_live(
     stop: &AtomicBool,
 ) -> Result<Vec<TrialRecord>, LiveError> {
     crate::rt::realtime::set_timer_slack_1ns();
+    // Live, a re-solve may take longer than the period: it runs beside the loop.
+    central.replan_in_background(false);
     let mut records = Vec::with_capacity(trials);
     let lost_after = (BOARD_LOST_PERIODS * planner_period_ns).max(BOARD_LOST_MIN_NS);
     for trial in 0..trials as u32 {

@@ -20,10 +20,12 @@ pub use crate::core::policy::Strategy;
 use crate::core::policy::{Feedback, Policy};
 use crate::core::replan::{Executor, ReplanOptions, ReplanStats, Replanner};
 use crate::core::scalar::{MAX_NU, MAX_NX};
+mod background;
 mod live;
+mod lockstep;
 pub use live::{LiveError, run_live};
+pub use lockstep::lockstep;
 
-use crate::rt::board::{Board, Inputs};
 use crate::rt::realtime::LatencyHistogram;
 use crate::rt::transport::{
     CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, Percentiles,
@@ -181,6 +183,8 @@ pub struct Central {
     /// Its re-solves over all trials, and their compute time [ns] (real clock).
     replan_stats: ReplanStats,
     replan_time: LatencyHistogram,
+    /// Where the re-solves run when not inline ([`Central::replan_in_background`]).
+    background: Option<background::Background>,
 }
 
 /// How long the central controller's periods took to compute, over all its trials.
@@ -203,6 +207,12 @@ pub struct ReplanTiming {
     /// Time of one re-solve [µs] (real clock): one per planner period.
     pub solve_us: Percentiles,
     pub stats: ReplanStats,
+    /// In the background ([`Central::replan_in_background`]): re-solves adopted after the knot
+    /// they were made for, and replanning knots skipped because a re-solve was still running.
+    #[serde(default)]
+    pub late: u64,
+    #[serde(default)]
+    pub skipped: u64,
 }
 
 impl Central {
@@ -253,7 +263,19 @@ impl Central {
             replanner,
             replan_stats: ReplanStats::default(),
             replan_time: LatencyHistogram::new(),
+            background: None,
             track,
+        }
+    }
+
+    /// Runs the `replan` strategy's re-solves on a worker thread, one period ahead (see
+    /// [`background`]'s module documentation): a re-solve longer than the period then never holds
+    /// the slices back. `wait` waits for each at the next period (deterministic, for lockstep and
+    /// tests). Nothing for the other strategies.
+    pub fn replan_in_background(&mut self, wait: bool) {
+        if let Some(r) = &mut self.replanner {
+            r.options.lead_steps = r.options.period_steps;
+            self.background = Some(background::Background::start(r, wait));
         }
     }
 
@@ -278,6 +300,8 @@ impl Central {
             replan: self.replanner.as_ref().map(|_| ReplanTiming {
                 solve_us: self.replan_time.percentiles(),
                 stats: self.replan_stats,
+                late: self.background.as_ref().map_or(0, |b| b.late),
+                skipped: self.background.as_ref().map_or(0, |b| b.skipped),
             }),
         }
     }
@@ -301,6 +325,9 @@ impl Central {
         self.last_slice = None;
         if let Some(r) = &mut self.replanner {
             r.reset();
+        }
+        if let Some(b) = &mut self.background {
+            b.begin_trial();
         }
         let dof = self.track.dof;
         self.control_seq += 1;
@@ -407,22 +434,18 @@ impl Central {
         let seen = seen.as_ref().map(|(l, x)| (*l, &x[..nx]));
         // The commands in flight: the controller sent them, so it knows them exactly.
         let applied = self.sent_u[from..k].iter().map(|u| &u[..nu]);
-        match &mut self.replanner {
-            Some(r) => {
+        match (&mut self.replanner, &mut self.background) {
+            (Some(r), Some(b)) => b.command_into(r, k, seen, applied, &mut predicted, &mut u),
+            (Some(r), None) => {
                 let t0 = (self.clock)();
                 let before = r.stats;
                 r.command_into(k, seen, applied, &mut predicted, &mut u);
                 if r.stats.solves > before.solves {
                     self.replan_time.record((self.clock)().saturating_sub(t0));
-                    let s = &mut self.replan_stats;
-                    s.solves += 1;
-                    s.accepted += r.stats.accepted - before.accepted;
-                    s.converged += r.stats.converged - before.converged;
-                    s.kept_old += r.stats.kept_old - before.kept_old;
-                    s.iterations += r.stats.iterations - before.iterations;
+                    self.replan_stats.add(&r.stats.since(&before));
                 }
             }
-            None => Executor::Plan {
+            (None, _) => Executor::Plan {
                 policy: &t.policy,
                 feedback,
             }
@@ -453,6 +476,10 @@ impl Central {
     /// computed, late, go out with the next period's slice.
     pub fn poll(&mut self, now_ns: u64, out: &mut Vec<CommandSlice>) {
         let t0 = (self.clock)();
+        if let (Some(b), Some(r)) = (&mut self.background, &mut self.replanner) {
+            let (stats, time) = (&mut self.replan_stats, &mut self.replan_time);
+            b.collect(r, self.knots.len(), stats, time);
+        }
         while let Some(&(release, k, x)) = self.sensor_line.front() {
             if release > now_ns {
                 break;
@@ -560,53 +587,6 @@ impl Central {
             stalled: self.stalled || !self.trial_done(),
         }
     }
-}
-
-/// Runs `trials` trials of the board and the central controller in lockstep on a simulated clock
-/// (no sleeping, deterministic): the board ticks every `board.period`, the controller every
-/// `planner_period_ns`, messages arrive instantly (the delay lines still apply).
-pub fn lockstep(
-    board: &mut Board,
-    central: &mut Central,
-    board_period_ns: u64,
-    planner_period_ns: u64,
-    trials: usize,
-    seed: u64,
-) -> Vec<TrialRecord> {
-    // Simulated time: the real clock still measures the compute time, but decides no overrun.
-    central.real_clock_overruns = false;
-    let mut now: u64 = 1_000_000_000;
-    let mut inputs = Inputs::default();
-    let mut out = Vec::new();
-    let mut records = Vec::with_capacity(trials);
-    for trial in 0..trials as u32 {
-        let start = (now + central.lead_time_ns(planner_period_ns)).div_ceil(board_period_ns)
-            * board_period_ns;
-        let reset = central.begin_trial(trial, seed, start, now);
-        inputs.push_control(&reset);
-        let limit = start + (central.track.steps as u64 + 50) * central.track.dt_ns;
-        while now < limit {
-            if now.is_multiple_of(planner_period_ns) {
-                out.clear();
-                central.poll(now, &mut out);
-                for c in &out {
-                    inputs.push_command(c);
-                }
-            }
-            let o = board.step(now, &mut inputs);
-            central.on_state(&o.state, now);
-            now += board_period_ns;
-            if central.trial_done() {
-                break;
-            }
-        }
-        inputs.push_control(&central.stop(now));
-        board.step(now, &mut inputs);
-        now += board_period_ns;
-        now = now.div_ceil(planner_period_ns) * planner_period_ns;
-        records.push(central.record());
-    }
-    records
 }
 
 /// The default split of a feedback latency into the sensor and command delay lines [ms]: what

@@ -8,13 +8,8 @@ use std::path::{Path, PathBuf};
 
 /// The latencies of the section [ms].
 pub const LATENCIES_MS: [f64; 7] = [0.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0];
-/// The strategies of the section (`stiffness+predictor` is not planned jointly yet, `replan` does
-/// not exist yet: neither is shown).
-pub const STRATEGIES: [Strategy; 3] = [
-    Strategy::NaiveDelayed,
-    Strategy::Predictor,
-    Strategy::Stiffness,
-];
+/// The strategies of the section: all five.
+pub const STRATEGIES: [Strategy; 5] = Strategy::ALL;
 
 /// One scenario's sweep.
 #[derive(Debug, Clone)]
@@ -56,6 +51,7 @@ pub fn run_delay_sweeps(
         seed,
         divergence: None,
         pulse: None,
+        execution: Default::default(),
     };
     let cases = [
         (
@@ -184,7 +180,11 @@ pub fn delay_markdown(sweeps: &[DelaySweep], figure_dir: &str) -> String {
          latency, on the state seen that late, no stiffness); `predictor` is the best delayed \
          feedback without stiffness (the undelayed ILQG gains on the present predicted from the \
          delayed state over the commands in flight, a Smith predictor); `stiffness` is the \
-         open-loop SOOC plan of torque and stiffness, which no latency touches. Final error: \
+         open-loop SOOC plan of torque and stiffness, which no latency touches; \
+         `stiffness+predictor` is the undelayed ILQG plan with stiffness allowed, its gains on the \
+         predicted present; `replan` re-solves the SOOC plan every 20 ms (3 Newton steps, warm \
+         started) from the present predicted from the delayed state, and plays it open loop \
+         between re-solves. Final error: \
          mean over the trials with the spread to the worst trial shaded; E[C] predicted is the \
          executed policy's cost by closed-loop covariance propagation (not modelled for the naive \
          law).\n\n",
@@ -254,10 +254,19 @@ fn scenario_markdown(s: &DelaySweep, figure_dir: &str) -> String {
             )
     };
     md.push_str(&format!(
-        " The naive law {}; the predictor {}; stiffness {}.\n\n",
+        " Replanning ends closer to the target than stiffness {}; stiffness+predictor {}.",
+        crossing_text(crossing(&s.sweep, Strategy::Replan, st, |p| p.final_error_mean)),
+        crossing_text(crossing(&s.sweep, Strategy::StiffnessPredictor, st, |p| {
+            p.final_error_mean
+        })),
+    ));
+    md.push_str(&format!(
+        " The naive law {}; the predictor {}; stiffness {}; stiffness+predictor {}; replanning {}.\n\n",
         first_diverged(Strategy::NaiveDelayed),
         first_diverged(pr),
         first_diverged(st),
+        first_diverged(Strategy::StiffnessPredictor),
+        first_diverged(Strategy::Replan),
     ));
     md
 }
