@@ -4,7 +4,7 @@
 //! a slice with `knot_dt_ns` = 1e15 (shape), a slice with `seq` = u64::MAX (wrong trial: it
 //! must block nothing), a stale disturbance (1 s old), a wrong protocol version, a burst of
 //! `BURST` junk slices at once (rejected, or dropped by iceoryx2 and counted from the sequence
-//! gaps as far as the sequence rules allow), NaN torque, a stiffness above any bound and a wrong
+//! gaps of its session, the planner's slices in between or not), NaN torque, a stiffness above any bound and a wrong
 //! joint count.
 //! Hostile messages go out on a raw sender's node (`vic-raw-sender`), so the planner that the
 //! soak runs beside it is not refused, each kind from a session of its own. At the end it prints
@@ -71,7 +71,7 @@ fn hostile(raw: &RawPorts, n: u64) -> u64 {
         "bad-version" => c.header.version = PROTOCOL_VERSION + 7,
         "flood-burst" => {
             // The first alone: the board sees the session, so it can count later losses from
-            // the sequence gaps (until another session's slices, the planner's, come between).
+            // the sequence gaps (it tracks each session's, the planner's slices in between).
             let mut sent = 0;
             for i in 0..BURST {
                 if i == 1 {

@@ -5,7 +5,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 use std::collections::BTreeMap;
 use std::mem::{offset_of, size_of, size_of_val};
-use vic::rt::board::FaultReason;
+use vic::rt::board::{FaultReason, gaps};
 use vic::rt::transport::ports::{self, Topic};
 use vic::rt::transport::*;
 
@@ -242,6 +242,8 @@ fn constants_match_the_document() {
         ("MAX_NOTIFIERS", ports::MAX_NOTIFIERS as u64),
         ("MAX_LISTENERS", ports::MAX_LISTENERS as u64),
         ("STATE_BUFFER", STATE_BUFFER as u64),
+        ("GAP_SESSIONS", gaps::GAP_SESSIONS as u64),
+        ("MAX_COUNTED_GAP", gaps::MAX_COUNTED_GAP),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))

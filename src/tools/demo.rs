@@ -512,6 +512,7 @@ mod tests {
     fn the_zero_latency_reference_runs_only_when_the_latency_is_not_zero() {
         let plans = DemoPlans {
             stiffness: "s.json".into(),
+            stiffness_feedback: "sf.json".into(),
             feedback: "f.json".into(),
             feedback_at_zero: Some("f0.json".into()),
         };
@@ -533,6 +534,9 @@ mod tests {
                 // The predictor plays the undelayed plan's gains.
                 row("predictor", "f0.json", 200.0, 50),
                 row("stiffness", "s.json", 200.0, 50),
+                row("stiffness+predictor", "sf.json", 200.0, 50),
+                // The replanner re-solves the stiffness plan.
+                row("replan", "s.json", 200.0, 50),
             ]
         );
         let plans = DemoPlans {
@@ -545,6 +549,8 @@ mod tests {
                 row("naive-delayed", "f.json", 0.0, 50),
                 row("predictor", "f.json", 0.0, 50),
                 row("stiffness", "s.json", 0.0, 50),
+                row("stiffness+predictor", "sf.json", 0.0, 50),
+                row("replan", "s.json", 0.0, 50),
             ]
         );
     }

@@ -4,6 +4,7 @@
 
 pub mod alloc;
 pub mod daemons;
+pub mod trial;
 
 use std::path::Path;
 use vic::core::model::{Plant, SingleJoint, TwoLink};

@@ -16,6 +16,7 @@
 //! moved; the loop itself never catches up in a burst.
 
 mod commands;
+pub mod gaps;
 mod plant;
 pub mod supervisor;
 pub mod validation;
@@ -26,10 +27,11 @@ use crate::rt::transport::{
     CommandSlice, Control, ControlKind, Disturbance, Header, Knot, MAX_JOINTS, Mode, StateMsg,
 };
 use commands::CommandBuffer;
+use gaps::GapCounter;
 use plant::SimulatedPlant;
 pub use supervisor::FaultReason;
 use supervisor::{Supervisor, guard};
-use validation::{Checks, GapCounter, LastSeen, TrialState};
+use validation::{Checks, LastSeen, TrialState};
 
 pub use crate::rt::transport::Rejection;
 
@@ -120,7 +122,9 @@ impl<T: Copy + Default> Queue<T> {
 
 /// Messages that arrived since the last step (fixed capacity: a step allocates nothing). Extra
 /// messages beyond the capacity are counted as rejected; messages a sender numbered but that
-/// never arrived (overwritten in the receive buffers) are counted from the sequence gaps.
+/// never arrived (overwritten in the receive buffers) are counted from the sequence gaps of
+/// each sender session ([`gaps`]; it lives here, across steps, because it sees every message
+/// received, valid or not).
 #[derive(Debug, Clone, Default)]
 pub struct Inputs {
     commands: Queue<CommandSlice>,
@@ -175,7 +179,7 @@ pub struct Counters {
     pub rejected: u64,
     /// Rejected messages by [`Rejection`] (index `reason as usize`).
     pub rejected_by: [u64; Rejection::COUNT],
-    /// Messages lost before the board saw them (sequence gaps within a sender session).
+    /// Messages lost before the board saw them (sequence gaps within each sender session).
     pub dropped: u64,
     pub safe_hold_ticks: u64,
     /// Times the watchdog expired and the board ramped to its safe hold.

@@ -65,28 +65,6 @@ impl LastSeen {
     }
 }
 
-/// Gap accounting of one kind of message, over every message received (valid or not): the
-/// messages a sender numbered but the board never saw were overwritten in its receive buffer.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct GapCounter {
-    last: Option<(u32, u64)>,
-}
-
-/// Largest gap counted as lost messages; a larger jump is a sender's renumbering (or junk), not
-/// a loss the receive buffers could cause.
-pub const MAX_COUNTED_GAP: u64 = 1 << 24;
-
-impl GapCounter {
-    /// Messages missing before `h` in its session (0 for a new session or a jump back).
-    pub fn missing_before(&mut self, h: &Header) -> u64 {
-        let gap = match self.last {
-            Some((session, seq)) if session == h.session && h.seq > seq => h.seq - seq - 1,
-            _ => 0,
-        };
-        self.last = Some((h.session, h.seq));
-        if gap <= MAX_COUNTED_GAP { gap } else { 0 }
-    }
-}
 impl Checks<'_> {
     /// A time stamp later than the board's clock by more than the tolerance, or older than
     /// [`MAX_MESSAGE_AGE_NS`].

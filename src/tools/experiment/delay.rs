@@ -318,6 +318,7 @@ mod tests {
             scenario: "x.toml".into(),
             trials: 2,
             seed: 1,
+            execution: Default::default(),
             pulse: None,
             points,
         }
