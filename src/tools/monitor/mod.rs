@@ -255,7 +255,12 @@ impl App {
         };
         let mode = match s.mode.as_str() {
             "running" => "RUNNING".to_string(),
-            "idle" => "IDLE: HOLDING POSTURE (no central process)".to_string(),
+            // Holding only when the board says so: a board that freezes its plant while idle
+            // reports no stiffness.
+            "idle" if s.stiffness.iter().any(|k| *k > 0.0) => {
+                "IDLE: HOLDING POSTURE (no central process)".to_string()
+            }
+            "idle" => "IDLE: PLANT FROZEN (no central process)".to_string(),
             "safe-hold" => "SAFE HOLD (no valid command)".to_string(),
             _ => format!("FAULT: {}", s.fault),
         };

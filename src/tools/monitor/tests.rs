@@ -52,7 +52,11 @@ fn the_banner_names_the_mode_and_a_fault_its_reason() {
     app.on_telemetry(&t);
     let rows = screen(&app, 100, 30);
     assert!(rows[1].contains("FAULT: velocity-limit"), "{}", rows[1]);
-    app.on_telemetry(&telemetry(Mode::Idle, 1.2));
+    let mut t = telemetry(Mode::Idle, 1.2);
+    app.on_telemetry(&t);
+    assert!(screen(&app, 100, 30)[1].contains("IDLE: PLANT FROZEN"));
+    t.stiffness = [100.0, 100.0];
+    app.on_telemetry(&t);
     assert!(screen(&app, 100, 30)[1].contains("IDLE: HOLDING POSTURE"));
     app.on_silence();
     assert!(screen(&app, 100, 30)[1].contains("(board silent)"));
