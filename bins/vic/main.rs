@@ -78,8 +78,13 @@ enum Command {
     ///
     /// Example: vic status --namespace lab1 --json
     Status(status::StatusArgs),
-    /// Watch a running board live: a refreshing view on a terminal, one line per interval when
-    /// piped. Stops on Ctrl-C (or after --count snapshots).
+    /// Watch a running board live: on a terminal a live view (the board's mode, rolling plots of
+    /// the joint angles, tracking error, stiffness and torque, the loop's jitter and late ticks,
+    /// command age, rejections by reason, the disturbances in force); piped, with --plain or with
+    /// --count, one line per interval.
+    ///
+    /// Keys: p / P push the chosen joint one way or the other (1, 2 choose the joint), f switches
+    /// the field on and off, r clears the plots and the disturbances, q / Esc / Ctrl-C quit.
     ///
     /// Example: vic monitor --namespace lab1
     Monitor(monitor::MonitorArgs),

@@ -55,6 +55,10 @@ pub struct BoardOptions {
     /// Capacity of the recording queue [ticks].
     #[arg(long, value_name = "TICKS", default_value_t = crate::rt::record::DEFAULT_CAPACITY)]
     pub record_queue: usize,
+    /// Level of the log on stderr: error, warn, info, debug, trace, off, or per target
+    /// (vic=debug,warn). Default: RUST_LOG, else info. Nothing is logged inside the loop.
+    #[arg(long, value_name = "LEVEL")]
+    pub log_level: Option<String>,
 }
 
 /// The board loop's real-time flags: what to ask the OS for ([`RtArgs::request`]).
@@ -97,6 +101,8 @@ impl RtArgs {
 
 /// Runs the board until the duration ends or a signal stops it, then prints its statistics.
 pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
+    crate::tools::logging::init(o.log_level.as_deref())?;
+    let _log = tracing::info_span!("vic-board").entered();
     if o.rate_hz == 0 || o.rate_hz > 10_000 {
         return Err(input_error(format!(
             "--rate-hz {}: use 1 to 10000",
@@ -112,9 +118,8 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
     let ep = BoardPorts::open(namespace)?;
     let cleaned_dead_nodes = ep.session().cleaned_dead_nodes();
     if cleaned_dead_nodes > 0 {
-        eprintln!(
-            "vic-board: removed the resources of {} dead process(es) in namespace \"{}\"",
-            cleaned_dead_nodes, namespace
+        tracing::warn!(
+            "removed the resources of {cleaned_dead_nodes} dead process(es) in namespace \"{namespace}\""
         );
     }
     let memory_locked = crate::rt::realtime::lock_memory();
@@ -130,6 +135,15 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
     };
     // After the recorder's writer thread exists: it must not inherit the real-time policy.
     let realtime = apply_scheduling(&request, memory_locked);
+    tracing::info!(
+        "running in namespace \"{namespace}\" at {} Hz ({} joints){}",
+        o.rate_hz,
+        scenario.model.dof(),
+        match o.duration_s {
+            0.0 => String::new(),
+            d => format!(" for {d} s"),
+        }
+    );
     let mut stats = run_board(
         &ep,
         &mut board,
@@ -148,6 +162,14 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
         stats.dropped = Some(summary.dropped);
     }
     stats.realtime = Some(realtime);
+    // After the loop: its counters, once.
+    tracing::info!(
+        "stopped after {} ticks ({} late, {} periods missed, {} rejected messages)",
+        stats.ticks,
+        stats.late_ticks,
+        stats.missed_periods,
+        stats.rejected_messages
+    );
     if o.json.json {
         print_json(&stats)
     } else {
@@ -220,17 +242,16 @@ fn start_recorder(
         .input()
 }
 
-/// Applies the real-time settings to the calling thread (the loop's) and says on stderr what
-/// is in force and what the OS refused (the loop runs on either way).
+/// Applies the real-time settings to the calling thread (the loop's) and logs what is in force
+/// and what the OS refused (a warning; the loop runs on either way).
 fn apply_scheduling(req: &RtRequest, memory_locked: bool) -> crate::rt::sched::RtSettings {
     let slack = crate::rt::realtime::set_timer_slack_1ns();
     let got = crate::rt::sched::apply_realtime(req, memory_locked, slack);
-    let label = if got.refused.is_empty() {
-        "real-time"
+    if got.refused.is_empty() {
+        tracing::info!("real-time: {}", got.describe());
     } else {
-        "warning: real-time"
-    };
-    eprintln!("vic-board: {label}: {}", got.describe());
+        tracing::warn!("real-time: {}", got.describe());
+    }
     got
 }
 

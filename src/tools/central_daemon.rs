@@ -81,6 +81,10 @@ pub struct CentralOptions {
     pub trajectories: Option<PathBuf>,
     #[command(flatten)]
     pub json: JsonArg,
+    /// Level of the log on stderr: error, warn, info, debug, trace, off, or per target
+    /// (vic=debug,warn). Default: RUST_LOG, else info. Nothing is logged inside the 50 Hz loop.
+    #[arg(long, value_name = "LEVEL")]
+    pub log_level: Option<String>,
 }
 
 impl CentralOptions {
@@ -98,6 +102,8 @@ struct Delays {
 
 /// Plays the plan for the trials and prints their summary.
 pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
+    crate::tools::logging::init(o.log_level.as_deref())?;
+    let _log = tracing::info_span!("vic-planner").entered();
     o.board_timeout()?;
     if o.rate_hz == 0 || o.rate_hz > 1000 || o.trials == 0 {
         return Err(input_error("--rate-hz must be 1..1000 and --trials ≥ 1"));
@@ -132,11 +138,24 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         lookahead_ns: (lookahead_ms * 1e6) as u64,
     };
     let mut central = Central::new(track, o.strategy, timing);
+    tracing::info!(
+        "{} trial(s), strategy {}, latency {latency_ms} ms (sensor {} + command {} + lookahead \
+         {lookahead_ms} ms), {}",
+        o.trials,
+        o.strategy,
+        delays.sensor,
+        delays.command,
+        match o.lockstep {
+            true => "in lockstep on a simulated clock".to_string(),
+            false => format!("live in namespace \"{namespace}\" at {} Hz", o.rate_hz),
+        }
+    );
     let (records, lost) = match run_trials(o, ports.as_ref(), &mut central, &setup.x0, period_ns)? {
         Ok(records) => (records, None),
         // The trials before the board was lost are results: print them, then fail.
         Err(e) => (e.records().to_vec(), Some(e)),
     };
+    tracing::info!("{} trial(s) finished", records.len());
     if let Some(path) = &o.trajectories {
         let text = serde_json::to_string(&Trajectories::from_records(&records))?;
         std::fs::write(path, text)
@@ -217,7 +236,7 @@ fn plan_at_start(o: &CentralOptions, overrides: &[String]) -> anyhow::Result<Pla
         }
     };
     let s = Scenario::load(&o.scenario.config, &overrides).input()?;
-    eprintln!("vic-planner: planning ({}) ...", method.name());
+    tracing::info!("planning ({}) ...", method.name());
     plan(&s, method, None).runtime()
 }
 
@@ -235,8 +254,8 @@ fn delay_lines(o: &CentralOptions, latency_ms: f64, lookahead_ms: f64) -> anyhow
         && latency_ms > 0.0
         && sensor + command + lookahead_ms > latency_ms + 1e-9
     {
-        eprintln!(
-            "vic-planner: warning: sensor {sensor} ms + command {command} ms + lookahead \
+        tracing::warn!(
+            "sensor {sensor} ms + command {command} ms + lookahead \
              {lookahead_ms} ms exceed the feedback latency {latency_ms} ms: feedback will use \
              older states (counted as stale)"
         );

@@ -7,10 +7,12 @@
 //!   (`vic experiment`, `vic results`), [`identify_command`], [`demo`], [`operator_command`]
 //!   (`vic inject`, `status`, `monitor`), [`bench_command`], [`board_daemon`] (`vic-board`) and
 //!   [`central_daemon`] (`vic-planner`).
-//! - The work they share: [`operator`] (inject, status, monitor), [`experiment`] (the paper's
+//! - The work they share: [`operator`] (inject, status, monitor), `monitor` (the live view of
+//!   `vic monitor` on a terminal, with the `tui` feature), [`experiment`] (the paper's
 //!   figures), [`sweep`] (delay versus stiffness over latencies), [`identify`] (noise
 //!   identification), [`plot`], [`bench`], [`report`] (a live run's results) and [`launch`]
-//!   (turning a scenario into the board's and the central controller's configuration).
+//!   (turning a scenario into the board's and the central controller's configuration), [`logging`]
+//!   (the daemons' `tracing` output).
 
 pub mod bench;
 pub mod bench_command;
@@ -24,6 +26,9 @@ pub mod experiment;
 pub mod identify;
 pub mod identify_command;
 pub mod launch;
+pub mod logging;
+#[cfg(feature = "tui")]
+pub mod monitor;
 pub mod operator;
 pub mod operator_command;
 pub mod plan_command;

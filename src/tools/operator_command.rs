@@ -94,32 +94,80 @@ pub fn run_status(namespace: &str, timeout: Duration, json: bool) -> anyhow::Res
     }
 }
 
-/// Shows the board's telemetry every `interval` (at least 0.1 s) until Ctrl-C or `count`
-/// snapshots: redrawn in place on a terminal, one line per snapshot when piped.
-pub fn run_monitor(namespace: &str, interval_s: f64, count: Option<u64>) -> anyhow::Result<()> {
-    if !(interval_s.is_finite() && interval_s >= 0.1) {
+/// What `vic monitor` was asked for.
+#[derive(Debug, Clone, Copy)]
+pub struct MonitorOptions {
+    /// Seconds between lines (piped or `--plain`; at least 0.1).
+    pub interval_s: f64,
+    /// Stop after this many lines (implies `plain`).
+    pub count: Option<u64>,
+    /// Lines even on a terminal.
+    pub plain: bool,
+    /// The pulse of the `p` key [N m] and its duration [ms].
+    pub pulse_nm: f64,
+    pub pulse_ms: f64,
+    /// β the `f` key switches on [N/m].
+    pub field_beta: f64,
+    /// Seconds of history in the plots.
+    pub window_s: f64,
+}
+
+/// Watches the board of `namespace`: the live view (`--features tui`) when stdin and stdout are
+/// a terminal, otherwise one line per interval until Ctrl-C or `count` lines.
+pub fn run_monitor(namespace: &str, o: MonitorOptions) -> anyhow::Result<()> {
+    if !(o.interval_s.is_finite() && o.interval_s >= 0.1) {
         return Err(input_error("--interval-s must be at least 0.1"));
     }
+    if !(o.pulse_nm.is_finite() && o.pulse_nm > 0.0) {
+        return Err(input_error(format!(
+            "--pulse-nm {}: must be a positive torque in N m (P pushes the other way)",
+            o.pulse_nm
+        )));
+    }
+    let _ = pulse(&[o.pulse_nm], o.pulse_ms)?;
+    let _ = field(o.field_beta)?;
+    if !(o.window_s.is_finite() && (1.0..=600.0).contains(&o.window_s)) {
+        return Err(input_error(format!(
+            "--window-s {}: must be between 1 and 600 seconds",
+            o.window_s
+        )));
+    }
     let stop = stop_on_signal()?;
-    let tty = std::io::stdout().is_terminal();
+    let tty = std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
+    let plain = o.plain || o.count.is_some() || !tty;
+    #[cfg(feature = "tui")]
+    if !plain {
+        let settings = crate::tools::monitor::Settings {
+            pulse_torque: o.pulse_nm,
+            pulse_duration: o.pulse_ms / 1e3,
+            field_beta: o.field_beta,
+            window_s: o.window_s,
+        };
+        return crate::tools::monitor::run(namespace, settings, &stop).runtime();
+    }
     let mut shown = 0u64;
-    monitor(namespace, Duration::from_secs_f64(interval_s), &stop, |s| {
-        let mut out = std::io::stdout().lock();
-        let text = match s {
-            Some(s) if tty => s.render(),
-            Some(s) => s.line(),
-            None => format!("no board in namespace \"{namespace}\" (waiting)"),
-        };
-        // On a terminal: clear and redraw in place.
-        let ok = if tty {
-            write!(out, "\x1b[H\x1b[2J{text}\n(Ctrl-C to quit)\n")
-        } else {
-            writeln!(out, "{text}")
-        };
-        let _ = out.flush();
-        shown += 1;
-        ok.is_ok() && count.is_none_or(|c| shown < c)
-    })
+    monitor(
+        namespace,
+        Duration::from_secs_f64(o.interval_s),
+        &stop,
+        |s| {
+            let mut out = std::io::stdout().lock();
+            let text = match s {
+                Some(s) if !plain => s.render(),
+                Some(s) => s.line(),
+                None => format!("no board in namespace \"{namespace}\" (waiting)"),
+            };
+            // Without the live view, on a terminal: clear and redraw in place.
+            let ok = if !plain {
+                write!(out, "\x1b[H\x1b[2J{text}\n(Ctrl-C to quit)\n")
+            } else {
+                writeln!(out, "{text}")
+            };
+            let _ = out.flush();
+            shown += 1;
+            ok.is_ok() && o.count.is_none_or(|c| shown < c)
+        },
+    )
     .runtime()
 }
 

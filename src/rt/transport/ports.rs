@@ -1,7 +1,8 @@
 //! The iceoryx2 ports of each role. A process opens the ports of its role and nothing else:
 //! [`BoardPorts`] (the board daemon), [`CentralPorts`] (the planner), [`ToolPorts`] (`vic
 //! inject`, the only tool that publishes), [`ObserverPorts`] (`vic status`, `vic monitor`: read
-//! only) and [`RecorderPorts`] (`vic record`: read only). A role that does not publish a message
+//! only), [`MonitorPorts`] (`vic monitor` on a terminal: read only, with the states) and
+//! [`RecorderPorts`] (`vic record`: read only). A role that does not publish a message
 //! has no method to publish it, so a wrong call is a compile error, not a run-time one; a role
 //! that does not publish takes no publisher slot, so observers cannot lock `vic inject` out.
 //!
@@ -297,6 +298,37 @@ impl std::ops::Deref for ObserverPorts {
     type Target = BoardWatch;
     fn deref(&self) -> &BoardWatch {
         &self.watch
+    }
+}
+
+/// The ports of `vic monitor` on a terminal: an observer (no publisher) that also reads the
+/// board's states, for its rolling plots. Each costs the board's loop a delivery per tick, so only
+/// the live view takes one; `vic status` and the piped monitor use [`ObserverPorts`].
+/// Dereferences to its [`BoardObserver`].
+pub struct MonitorPorts {
+    observer: BoardObserver,
+    session: Session,
+}
+
+impl MonitorPorts {
+    /// Connects a live monitor to namespace `ns` (node `vic-observer`, like every read-only tool).
+    pub fn open(ns: &str) -> Result<MonitorPorts, TransportError> {
+        let session = Session::open(ns, OBSERVER_NODE)?;
+        Ok(MonitorPorts {
+            observer: BoardObserver::open(&session)?,
+            session,
+        })
+    }
+    /// The node this monitor holds in its namespace.
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+}
+
+impl std::ops::Deref for MonitorPorts {
+    type Target = BoardObserver;
+    fn deref(&self) -> &BoardObserver {
+        &self.observer
     }
 }
 
