@@ -26,6 +26,10 @@ MAX_NODES = 32
 MAX_NOTIFIERS = 4
 MAX_LISTENERS = 24
 STATE_BUFFER = 128
+# The board counts sequence gaps per sender session in a table of this many sessions, and no gap
+# larger than this (a jump, not a loss).
+GAP_SESSIONS = 8
+MAX_COUNTED_GAP = 1 << 24
 
 U32, U64, F64 = ctypes.c_uint32, ctypes.c_uint64, ctypes.c_double
 Joints = F64 * MAX_JOINTS

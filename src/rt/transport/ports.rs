@@ -272,63 +272,58 @@ impl std::ops::Deref for ToolPorts {
     }
 }
 
-/// The ports of a read-only tool (`vic status`, `vic monitor`): the board's telemetry and events,
-/// no publisher and no state subscriber. Dereferences to its [`BoardWatch`].
-pub struct ObserverPorts {
-    watch: BoardWatch,
+/// The ports of a read-only tool: the node `vic-observer` and `W`, what it reads of the board,
+/// with no publisher. Dereferences to its `W`.
+pub struct ReadOnlyPorts<W> {
+    watch: W,
     session: Session,
 }
 
-impl ObserverPorts {
-    /// Connects a read-only observer to namespace `ns`.
-    pub fn open(ns: &str) -> Result<ObserverPorts, TransportError> {
+/// What a read-only tool opens on its session.
+pub trait ReadOnly: Sized {
+    fn open_on(session: &Session) -> Result<Self, TransportError>;
+}
+
+impl ReadOnly for BoardWatch {
+    fn open_on(session: &Session) -> Result<Self, TransportError> {
+        BoardWatch::open(session)
+    }
+}
+
+impl ReadOnly for BoardObserver {
+    fn open_on(session: &Session) -> Result<Self, TransportError> {
+        BoardObserver::open(session)
+    }
+}
+
+/// `vic status` and the piped `vic monitor`: the board's telemetry and events, no state
+/// subscriber.
+pub type ObserverPorts = ReadOnlyPorts<BoardWatch>;
+
+/// `vic monitor` on a terminal: the telemetry and the board's states too, for its rolling plots.
+/// Each costs the board's loop a delivery per tick, so only the live view takes one.
+pub type MonitorPorts = ReadOnlyPorts<BoardObserver>;
+
+impl<W: ReadOnly> ReadOnlyPorts<W> {
+    /// Connects a read-only tool to namespace `ns` (node `vic-observer`, like every read-only
+    /// tool).
+    pub fn open(ns: &str) -> Result<Self, TransportError> {
         let session = Session::open(ns, OBSERVER_NODE)?;
-        Ok(ObserverPorts {
-            watch: BoardWatch::open(&session)?,
+        Ok(ReadOnlyPorts {
+            watch: W::open_on(&session)?,
             session,
         })
     }
-    /// The node this observer holds in its namespace.
+    /// The node this tool holds in its namespace.
     pub fn session(&self) -> &Session {
         &self.session
     }
 }
 
-impl std::ops::Deref for ObserverPorts {
-    type Target = BoardWatch;
-    fn deref(&self) -> &BoardWatch {
+impl<W> std::ops::Deref for ReadOnlyPorts<W> {
+    type Target = W;
+    fn deref(&self) -> &W {
         &self.watch
-    }
-}
-
-/// The ports of `vic monitor` on a terminal: an observer (no publisher) that also reads the
-/// board's states, for its rolling plots. Each costs the board's loop a delivery per tick, so only
-/// the live view takes one; `vic status` and the piped monitor use [`ObserverPorts`].
-/// Dereferences to its [`BoardObserver`].
-pub struct MonitorPorts {
-    observer: BoardObserver,
-    session: Session,
-}
-
-impl MonitorPorts {
-    /// Connects a live monitor to namespace `ns` (node `vic-observer`, like every read-only tool).
-    pub fn open(ns: &str) -> Result<MonitorPorts, TransportError> {
-        let session = Session::open(ns, OBSERVER_NODE)?;
-        Ok(MonitorPorts {
-            observer: BoardObserver::open(&session)?,
-            session,
-        })
-    }
-    /// The node this monitor holds in its namespace.
-    pub fn session(&self) -> &Session {
-        &self.session
-    }
-}
-
-impl std::ops::Deref for MonitorPorts {
-    type Target = BoardObserver;
-    fn deref(&self) -> &BoardObserver {
-        &self.observer
     }
 }
 
