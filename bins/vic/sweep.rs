@@ -3,6 +3,7 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use vic::tools::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
+use vic::tools::progress::Progress;
 use vic::tools::sweep::{Execution, Pulse, Strategy, SweepOptions, sweep_latency, write_figure};
 
 #[derive(clap::Args)]
@@ -104,11 +105,13 @@ impl SweepArgs {
                 Execution::Offline
             },
         };
-        let quiet = a.json.json;
+        // A bar over the points on a terminal (nothing in pipes and scripts).
+        let points = opts.strategies.len() * opts.latencies_ms.len();
+        let progress = Progress::steps("sweep", points as u64);
+        let done = std::cell::Cell::new(0);
         let sweep = sweep_latency(&a.scenario.config, &a.scenario.set.overrides, &opts, &|p| {
-            if !quiet {
-                eprintln!("sweep: {p}");
-            }
+            progress.step(done.get(), points, p);
+            done.set(done.get() + 1);
         })
         .map_err(|e| {
             if e.is_input() {
@@ -117,6 +120,7 @@ impl SweepArgs {
                 anyhow::Error::new(e)
             }
         })?;
+        drop(progress);
         if let Some(dir) = &a.out_dir {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("{}: cannot create", dir.display()))?;
