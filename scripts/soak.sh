@@ -159,7 +159,7 @@ BEYOND=$(jq -r --argjson shape "$(k knot-dt-1e15)" --argjson version "$(k bad-ve
          "stale \(g("stale") - $stale)", "joints \(g("joints") - $joints)",
          "wrong-trial + overflow + dropped \(g("wrong-trial") + g("overflow") + .dropped_messages - $wto)"]
     | map(select(test(" 0$") | not)) | join(", ")' "$S")
-echo "hostile counted    $REJECTED rejected + $DROPPED dropped = $COUNTED for $HOSTILE hostile messages ($SINGLE single, $BURSTS bursts of 2000); beyond the hostile ones: $((COUNTED - HOSTILE)) (${BEYOND:-none}; the planner's own: alone, it has one slice per trial rejected as wrong-trial; $TRIALS trials)"
+echo "hostile counted    $REJECTED rejected + $DROPPED dropped = $COUNTED for $HOSTILE hostile messages ($SINGLE single, $BURSTS bursts of 2000); beyond the hostile ones: $((COUNTED - HOSTILE)) (${BEYOND:-none}; the planner's own, e.g. slices sent into a latched fault; $TRIALS trials)"
 FAIL=0
 check() { # name, counted, at least
     if (($2 < $3)); then
