@@ -51,7 +51,7 @@ fn main() -> anyhow::Result<()> {
     let mut n = 0u64;
     while t0.elapsed().as_secs_f64() < seconds {
         next += every;
-        if n % 2 == 0 {
+        if n.is_multiple_of(2) {
             z(publisher.put(vec![0xAB_u8; 7]).wait())?;
             size += 1;
         } else {
