@@ -143,8 +143,8 @@ impl BoardWatch {
         got
     }
 
-    /// Whether the board signalled an event since the last call, without blocking (a relay's
-    /// loop, e.g. the bridge, polls it).
+    /// Whether the board signalled an event since the last call, without blocking (the bridge
+    /// checks it on every wake-up).
     pub fn take_event(&self) -> bool {
         let mut got = false;
         let _ = self.events.try_wait(|_| got = true);
