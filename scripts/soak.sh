@@ -12,8 +12,16 @@
 # dropped and counted from the sequence gaps of its session) and the planner's trials kept running.
 # Processes and shared-memory files are cleaned up on exit, Ctrl-C included.
 #
+# Across the bridge (SOAK_BRIDGE=1, issue 16; needs the zenoh feature, built here): the board and a
+# board-side `vic bridge` in one namespace, a central-side bridge, the planner and the hostile sender
+# in another, sharing nothing but a Zenoh TCP link on loopback. Besides the hostile messages above
+# (which now cross the link), every second examples/link_junk.rs puts a malformed message straight
+# onto the link (7 bytes, or a slice of another protocol version); the board-side bridge must count
+# each and forward none. Messages of another version are refused (and counted) by the bridge
+# before they reach the board, so they count as counted there.
+#
 # Environment: CARGO_TARGET_DIR (default ./target), SOAK_DIR (where the recording and logs go;
-# default a new /tmp/vic-soak.* folder, kept).
+# default a new /tmp/vic-soak.* folder, kept), SOAK_BRIDGE (1: across the bridge).
 set -euo pipefail
 
 MINUTES=${1:-10}
@@ -27,6 +35,14 @@ ROOT=$PWD
 export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
 BIN=$CARGO_TARGET_DIR/release
 NS=soak$$
+BRIDGE=${SOAK_BRIDGE:-0}
+# Where the central process and the hostile sender run: the board's namespace, or across the link.
+NS_C=$NS
+if [[ $BRIDGE == 1 ]]; then
+    NS_C=soakc$$
+    PORT=$((20000 + $$ % 20000))
+    LINK=soak$$
+fi
 OUT=${SOAK_DIR:-$(mktemp -d /tmp/vic-soak.XXXXXX)}
 mkdir -p "$OUT"
 CONFIG=$ROOT/config/two_link_divergent.toml
@@ -36,6 +52,8 @@ SIGMA=noise.sigma=0.02
 BOARD_PID=""
 LOOP_PID=""
 TOOL_PID=""
+BRIDGE_PIDS=()
+JUNK_PID=""
 
 cleanup() {
     local code=$?
@@ -46,28 +64,35 @@ cleanup() {
         pkill -TERM -P "$LOOP_PID" 2>/dev/null || true
     fi
     [[ -n $TOOL_PID ]] && kill "$TOOL_PID" 2>/dev/null || true
+    [[ -n $JUNK_PID ]] && kill "$JUNK_PID" 2>/dev/null || true
+    for p in "${BRIDGE_PIDS[@]}"; do kill "$p" 2>/dev/null || true; done
     [[ -n $BOARD_PID ]] && kill "$BOARD_PID" 2>/dev/null || true
     wait 2>/dev/null || true
     # What transport::remove_namespace removes: the namespace's files in /dev/shm and under
     # iceoryx2's root folder.
     # iceoryx2's root folder (the user's private /tmp/vic-UID), then the node folders that held
     # this namespace's files and are empty now (rmdir leaves any other).
-    local root dirs
+    local root dirs ns left
     root=/tmp/vic-$(id -u)
-    dirs=$(find "$root/nodes" -mindepth 2 -maxdepth 2 -name "vic_${NS}.*" -printf '%h\n' 2>/dev/null | sort -u)
-    find /dev/shm -maxdepth 1 -name "vic_${NS}.*" -delete 2>/dev/null || true
-    find "$root" -name "vic_${NS}.*" -delete 2>/dev/null || true
-    for d in $dirs; do rmdir "$d" 2>/dev/null || true; done
-    local left
-    left=$(find /dev/shm -maxdepth 1 -name "vic_${NS}.*" | wc -l)
-    echo "cleanup: namespace $NS, $left files left in /dev/shm" >&2
+    for ns in $(printf '%s\n' "$NS" "$NS_C" | sort -u); do
+        dirs=$(find "$root/nodes" -mindepth 2 -maxdepth 2 -name "vic_${ns}.*" -printf '%h\n' 2>/dev/null | sort -u)
+        find /dev/shm -maxdepth 1 -name "vic_${ns}.*" -delete 2>/dev/null || true
+        find "$root" -name "vic_${ns}.*" -delete 2>/dev/null || true
+        for d in $dirs; do rmdir "$d" 2>/dev/null || true; done
+        left=$(find /dev/shm -maxdepth 1 -name "vic_${ns}.*" | wc -l)
+        echo "cleanup: namespace $ns, $left files left in /dev/shm" >&2
+    done
     exit "$code"
 }
 trap cleanup EXIT
 trap 'echo "interrupted" >&2; exit 130' INT TERM
 
 echo "building (release)…" >&2
-cargo build --release --bins --example malformed 2>&1 | tail -n 2 >&2
+if [[ $BRIDGE == 1 ]]; then
+    cargo build --release --features zenoh --bins --example malformed --example link_junk 2>&1 | tail -n 2 >&2
+else
+    cargo build --release --bins --example malformed 2>&1 | tail -n 2 >&2
+fi
 
 rss_kb() { awk '/^VmRSS/ { print $2 }' "/proc/$1/status"; }
 
@@ -76,21 +101,38 @@ rss_kb() { awk '/^VmRSS/ { print $2 }' "/proc/$1/status"; }
 BOARD_PID=$!
 sleep 1
 kill -0 "$BOARD_PID" || { cat "$OUT/board.err" >&2; exit 1; }
+if [[ $BRIDGE == 1 ]]; then
+    "$BIN/vic" bridge --side board --namespace "$NS" --link-name "$LINK" \
+        --listen "tcp/127.0.0.1:$PORT" --json >"$OUT/bridge_board.json" 2>"$OUT/bridge_board.err" &
+    BRIDGE_PIDS+=($!)
+    "$BIN/vic" bridge --side central --namespace "$NS_C" --link-name "$LINK" \
+        --connect "tcp/127.0.0.1:$PORT" --json >"$OUT/bridge_central.json" 2>"$OUT/bridge_central.err" &
+    BRIDGE_PIDS+=($!)
+    sleep 2
+    for p in "${BRIDGE_PIDS[@]}"; do
+        kill -0 "$p" || { cat "$OUT"/bridge_*.err >&2; exit 1; }
+    done
+fi
 
 (
     trap 'exit 0' TERM
     i=0
     while true; do
         i=$((i + 1))
-        "$BIN/vic-planner" --config "$CONFIG" --set "$SIGMA" --namespace "$NS" --json \
+        "$BIN/vic-planner" --config "$CONFIG" --set "$SIGMA" --namespace "$NS_C" --json \
             --plan "$PLAN" --strategy stiffness --latency-ms 200 --seed "$i" --trials 5 \
             >>"$OUT/planner.jsonl" 2>>"$OUT/planner.err" || echo "planner run $i failed" >>"$OUT/planner.err"
     done
 ) &
 LOOP_PID=$!
 
-"$BIN/examples/malformed" "$NS" "$SECONDS_TOTAL" 1000 >"$OUT/malformed.log" 2>&1 &
+"$BIN/examples/malformed" "$NS_C" "$SECONDS_TOTAL" 1000 >"$OUT/malformed.log" 2>&1 &
 TOOL_PID=$!
+if [[ $BRIDGE == 1 ]]; then
+    "$BIN/examples/link_junk" "$LINK" "tcp/127.0.0.1:$PORT" "$((SECONDS_TOTAL - 3))" 1000 \
+        >"$OUT/link_junk.log" 2>&1 &
+    JUNK_PID=$!
+fi
 
 sleep 2
 RSS_START=$(rss_kb "$BOARD_PID")
@@ -98,16 +140,28 @@ echo "soak: $MINUTES min in namespace $NS, board pid $BOARD_PID, files in $OUT" 
 END=$(($(date +%s) + SECONDS_TOTAL - 2))
 while (($(date +%s) < END)); do
     kill -0 "$BOARD_PID" 2>/dev/null || { echo "the board died" >&2; cat "$OUT/board.err" >&2; exit 1; }
+    for p in "${BRIDGE_PIDS[@]}"; do
+        kill -0 "$p" 2>/dev/null || { echo "a bridge died" >&2; cat "$OUT"/bridge_*.err >&2; exit 1; }
+    done
     sleep 5
 done
 RSS_END=$(rss_kb "$BOARD_PID")
 
 wait "$TOOL_PID" || true
 TOOL_PID=""
+if [[ -n $JUNK_PID ]]; then
+    wait "$JUNK_PID" || true
+    JUNK_PID=""
+fi
 kill "$LOOP_PID" 2>/dev/null || true
 pkill -TERM -P "$LOOP_PID" 2>/dev/null || true
 wait "$LOOP_PID" 2>/dev/null || true
 LOOP_PID=""
+for p in "${BRIDGE_PIDS[@]}"; do
+    kill -TERM "$p" 2>/dev/null || true
+    wait "$p" || true
+done
+BRIDGE_PIDS=()
 kill -TERM "$BOARD_PID"
 wait "$BOARD_PID"
 BOARD_PID=""
@@ -145,11 +199,26 @@ BURSTS=$(($(k flood-burst) / 2000))
 SINGLE=$((HOSTILE - $(k flood-burst)))
 REJECTED=$(jq -r '.rejected_messages' "$S")
 DROPPED=$(jq -r '.dropped_messages' "$S")
-COUNTED=$((REJECTED + DROPPED))
+# Across the bridge: what the board-side bridge refused (size, version) and what was put on the
+# link past both namespaces. The bridge's version refusals are the hostile sender's bad-version
+# messages (which crossed the link raw) plus the link's junk of another version.
+BS=0 BV=0 JS=0 JV=0
+if [[ $BRIDGE == 1 ]]; then
+    BS=$(jq -r '.stats.malformed_size' "$OUT/bridge_board.json")
+    BV=$(jq -r '.stats.malformed_version' "$OUT/bridge_board.json")
+    JS=$(jq -r '.malformed_size // 0' "$OUT/link_junk.log" 2>/dev/null || echo 0)
+    JV=$(jq -r '.malformed_version // 0' "$OUT/link_junk.log" 2>/dev/null || echo 0)
+    echo "bridge (board side) $(jq -c '.stats' "$OUT/bridge_board.json")"
+    echo "bridge (central)    $(jq -c '.stats' "$OUT/bridge_central.json")"
+    echo "link junk          $JS of the wrong size, $JV of another version put on the link; the bridge refused $BS and $BV"
+fi
+# Bad-version messages refused by the bridge before the board saw them.
+BRIDGE_VERSION=$((BV - JV))
+COUNTED=$((REJECTED + DROPPED + BRIDGE_VERSION))
 # Per reason, what the hostile messages explain (wrong trial, overflow and drops share the burst
 # and the slices for trial 0xFFFF); the rest is the planner's.
 WTO=$(($(k seq-u64-max) + $(k nan-torque) + $(k stiffness-unbounded) + $(k flood-burst)))
-BEYOND=$(jq -r --argjson shape "$(k knot-dt-1e15)" --argjson version "$(k bad-version)" \
+BEYOND=$(jq -r --argjson shape "$(k knot-dt-1e15)" --argjson version "$(($(k bad-version) - BRIDGE_VERSION))" \
     --argjson stale "$(k stale)" --argjson joints "$(k wrong-joints)" --argjson wto "$WTO" '
     (.rejected_by_reason // {}) as $r | def g($k): ($r[$k] // 0);
     ($r | to_entries | map(select(.key as $k
@@ -159,22 +228,27 @@ BEYOND=$(jq -r --argjson shape "$(k knot-dt-1e15)" --argjson version "$(k bad-ve
          "stale \(g("stale") - $stale)", "joints \(g("joints") - $joints)",
          "wrong-trial + overflow + dropped \(g("wrong-trial") + g("overflow") + .dropped_messages - $wto)"]
     | map(select(test(" 0$") | not)) | join(", ")' "$S")
-echo "hostile counted    $REJECTED rejected + $DROPPED dropped = $COUNTED for $HOSTILE hostile messages ($SINGLE single, $BURSTS bursts of 2000); beyond the hostile ones: $((COUNTED - HOSTILE)) (${BEYOND:-none}; the planner's own: alone, it has one slice per trial rejected as wrong-trial; $TRIALS trials)"
+echo "hostile counted    $REJECTED rejected + $DROPPED dropped + $BRIDGE_VERSION refused by the bridge = $COUNTED for $HOSTILE hostile messages ($SINGLE single, $BURSTS bursts of 2000); beyond the hostile ones: $((COUNTED - HOSTILE)) (${BEYOND:-none}; the planner's own, e.g. slices sent into a latched fault; $TRIALS trials)"
 FAIL=0
 check() { # name, counted, at least
     if (($2 < $3)); then
-        echo "FAIL: $1: the board counted $2, at least $3 expected" >&2
+        echo "FAIL: $1: counted $2, at least $3 expected" >&2
         FAIL=1
     fi
 }
 ((HOSTILE > 0)) || { echo "FAIL: no hostile message sent" >&2; FAIL=1; }
 check "knot_dt 1e15 (shape)" "$(r shape)" "$(k knot-dt-1e15)"
-check "bad version" "$(r version)" "$(k bad-version)"
+check "bad version" "$(($(r version) + BRIDGE_VERSION))" "$(k bad-version)"
 check "stale" "$(r stale)" "$(k stale)"
 check "wrong joints" "$(r joints)" "$(k wrong-joints)"
 check "seq u64::MAX, NaN, unbounded stiffness, bursts (wrong trial, overflow, dropped)" \
     $(($(r wrong-trial) + $(r overflow) + DROPPED)) "$WTO"
 check "all hostile messages (rejected + dropped)" "$COUNTED" "$HOSTILE"
+if [[ $BRIDGE == 1 ]]; then
+    ((JS + JV > 0)) || { echo "FAIL: no junk put on the link" >&2; FAIL=1; }
+    check "link junk of the wrong size (counted by the bridge)" "$BS" "$JS"
+    check "link junk of another version (counted by the bridge)" "$BV" "$JV"
+fi
 if [[ $TRIALS == "?" ]] || ((TRIALS == 0)); then
     echo "FAIL: the planner ran no trial beside the hostile sender" >&2
     FAIL=1

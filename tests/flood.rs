@@ -56,11 +56,33 @@ fn pace(t0: Instant, duration: Duration, i: u64, n: u64) {
     }
 }
 
-/// Tick rate of the board between two telemetries, from its own counters [Hz], and the window
-/// it was measured over [s].
-fn tick_rate(before: &Telemetry, after: &Telemetry) -> (f64, f64) {
-    let seconds = (after.header.time_ns - before.header.time_ns) as f64 * 1e-9;
-    ((after.tick - before.tick) as f64 / seconds, seconds)
+/// What the board counted between two telemetries: messages rejected (and by reason) and
+/// dropped, ticks run and late, and the tick rate from its own counters [Hz] over the window
+/// [s].
+struct Delta {
+    rejected: u64,
+    dropped: u64,
+    by_reason: Vec<(&'static str, u64)>,
+    ticks: u64,
+    rate: f64,
+    seconds: f64,
+    late: u64,
+}
+
+impl Delta {
+    fn between(before: &Telemetry, after: &Telemetry) -> Delta {
+        let seconds = (after.header.time_ns - before.header.time_ns) as f64 * 1e-9;
+        let ticks = after.tick - before.tick;
+        Delta {
+            rejected: after.rejected_messages - before.rejected_messages,
+            dropped: after.dropped_messages - before.dropped_messages,
+            by_reason: rejected_by_reason(before, after),
+            ticks,
+            rate: ticks as f64 / seconds,
+            seconds,
+            late: after.late_ticks - before.late_ticks,
+        }
+    }
 }
 
 /// Junk message `i` of the flood: every one invalid, one reason in five.
@@ -120,12 +142,15 @@ fn flood(n: u64, min_duration: Duration) {
     // Telemetry from after the board took the last message (it drains every tick).
     let after = trial.telemetry_after(flood_end_ns + 150_000_000, false);
 
-    let rejected = after.rejected_messages - before.rejected_messages;
-    let dropped = after.dropped_messages - before.dropped_messages;
-    let by_reason = rejected_by_reason(&before, &after);
-    let ticks = after.tick - before.tick;
-    let (rate, seconds) = tick_rate(&before, &after);
-    let late = after.late_ticks - before.late_ticks;
+    let Delta {
+        rejected,
+        dropped,
+        by_reason,
+        ticks,
+        rate,
+        seconds,
+        late,
+    } = Delta::between(&before, &after);
     eprintln!(
         "flood of {n} in {sent_in:?} ({:.0} msg/s): rejected {rejected} {by_reason:?}, \
          dropped by iceoryx2 {dropped}; {ticks} ticks in {seconds:.3} s = {rate:.1} Hz, \
@@ -254,12 +279,15 @@ fn flood_controls_and_disturbances(n: u64, min_duration: Duration) {
     let after = trial.telemetry_after(flood_end_ns + 150_000_000, true);
     let state = trial.ep.latest_state().expect("a state");
 
-    let rejected = after.rejected_messages - before.rejected_messages;
-    let dropped = after.dropped_messages - before.dropped_messages;
-    let by_reason = rejected_by_reason(&before, &after);
-    let ticks = after.tick - before.tick;
-    let (rate, seconds) = tick_rate(&before, &after);
-    let late = after.late_ticks - before.late_ticks;
+    let Delta {
+        rejected,
+        dropped,
+        by_reason,
+        ticks,
+        rate,
+        seconds,
+        late,
+    } = Delta::between(&before, &after);
     eprintln!(
         "flood of {n} controls + {n} disturbances in {sent_in:?}: rejected {rejected} \
          {by_reason:?}, dropped by iceoryx2 {dropped}; {ticks} ticks in {seconds:.3} s = \

@@ -36,6 +36,16 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
     let stats: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(stats["ticks"].as_u64().unwrap() > 1000);
     assert!(stats["jitter_us"]["p50"].as_f64().is_some());
+    // The planners' slices all belong to a running trial: none crosses the stop that ends it
+    // (one per trial did, sent in the same tick as the stop and checked after it).
+    assert_eq!(
+        stats["rejected_by_reason"]["wrong-trial"]
+            .as_u64()
+            .unwrap_or(0),
+        0,
+        "slices rejected as wrong-trial: {}",
+        stats["rejected_by_reason"]
+    );
     assert!(
         vic::rt::transport::namespace_files(&ns).is_empty(),
         "shared memory left behind: {:?}",

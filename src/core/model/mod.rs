@@ -13,7 +13,7 @@ pub mod plant;
 pub use actuator::{Actuator, Damping};
 pub use field::Field;
 pub use noise::Noise;
-pub use plant::{Plant, SingleJoint, TwoLink};
+pub use plant::{Angles, Plant, SingleJoint, TwoLink};
 
 use crate::core::scalar::{Scalar, c};
 use serde::{Deserialize, Serialize};
@@ -147,22 +147,24 @@ impl ArmModel {
     pub fn f<S: Scalar>(&self, x: &[S], u: &[S], ex: &Exogenous, xdot: &mut [S]) {
         let n = self.dof();
         let (q, qd) = (&x[..n], &x[n..2 * n]);
+        let angles = self.plant.angles(q);
         let mut tau = [S::zero(); 2];
         self.joint_torque(x, u, ex, &mut tau);
         let mut bias = [S::zero(); 2];
-        self.plant.bias_torque(q, qd, &mut bias);
+        self.plant.bias_torque_at(&angles, qd, &mut bias);
         let mut rhs = [S::zero(); 2];
         for i in 0..n {
             rhs[i] = tau[i] - bias[i];
         }
         if !self.field.is_none() {
-            let field = self.field_torque(q, qd);
+            let field = self.field_torque(&angles, qd);
             for (r, t) in rhs.iter_mut().zip(field).take(n) {
                 *r += t;
             }
         }
         let mut qdd = [S::zero(); 2];
-        self.plant.solve_mass(q, &rhs[..n], &mut qdd[..n]);
+        let m = self.plant.mass_matrix_at(&angles);
+        Plant::solve_with(&m, n, &rhs[..n], &mut qdd[..n]);
         xdot[..n].copy_from_slice(qd);
         xdot[n..2 * n].copy_from_slice(&qdd[..n]);
         if let Actuator::Vsa { motor_inertia } = &self.actuator {
@@ -190,12 +192,12 @@ impl ArmModel {
             Noise::Torque { a, b, sample_time } => {
                 let scale = sample_time.sqrt();
                 let n = self.dof();
-                let q = &x[..n];
+                let m = self.plant.mass_matrix(&x[..n]);
                 for i in 0..n {
                     let mut e = [S::zero(); 2];
                     e[i] = (x[n + i] * b + a) * scale;
                     let mut acc = [S::zero(); 2];
-                    self.plant.solve_mass(q, &e[..n], &mut acc[..n]);
+                    Plant::solve_with(&m, n, &e[..n], &mut acc[..n]);
                     for j in 0..n {
                         out[i * nx + n + j] = acc[j];
                     }
@@ -208,16 +210,17 @@ impl ArmModel {
     /// `M(q) q'' + C(q, q') + B_v q' + g(q) − Jᵀ D` (used to warm-start the planner).
     pub fn inverse_dynamics(&self, q: &[f64], qd: &[f64], qdd: &[f64]) -> [f64; 2] {
         let n = self.dof();
-        let m = self.plant.mass_matrix(q);
+        let angles = self.plant.angles(q);
+        let m = self.plant.mass_matrix_at(&angles);
         let mut tau = [0.0; 2];
-        self.plant.bias_torque(q, qd, &mut tau);
+        self.plant.bias_torque_at(&angles, qd, &mut tau);
         for i in 0..n {
             for j in 0..n {
                 tau[i] += m[i][j] * qdd[j];
             }
         }
         if !self.field.is_none() {
-            for (t, f) in tau.iter_mut().zip(self.field_torque(q, qd)).take(n) {
+            for (t, f) in tau.iter_mut().zip(self.field_torque(&angles, qd)).take(n) {
                 *t -= f;
             }
         }
@@ -226,13 +229,13 @@ impl ArmModel {
 
     /// `Jᵀ(q) D(x, v)`: the field's hand force mapped to joint torques (Eq. 2's external term),
     /// with the hand velocity `v = J(q) q'`.
-    fn field_torque<S: Scalar>(&self, q: &[S], qd: &[S]) -> [S; 2] {
-        let jac = self.plant.jacobian(q);
+    fn field_torque<S: Scalar>(&self, angles: &Angles<S>, qd: &[S]) -> [S; 2] {
+        let jac = self.plant.jacobian_at(angles);
         let v = [
             jac[0][0] * qd[0] + jac[0][1] * qd[1],
             jac[1][0] * qd[0] + jac[1][1] * qd[1],
         ];
-        let force = self.field.force(self.plant.hand_position(q), v);
+        let force = self.field.force(self.plant.hand_position_at(angles), v);
         [
             jac[0][0] * force[0] + jac[1][0] * force[1],
             jac[0][1] * force[0] + jac[1][1] * force[1],

@@ -43,6 +43,18 @@ pub struct TwoLink {
     pub viscosity: [[f64; 2]; 2],
 }
 
+/// `sin` and `cos` of the joint angles and of their sum (`s12 = sin(q1 + q2)`); for a single
+/// joint `q2 = 0`.
+#[derive(Debug, Clone, Copy)]
+pub struct Angles<S> {
+    pub s1: S,
+    pub c1: S,
+    pub s2: S,
+    pub c2: S,
+    pub s12: S,
+    pub c12: S,
+}
+
 /// The limb: which rigid-body model moves.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub enum Plant {
@@ -59,12 +71,47 @@ impl Plant {
         }
     }
 
+    /// The sines and cosines of a configuration, each computed once: one evaluation of the
+    /// dynamics needs them in the mass matrix, the bias torques, the hand position and the
+    /// Jacobian, and with nested dual numbers (the solver's derivatives) the trigonometry is most
+    /// of the cost of an evaluation.
+    pub fn angles<S: Scalar>(&self, q: &[S]) -> Angles<S> {
+        let (s1, c1) = q[0].sin_cos();
+        match self {
+            Plant::SingleJoint(_) => Angles {
+                s1,
+                c1,
+                s2: S::zero(),
+                c2: S::one(),
+                s12: s1,
+                c12: c1,
+            },
+            Plant::TwoLink(_) => {
+                let (s2, c2) = q[1].sin_cos();
+                let (s12, c12) = (q[0] + q[1]).sin_cos();
+                Angles {
+                    s1,
+                    c1,
+                    s2,
+                    c2,
+                    s12,
+                    c12,
+                }
+            }
+        }
+    }
+
     /// Mass matrix `M(q)`, row-major 2×2 (only `[0][0]` used for a single joint).
     pub fn mass_matrix<S: Scalar>(&self, q: &[S]) -> [[S; 2]; 2] {
+        self.mass_matrix_at(&self.angles(q))
+    }
+
+    /// [`Plant::mass_matrix`] from the configuration's [`Angles`].
+    pub fn mass_matrix_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
         match self {
             Plant::SingleJoint(p) => [[c(p.inertia), S::zero()], [S::zero(), S::one()]],
             Plant::TwoLink(p) => {
-                let h = c::<S>(p.m2 * p.l1 * p.s2) * q[1].cos();
+                let h = c::<S>(p.m2 * p.l1 * p.s2) * a.c2;
                 let m11 = c::<S>(p.i1 + p.i2 + p.m2 * p.l1 * p.l1) + h * 2.0;
                 let m12 = c::<S>(p.i2) + h;
                 [[m11, m12], [m12, c(p.i2)]]
@@ -74,12 +121,17 @@ impl Plant {
 
     /// Velocity- and gravity-dependent torques `C(q, q') + B_v q' + g(q)` (the bias torques).
     pub fn bias_torque<S: Scalar>(&self, q: &[S], qd: &[S], out: &mut [S]) {
+        self.bias_torque_at(&self.angles(q), qd, out)
+    }
+
+    /// [`Plant::bias_torque`] from the configuration's [`Angles`].
+    pub fn bias_torque_at<S: Scalar>(&self, a: &Angles<S>, qd: &[S], out: &mut [S]) {
         match self {
             Plant::SingleJoint(p) => {
-                out[0] = c::<S>(p.mass * p.gravity * p.com) * q[0].cos() + qd[0] * p.viscosity;
+                out[0] = c::<S>(p.mass * p.gravity * p.com) * a.c1 + qd[0] * p.viscosity;
             }
             Plant::TwoLink(p) => {
-                let h = c::<S>(p.m2 * p.l1 * p.s2) * q[1].sin();
+                let h = c::<S>(p.m2 * p.l1 * p.s2) * a.s2;
                 let b = &p.viscosity;
                 out[0] = -h * qd[1] * (qd[0] * 2.0 + qd[1]) + qd[0] * b[0][0] + qd[1] * b[0][1];
                 out[1] = h * qd[0] * qd[0] + qd[0] * b[1][0] + qd[1] * b[1][1];
@@ -90,47 +142,46 @@ impl Plant {
     /// Position of the hand (two-link) or of the forearm tip (single joint) [m], shoulder at the
     /// origin: `x = l1 cos q1 + l2 cos(q1 + q2)`, `y = l1 sin q1 + l2 sin(q1 + q2)`.
     pub fn hand_position<S: Scalar>(&self, q: &[S]) -> [S; 2] {
+        self.hand_position_at(&self.angles(q))
+    }
+
+    /// [`Plant::hand_position`] from the configuration's [`Angles`].
+    pub fn hand_position_at<S: Scalar>(&self, a: &Angles<S>) -> [S; 2] {
         match self {
-            Plant::SingleJoint(p) => [q[0].cos() * p.length, q[0].sin() * p.length],
-            Plant::TwoLink(p) => {
-                let q12 = q[0] + q[1];
-                [
-                    q[0].cos() * p.l1 + q12.cos() * p.l2,
-                    q[0].sin() * p.l1 + q12.sin() * p.l2,
-                ]
-            }
+            Plant::SingleJoint(p) => [a.c1 * p.length, a.s1 * p.length],
+            Plant::TwoLink(p) => [a.c1 * p.l1 + a.c12 * p.l2, a.s1 * p.l1 + a.s12 * p.l2],
         }
     }
 
     /// Hand Jacobian `J(q) = ∂(x, y)/∂q`, row-major 2×dof (column 1 unused for a single joint).
     pub fn jacobian<S: Scalar>(&self, q: &[S]) -> [[S; 2]; 2] {
+        self.jacobian_at(&self.angles(q))
+    }
+
+    /// [`Plant::jacobian`] from the configuration's [`Angles`].
+    pub fn jacobian_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
         match self {
-            Plant::SingleJoint(p) => [
-                [-q[0].sin() * p.length, S::zero()],
-                [q[0].cos() * p.length, S::zero()],
+            Plant::SingleJoint(p) => [[-a.s1 * p.length, S::zero()], [a.c1 * p.length, S::zero()]],
+            Plant::TwoLink(p) => [
+                [-a.s1 * p.l1 - a.s12 * p.l2, -a.s12 * p.l2],
+                [a.c1 * p.l1 + a.c12 * p.l2, a.c12 * p.l2],
             ],
-            Plant::TwoLink(p) => {
-                let q12 = q[0] + q[1];
-                let (s1, c1) = (q[0].sin(), q[0].cos());
-                let (s12, c12) = (q12.sin(), q12.cos());
-                [
-                    [-s1 * p.l1 - s12 * p.l2, -s12 * p.l2],
-                    [c1 * p.l1 + c12 * p.l2, c12 * p.l2],
-                ]
-            }
         }
     }
 
     /// Solves `M(q) a = rhs` for the joint accelerations `a`.
     pub fn solve_mass<S: Scalar>(&self, q: &[S], rhs: &[S], out: &mut [S]) {
-        let m = self.mass_matrix(q);
-        match self {
-            Plant::SingleJoint(_) => out[0] = rhs[0] / m[0][0],
-            Plant::TwoLink(_) => {
-                let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-                out[0] = (m[1][1] * rhs[0] - m[0][1] * rhs[1]) / det;
-                out[1] = (m[0][0] * rhs[1] - m[1][0] * rhs[0]) / det;
-            }
+        Plant::solve_with(&self.mass_matrix(q), self.dof(), rhs, out)
+    }
+
+    /// Solves `m a = rhs` for a mass matrix `m` of a plant with `dof` joints.
+    pub fn solve_with<S: Scalar>(m: &[[S; 2]; 2], dof: usize, rhs: &[S], out: &mut [S]) {
+        if dof == 1 {
+            out[0] = rhs[0] / m[0][0];
+        } else {
+            let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+            out[0] = (m[1][1] * rhs[0] - m[0][1] * rhs[1]) / det;
+            out[1] = (m[0][0] * rhs[1] - m[1][0] * rhs[0]) / det;
         }
     }
 
@@ -179,6 +230,52 @@ mod tests {
             assert!(q[1] > 0.0);
         }
         assert!(p.inverse_kinematics([0.0, 0.7]).is_none());
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences_of_the_hand_position() {
+        // The cached angles feed both: each is checked against the other and against the
+        // forward kinematics written out with plain sin and cos.
+        let joint = Plant::SingleJoint(SingleJoint {
+            inertia: 0.1,
+            mass: 1.0,
+            com: 0.1,
+            length: 0.3,
+            gravity: 9.81,
+            viscosity: 0.05,
+        });
+        for (p, q) in [
+            (arm(), [0.3_f64, 1.1]),
+            (arm(), [-2.0, 2.9]),
+            (joint, [0.7, 0.0]),
+        ] {
+            let dof = p.dof();
+            let hand = p.hand_position(&q);
+            let direct = match &p {
+                Plant::TwoLink(a) => [
+                    a.l1 * q[0].cos() + a.l2 * (q[0] + q[1]).cos(),
+                    a.l1 * q[0].sin() + a.l2 * (q[0] + q[1]).sin(),
+                ],
+                Plant::SingleJoint(j) => [j.length * q[0].cos(), j.length * q[0].sin()],
+            };
+            assert_eq!(hand, direct);
+            let jac = p.jacobian(&q);
+            let eps = 1e-6;
+            for k in 0..dof {
+                let (mut qp, mut qm) = (q, q);
+                qp[k] += eps;
+                qm[k] -= eps;
+                let (a, b) = (p.hand_position(&qp), p.hand_position(&qm));
+                for r in 0..2 {
+                    let fd = (a[r] - b[r]) / (2.0 * eps);
+                    assert!(
+                        (jac[r][k] - fd).abs() < 1e-8,
+                        "J[{r}][{k}] {} vs {fd}",
+                        jac[r][k]
+                    );
+                }
+            }
+        }
     }
 
     #[test]

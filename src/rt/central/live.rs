@@ -167,6 +167,12 @@ fn stream_trial(
         if ep.drain_states(|s| central.on_state(s, now)) > 0 {
             last_state_ns = now;
         }
+        // Done before sending: a slice published now would reach the board in the same tick
+        // as the stop that follows, be checked after it (controls go first) and be rejected as
+        // `wrong-trial`, one counted rejection per trial for slices past the movement's end.
+        if central.trial_done() {
+            return Ok(TrialEnd::Done);
+        }
         let silent = now.saturating_sub(last_state_ns);
         if silent > watch.lost_after_ns {
             central.stalled = true;
@@ -179,9 +185,6 @@ fn stream_trial(
         central.poll(wake.deadline_ns.max(now), &mut out);
         for c in &out {
             ep.publish_command(c)?;
-        }
-        if central.trial_done() {
-            return Ok(TrialEnd::Done);
         }
         if now > limit || stop.load(Ordering::Relaxed) {
             central.stalled = true;
