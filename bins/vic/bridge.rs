@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 use vic::rt::bridge::{BridgeOptions, Link, Side};
-use vic::tools::cli::{JsonArg, NamespaceArgs, input_error, non_negative_seconds};
+use vic::tools::cli::{JsonArg, NamespaceArgs, non_negative_seconds};
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum SideArg {
@@ -32,10 +32,11 @@ pub struct BridgeArgs {
     /// The name both bridges share (key expressions vic/NAME/...); default: the namespace.
     #[arg(long)]
     link_name: Option<String>,
-    /// Drain period of the local subscribers [µs] (messages from the link are forwarded as they
-    /// arrive).
-    #[arg(long, default_value_t = 250)]
-    poll_us: u64,
+    /// Messages are forwarded as they are published (the local daemons notify the bridge) and as
+    /// they arrive from the link; this is only the longest the bridge waits before looking at the
+    /// local subscribers without a notification [ms] (1 to 60000).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=60_000))]
+    safety_interval_ms: u64,
     /// Re-stamp the messages forwarded to the board with this host's clock: needed across hosts
     /// whose monotonic clocks differ (the age check then covers bridge → board only).
     #[arg(long)]
@@ -50,12 +51,6 @@ pub struct BridgeArgs {
 impl BridgeArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let namespace = self.namespace.validated()?.to_string();
-        if !(10..=100_000).contains(&self.poll_us) {
-            return Err(input_error(format!(
-                "--poll-us {}: use 10 to 100000",
-                self.poll_us
-            )));
-        }
         let duration = non_negative_seconds("--duration-s", self.duration_s)?;
         let link = match (self.listen, self.connect) {
             (Some(e), None) => Link::Listen(e),
@@ -70,7 +65,7 @@ impl BridgeArgs {
                 SideArg::Central => Side::Central,
             },
             link,
-            poll: Duration::from_micros(self.poll_us),
+            safety_interval: Duration::from_millis(self.safety_interval_ms),
             restamp: self.restamp,
         };
         vic::tools::bridge_command::run(&options, duration, self.json.json)
