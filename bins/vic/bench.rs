@@ -53,12 +53,13 @@ struct BenchBridgeArgs {
     /// Round trips per channel (after 10 % more for warm-up).
     #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u64).range(10..=10_000_000))]
     iterations: u64,
-    /// The bridges' drain period of the local subscribers [µs].
-    #[arg(long, default_value_t = 250, value_parser = clap::value_parser!(u64).range(10..=100_000))]
-    poll_us: u64,
     /// Loopback TCP port of the link (the bare Zenoh pair uses the next one).
     #[arg(long, default_value_t = 17447)]
     port: u16,
+    /// The ping–pong's two ends spin on their subscribers (by default they sleep until the
+    /// other end's publisher notifies, as the bare Zenoh pair sleeps in its receiver).
+    #[arg(long)]
+    spin: bool,
     #[command(flatten)]
     json: JsonArg,
 }
@@ -148,8 +149,8 @@ impl BenchArgs {
             BenchCommand::Bridge(a) => vic::tools::bench_command::run_bridge(
                 &vic::tools::bench::bridge::Options {
                     iterations: a.iterations,
-                    poll: std::time::Duration::from_micros(a.poll_us),
                     port: a.port,
+                    spin: a.spin,
                 },
                 a.json.json,
             ),

@@ -40,10 +40,11 @@ pub struct BridgeArgs {
     /// The name both bridges share (key expressions vic/NAME/...); default: the namespace.
     #[arg(long)]
     link_name: Option<String>,
-    /// Drain period of the local subscribers [µs] (messages from the link are forwarded as they
-    /// arrive).
-    #[arg(long, default_value_t = 250)]
-    poll_us: u64,
+    /// Messages are forwarded as they are published (the local daemons notify the bridge) and as
+    /// they arrive from the link; this is only the longest the bridge waits before looking at the
+    /// local subscribers without a notification [ms] (1 to 60000).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=60_000))]
+    safety_interval_ms: u64,
     /// Board side: what to do with the time stamps of the messages forwarded to the board.
     /// `translate` measures the offset to the central host's clock (probes over the link, a few
     /// per second) and moves every stamp into this host's clock, so that the board's age check
@@ -64,12 +65,6 @@ pub struct BridgeArgs {
 impl BridgeArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let namespace = self.namespace.validated()?.to_string();
-        if !(10..=100_000).contains(&self.poll_us) {
-            return Err(input_error(format!(
-                "--poll-us {}: use 10 to 100000",
-                self.poll_us
-            )));
-        }
         let duration = non_negative_seconds("--duration-s", self.duration_s)?;
         if self.clock_skew_ms != 0 && !matches!(self.side, SideArg::Central) {
             return Err(input_error("--clock-skew-ms: only with --side central"));
@@ -91,7 +86,7 @@ impl BridgeArgs {
                 SideArg::Central => Side::Central,
             },
             link,
-            poll: Duration::from_micros(self.poll_us),
+            safety_interval: Duration::from_millis(self.safety_interval_ms),
             stamps: match self.stamps {
                 StampsArg::Translate => Stamps::Translate,
                 StampsArg::Keep => Stamps::Keep,

@@ -22,12 +22,13 @@ pub fn run(o: &BridgeOptions, duration: Duration, json: bool) -> anyhow::Result<
     }
     let start = Instant::now();
     eprintln!(
-        "vic bridge: namespace {} as the {:?} side of link \"{}\" ({:?}), draining every {} µs{}",
+        "vic bridge: namespace {} as the {:?} side of link \"{}\" ({:?}), woken by events \
+         (safety interval {} ms){}",
         o.namespace,
         o.side,
         o.link_name,
         o.link,
-        o.poll.as_micros(),
+        o.safety_interval.as_millis(),
         match (o.side, o.stamps) {
             (Side::Board, Stamps::Translate) => ", stamps translated into this host's clock",
             (Side::Board, Stamps::Keep) => ", senders' stamps kept (one machine)",

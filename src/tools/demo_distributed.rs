@@ -53,7 +53,6 @@ mod link {
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::thread::JoinHandle;
-    use std::time::Duration;
 
     type Bridge = JoinHandle<Result<BridgeStats, bridge::BridgeError>>;
 
@@ -87,7 +86,7 @@ mod link {
                     link_name: board_ns.to_string(),
                     side,
                     link,
-                    poll: Duration::from_micros(250),
+                    safety_interval: bridge::DEFAULT_SAFETY_INTERVAL,
                     stamps: Stamps::Translate,
                     clock_skew_ns: 0,
                 };

@@ -22,24 +22,30 @@
 //! path, link included, to within ± half the best probe's round trip. [`Stamps::Keep`] forwards
 //! the senders' stamps unchanged: exact when both daemons share one machine's clock.
 //!
-//! **Wake-ups.** Zenoh delivers to callbacks, which hand each message to the bridge's thread
-//! through a channel: the thread sleeps in the channel until a message arrives or until the next
-//! drain of the local subscribers. iceoryx2 publish–subscribe has no wake-up unless the publisher
-//! notifies, and neither the board (1 kHz: a notification per tick would put a system call into
-//! its loop) nor the central process notifies per message, so the local side is drained every
-//! `poll` (default 250 µs), at absolute deadlines.
+//! **Wake-ups** (event-driven on both sides, no polling). Zenoh delivers to callbacks, which hand
+//! each message to the bridge's thread through a channel and ring a socket the thread's iceoryx2
+//! wait set watches ([`looper::LinkWake`]). iceoryx2 publish–subscribe has no wake-up of its
+//! own, so the local publishers notify a relay event service per message
+//! ([`crate::rt::transport::relay`]: the board per state, telemetry and event; the central
+//! process per command slice and control; `vic inject` per disturbance); only a bridge listens
+//! there, and while none does a notification costs the publisher one atomic load. The same wait
+//! set watches that listener. A slow safety interval (`safety_interval`, default 100 ms) drains
+//! the local side anyway, so a message from a client that does not notify is late, not lost.
 
 pub mod clock;
+mod looper;
 pub mod wire;
 
 use crate::rt::transport::ports::Topic;
 use crate::rt::transport::protocol::{
     BoardEvent, CommandSlice, Control, Disturbance, StateMsg, Telemetry,
 };
+use crate::rt::transport::relay::{Relay, RelayListener};
 use crate::rt::transport::{BoardPorts, CentralPorts, ToolPorts, TransportError};
 use clock::skewed;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc;
+use looper::{LinkWake, Looper};
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 use wire::{Malformed, Plain, decode, encode};
 use zenoh::Wait;
@@ -71,8 +77,10 @@ pub struct BridgeOptions {
     pub link_name: String,
     pub side: Side,
     pub link: Link,
-    /// Drain period of the local subscribers.
-    pub poll: Duration,
+    /// The longest the bridge sleeps before draining the local subscribers without having been
+    /// notified (messages are forwarded as they are notified; this only bounds the delay of one
+    /// whose notification was missed).
+    pub safety_interval: Duration,
     /// What the board-side bridge does with the stamps it forwards.
     pub stamps: Stamps,
     /// Central side, tests only: pretend this host's clock is ahead by this much (the stamps of
@@ -126,7 +134,13 @@ pub enum BridgeError {
     Zenoh { what: String, message: String },
     #[error("--link-name {0:?}: use 1–32 characters of [A-Za-z0-9_-]")]
     LinkName(String),
+    /// The bridge thread's wait set or the link's wake-up could not be set up.
+    #[error("waiting for messages: {0}")]
+    Wait(String),
 }
+
+/// The default of [`BridgeOptions::safety_interval`].
+pub const DEFAULT_SAFETY_INTERVAL: Duration = Duration::from_millis(100);
 
 fn zenoh_error(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> BridgeError {
     let what = what.into();
@@ -210,6 +224,7 @@ pub fn run(
     check_link_name(&o.link_name)?;
     let session = open_session(&o.link)?;
     let (tx, rx) = mpsc::channel();
+    let wake = Arc::new(LinkWake::new()?);
     let mut stats = BridgeStats::default();
     let mut next_report = Instant::now() + Duration::from_secs(1);
     let mut tick = |stats: &BridgeStats| {
@@ -221,12 +236,14 @@ pub fn run(
     let link = LinkEnd {
         session: &session,
         tx: &tx,
+        wake: &wake,
         name: &o.link_name,
     };
     let looper = Looper {
-        poll: o.poll,
+        safety: o.safety_interval,
         stop,
         rx: &rx,
+        wake: &wake,
     };
     match o.side {
         Side::Board => board_side(o, &link, &looper, &mut tick, &mut stats)?,
@@ -237,11 +254,12 @@ pub fn run(
     Ok(stats)
 }
 
-/// This bridge's end of the Zenoh link: its session, the channel its subscriptions feed, and the
-/// link's name in the key expressions.
+/// This bridge's end of the Zenoh link: its session, the channel its subscriptions feed, the
+/// wake-up they ring, and the link's name in the key expressions.
 struct LinkEnd<'a> {
     session: &'a zenoh::Session,
     tx: &'a mpsc::Sender<Inbound>,
+    wake: &'a Arc<LinkWake>,
     name: &'a str,
 }
 
@@ -251,7 +269,7 @@ impl LinkEnd<'_> {
         &self,
         wrap: fn(T) -> Inbound,
     ) -> Result<zenoh::pubsub::Subscriber<()>, BridgeError> {
-        let tx = self.tx.clone();
+        let (tx, wake) = (self.tx.clone(), self.wake.clone());
         let key = key::<T>(self.name);
         self.session
             .declare_subscriber(key.clone())
@@ -261,6 +279,7 @@ impl LinkEnd<'_> {
                     Ok(m) => wrap(m),
                     Err(e) => Inbound::Malformed(e),
                 });
+                wake.wake();
             })
             .wait()
             .map_err(zenoh_error(format!("subscribing {key}")))
@@ -303,6 +322,7 @@ fn board_side(
     let state = link.publisher::<StateMsg>()?;
     let telemetry = link.publisher::<Telemetry>()?;
     let events = link.declare_publisher(event_key(link.name))?;
+    let relay = RelayListener::open(central.session(), Relay::FromBoard)?;
     let clock = match o.stamps {
         Stamps::Translate => Some(clock::Prober::start(link.session, link.name)?),
         Stamps::Keep => None,
@@ -310,6 +330,7 @@ fn board_side(
     // Into the board's clock; false: no estimate yet, the message is held back (counted).
     let stamp = |m: &mut dyn clock::Stamped| clock.as_ref().is_none_or(|c| c.translate(m));
     looper.run(
+        &relay,
         |inbound, r: &mut Counts| match inbound {
             Inbound::Command(mut c) => {
                 r.command += 1;
@@ -348,8 +369,7 @@ fn board_side(
             tick(s);
         },
         stats,
-    );
-    Ok(())
+    )
 }
 
 /// The bridge beside the central process, playing the board to it: state, telemetry and events
@@ -368,9 +388,10 @@ fn central_side(
         link.session
             .declare_subscriber(event_key(link.name))
             .callback({
-                let tx = link.tx.clone();
+                let (tx, wake) = (link.tx.clone(), link.wake.clone());
                 move |_| {
                     let _ = tx.send(Inbound::Event);
+                    wake.wake();
                 }
             })
             .wait()
@@ -379,9 +400,11 @@ fn central_side(
     let commands = link.publisher::<CommandSlice>()?;
     let controls = link.publisher::<Control>()?;
     let disturbances = link.publisher::<Disturbance>()?;
+    let relay = RelayListener::open(board.session(), Relay::ToBoard)?;
     let responder = clock::Responder::start(link.session, link.name, o.clock_skew_ns)?;
     let skew = o.clock_skew_ns;
     looper.run(
+        &relay,
         |inbound, r: &mut Counts| match inbound {
             Inbound::State(m) => {
                 r.state += 1;
@@ -413,59 +436,5 @@ fn central_side(
             tick(s);
         },
         stats,
-    );
-    Ok(())
-}
-
-/// The bridge's loop, the same on both sides.
-struct Looper<'a> {
-    /// Drain period of the local subscribers.
-    poll: Duration,
-    stop: &'a AtomicBool,
-    /// What the link's callbacks decoded.
-    rx: &'a mpsc::Receiver<Inbound>,
-}
-
-impl Looper<'_> {
-    /// Forwards what arrives from the link as it arrives (`forward`: publishes it locally, counts
-    /// it in the received counts, says whether the local publish worked) and drains the local
-    /// side (`drain`) at every absolute deadline `poll` apart, until `stop`. What did not decode
-    /// is counted here, once for both sides, and never forwarded.
-    fn run(
-        &self,
-        mut forward: impl FnMut(Inbound, &mut Counts) -> bool,
-        mut drain: impl FnMut(&mut BridgeStats),
-        stats: &mut BridgeStats,
-    ) {
-        let mut inbound = |m: Inbound, s: &mut BridgeStats| match m {
-            Inbound::Malformed(Malformed::Size { .. }) => s.malformed_size += 1,
-            Inbound::Malformed(Malformed::Version(_)) => s.malformed_version += 1,
-            m => s.local_errors += (!forward(m, &mut s.received)) as u64,
-        };
-        let mut deadline = Instant::now() + self.poll;
-        while !self.stop.load(Ordering::Relaxed) {
-            match self
-                .rx
-                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            {
-                Ok(m) => {
-                    // Everything that arrived meanwhile goes on at once, before the next drain.
-                    inbound(m, stats);
-                    while let Ok(m) = self.rx.try_recv() {
-                        inbound(m, stats);
-                    }
-                }
-                Err(mpsc::RecvTimeoutError::Timeout) => {}
-                Err(mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                drain(stats);
-                // Absolute deadlines; a late drain skips the periods it missed.
-                while deadline <= now {
-                    deadline += self.poll;
-                }
-            }
-        }
-    }
+    )
 }

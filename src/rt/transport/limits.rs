@@ -24,6 +24,10 @@ pub const MAX_SUBSCRIBERS: usize = 16;
 pub const MAX_NODES: usize = 32;
 /// Notifiers of the board's event service (the board; the rest is spare).
 pub const MAX_NOTIFIERS: usize = 4;
+/// Notifiers of each relay event service (`transport::relay`): every process that publishes
+/// commands, controls or disturbances holds one (central process, `vic inject`, a raw sender, the
+/// board-side bridge's two roles), with room to spare.
+pub const MAX_RELAY_NOTIFIERS: usize = 8;
 /// Listeners of the board's event service: the central process, `vic inject` and every observer.
 pub const MAX_LISTENERS: usize = 24;
 

@@ -10,6 +10,8 @@
 //! - [`limits`]: the port and node limits of every service, in one place, and the "too many"
 //!   error that names the limit and who holds the slots;
 //! - [`session`]: one process's node and the services it opens;
+//! - [`relay`]: the event services that wake a relay (the Zenoh bridge) when there is something
+//!   to forward, free for the publishers while no relay listens;
 //! - [`ports`]: one type per role ([`BoardPorts`], [`CentralPorts`], [`ToolPorts`],
 //!   [`ObserverPorts`], [`RecorderPorts`]) with plain `publish_*`, `latest_*` and `drain_*`
 //!   methods; no caller touches an iceoryx2 builder.
@@ -20,6 +22,7 @@ pub mod limits;
 pub mod namespace;
 pub mod ports;
 pub mod protocol;
+pub mod relay;
 pub mod service;
 pub mod session;
 

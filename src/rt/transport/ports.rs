@@ -13,6 +13,7 @@
 
 use super::error::TransportError;
 use super::protocol::{BoardEvent, CommandSlice, Control, Disturbance, StateMsg, Telemetry};
+use super::relay::{Relay, RelayNotifier};
 use super::service::Service as Ipc;
 pub use super::session::{EVENT_SERVICE, STATE_BUFFER, Session, Topic};
 use super::session::{Pub, Sub, drain, latest, send};
@@ -22,7 +23,9 @@ use iceoryx2::prelude::*;
 use std::time::{Duration, Instant};
 
 /// The limits, here too because the protocol document lists them with the ports.
-pub use super::limits::{MAX_LISTENERS, MAX_NODES, MAX_NOTIFIERS, MAX_PUBLISHERS, MAX_SUBSCRIBERS};
+pub use super::limits::{
+    MAX_LISTENERS, MAX_NODES, MAX_NOTIFIERS, MAX_PUBLISHERS, MAX_RELAY_NOTIFIERS, MAX_SUBSCRIBERS,
+};
 
 /// The board's node name: how a second board finds the first.
 pub const BOARD_NODE: &str = "vic-board";
@@ -42,6 +45,8 @@ pub struct BoardPorts {
     controls: Sub<Control>,
     disturbances: Sub<Disturbance>,
     events: Notifier<Ipc>,
+    /// Wakes a bridge beside the board (free while none listens: [`RelayNotifier::notify`]).
+    relay: RelayNotifier,
     session: Session,
 }
 
@@ -63,6 +68,7 @@ impl BoardPorts {
             controls: session.subscriber()?,
             disturbances: session.subscriber()?,
             events: session.notifier()?,
+            relay: RelayNotifier::open(&session, Relay::FromBoard)?,
             session,
         })
     }
@@ -73,11 +79,15 @@ impl BoardPorts {
     }
     /// Publishes the plant state.
     pub fn publish_state(&self, s: &StateMsg) -> Result<(), TransportError> {
-        send(&self.session, &self.state, s)
+        let sent = send(&self.session, &self.state, s);
+        self.relay.notify();
+        sent
     }
     /// Publishes telemetry.
     pub fn publish_telemetry(&self, t: &Telemetry) -> Result<(), TransportError> {
-        send(&self.session, &self.telemetry, t)
+        let sent = send(&self.session, &self.telemetry, t);
+        self.relay.notify();
+        sent
     }
     /// Every command slice received since the last call, oldest first.
     pub fn drain_commands(&self, f: impl FnMut(&CommandSlice)) -> usize {
@@ -100,6 +110,7 @@ impl BoardPorts {
         let _ = self
             .events
             .notify_with_custom_event_id(EventId::new(e as usize));
+        self.relay.notify();
     }
 }
 
@@ -132,8 +143,8 @@ impl BoardWatch {
         got
     }
 
-    /// Whether the board signalled an event since the last call, without blocking (a relay's
-    /// loop, e.g. the bridge, polls it).
+    /// Whether the board signalled an event since the last call, without blocking (the bridge
+    /// checks it on every wake-up).
     pub fn take_event(&self) -> bool {
         let mut got = false;
         let _ = self.events.try_wait(|_| got = true);
@@ -194,6 +205,7 @@ impl std::ops::Deref for BoardObserver {
 pub struct CentralPorts {
     commands: Pub<CommandSlice>,
     controls: Pub<Control>,
+    relay: RelayNotifier,
     observer: BoardObserver,
     session: Session,
 }
@@ -212,6 +224,7 @@ impl CentralPorts {
         Ok(CentralPorts {
             commands: session.publisher()?,
             controls: session.publisher()?,
+            relay: RelayNotifier::open(&session, Relay::ToBoard)?,
             observer: BoardObserver::open(&session)?,
             session,
         })
@@ -222,11 +235,15 @@ impl CentralPorts {
     }
     /// Publishes a command slice.
     pub fn publish_command(&self, c: &CommandSlice) -> Result<(), TransportError> {
-        send(&self.session, &self.commands, c)
+        let sent = send(&self.session, &self.commands, c);
+        self.relay.notify();
+        sent
     }
     /// Publishes a control request.
     pub fn publish_control(&self, c: &Control) -> Result<(), TransportError> {
-        send(&self.session, &self.controls, c)
+        let sent = send(&self.session, &self.controls, c);
+        self.relay.notify();
+        sent
     }
 }
 
@@ -241,6 +258,7 @@ impl std::ops::Deref for CentralPorts {
 /// the acknowledgement). Dereferences to its [`BoardObserver`].
 pub struct ToolPorts {
     disturbances: Pub<Disturbance>,
+    relay: RelayNotifier,
     observer: BoardObserver,
     session: Session,
 }
@@ -251,6 +269,7 @@ impl ToolPorts {
         let session = Session::open(ns, INJECT_NODE)?;
         Ok(ToolPorts {
             disturbances: session.publisher()?,
+            relay: RelayNotifier::open(&session, Relay::ToBoard)?,
             observer: BoardObserver::open(&session)?,
             session,
         })
@@ -261,7 +280,9 @@ impl ToolPorts {
     }
     /// Publishes a disturbance.
     pub fn publish_disturbance(&self, d: &Disturbance) -> Result<(), TransportError> {
-        send(&self.session, &self.disturbances, d)
+        let sent = send(&self.session, &self.disturbances, d);
+        self.relay.notify();
+        sent
     }
 }
 
@@ -385,6 +406,7 @@ pub struct RawPorts {
     commands: Pub<CommandSlice>,
     controls: Pub<Control>,
     disturbances: Pub<Disturbance>,
+    relay: RelayNotifier,
     session: Session,
 }
 
@@ -397,20 +419,27 @@ impl RawPorts {
             commands: session.publisher()?,
             controls: session.publisher()?,
             disturbances: session.publisher()?,
+            relay: RelayNotifier::open(&session, Relay::ToBoard)?,
             session,
         })
     }
     /// Publishes a command slice as is.
     pub fn publish_command(&self, c: &CommandSlice) -> Result<(), TransportError> {
-        send(&self.session, &self.commands, c)
+        let sent = send(&self.session, &self.commands, c);
+        self.relay.notify();
+        sent
     }
     /// Publishes a control request as is.
     pub fn publish_control(&self, c: &Control) -> Result<(), TransportError> {
-        send(&self.session, &self.controls, c)
+        let sent = send(&self.session, &self.controls, c);
+        self.relay.notify();
+        sent
     }
     /// Publishes a disturbance as is.
     pub fn publish_disturbance(&self, d: &Disturbance) -> Result<(), TransportError> {
-        send(&self.session, &self.disturbances, d)
+        let sent = send(&self.session, &self.disturbances, d);
+        self.relay.notify();
+        sent
     }
 }
 

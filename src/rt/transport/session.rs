@@ -66,7 +66,7 @@ pub const EVENT_SERVICE: &str = "vic/board-event";
 pub(super) type Pub<T> = Publisher<Ipc, T, ()>;
 pub(super) type Sub<T> = Subscriber<Ipc, T, ()>;
 type PubSubService<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>;
-type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
+pub(super) type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
 
 /// One process's node in a namespace. Drop it after its ports (declare it last): the last process
 /// of a namespace to leave also removes the namespace's files, so that a clean shutdown leaves
@@ -227,31 +227,44 @@ impl Session {
         })
     }
 
-    fn event_service(&self) -> Result<EventService, TransportError> {
+    /// The event service `name` (the board's events or a relay service).
+    fn event_service(
+        &self,
+        name: &'static str,
+        max_notifiers: usize,
+    ) -> Result<EventService, TransportError> {
         let ns = &self.namespace;
-        let name = ServiceName::new(EVENT_SERVICE)
-            .map_err(|e| TransportError::ipc(ns, EVENT_SERVICE, e))?;
+        let service = ServiceName::new(name).map_err(|e| TransportError::ipc(ns, name, e))?;
         self.node()
-            .service_builder(&name)
+            .service_builder(&service)
             .event()
-            .max_notifiers(MAX_NOTIFIERS)
+            .max_notifiers(max_notifiers)
             .max_listeners(MAX_LISTENERS)
             .max_nodes(MAX_NODES)
             .open_or_create()
             .map_err(|e| match e {
                 EventOpenOrCreateError::EventOpenError(EventOpenError::ExceedsMaxNumberOfNodes) => {
-                    self.too_many_nodes(EVENT_SERVICE, MAX_NODES)
+                    self.too_many_nodes(name, MAX_NODES)
                 }
-                e => TransportError::ipc(ns, format!("service {EVENT_SERVICE}"), e),
+                e => TransportError::ipc(ns, format!("service {name}"), e),
             })
     }
 
     /// A listener of the board's events.
     pub(super) fn listener(&self) -> Result<Listener<Ipc>, TransportError> {
-        let svc = self.event_service()?;
+        self.listener_on(EVENT_SERVICE, MAX_NOTIFIERS)
+    }
+
+    /// A listener of the event service `name`.
+    pub(super) fn listener_on(
+        &self,
+        name: &'static str,
+        max_notifiers: usize,
+    ) -> Result<Listener<Ipc>, TransportError> {
+        let svc = self.event_service(name, max_notifiers)?;
         svc.listener_builder().create().map_err(|e| match e {
             ListenerCreateError::ExceedsMaxSupportedListeners => self.too_many_ports(
-                EVENT_SERVICE,
+                name,
                 PortKind::Listener,
                 svc.static_config().max_listeners(),
                 |push| {
@@ -261,16 +274,26 @@ impl Session {
                     })
                 },
             ),
-            e => TransportError::ipc(&self.namespace, "event listener", e),
+            e => TransportError::ipc(&self.namespace, format!("{name} listener"), e),
         })
     }
 
     /// The board's notifier of its events.
     pub(super) fn notifier(&self) -> Result<Notifier<Ipc>, TransportError> {
-        let svc = self.event_service()?;
-        svc.notifier_builder().create().map_err(|e| match e {
+        Ok(self.notifier_on(EVENT_SERVICE, MAX_NOTIFIERS)?.0)
+    }
+
+    /// A notifier of the event service `name`, with the service (which tells how many listeners
+    /// it has).
+    pub(super) fn notifier_on(
+        &self,
+        name: &'static str,
+        max_notifiers: usize,
+    ) -> Result<(Notifier<Ipc>, EventService), TransportError> {
+        let svc = self.event_service(name, max_notifiers)?;
+        let notifier = svc.notifier_builder().create().map_err(|e| match e {
             NotifierCreateError::ExceedsMaxSupportedNotifiers => self.too_many_ports(
-                EVENT_SERVICE,
+                name,
                 PortKind::Notifier,
                 svc.static_config().max_notifiers(),
                 |push| {
@@ -280,8 +303,9 @@ impl Session {
                     })
                 },
             ),
-            e => TransportError::ipc(&self.namespace, "event notifier", e),
-        })
+            e => TransportError::ipc(&self.namespace, format!("{name} notifier"), e),
+        })?;
+        Ok((notifier, svc))
     }
 
     /// The namespace of this session.

@@ -9,6 +9,7 @@
 
 use crate::rt::bridge::{self, BridgeOptions, Link, Side};
 use crate::rt::transport::protocol::{CommandSlice, Header, StateMsg};
+use crate::rt::transport::relay::{Relay, RelayListener};
 use crate::rt::transport::{BoardPorts, CentralPorts, monotonic_ns, remove_namespace};
 use hdrhistogram::Histogram;
 use serde::Serialize;
@@ -22,10 +23,10 @@ use zenoh::Wait;
 pub struct Options {
     /// Round trips per channel (after 10 % more for warm-up).
     pub iterations: u64,
-    /// The bridges' drain period.
-    pub poll: Duration,
     /// Loopback TCP port of the link (the bare Zenoh pair uses the next one).
     pub port: u16,
+    /// The endpoints spin on their subscribers instead of sleeping until notified.
+    pub spin: bool,
 }
 
 /// One channel's one-way latency [µs].
@@ -41,7 +42,10 @@ pub struct Latency {
 #[derive(Debug, Clone, Serialize)]
 pub struct Report {
     pub iterations: u64,
-    pub poll_us: f64,
+    /// Whether the endpoints spun (else they slept until notified).
+    pub spin: bool,
+    /// The bridges' safety interval (they are woken by events; this only bounds a missed one).
+    pub safety_interval_ms: f64,
     pub payload_bytes: usize,
     pub shared_memory: Latency,
     pub zenoh: Latency,
@@ -90,8 +94,14 @@ fn histogram() -> Histogram<u64> {
 
 /// The echo: answers every command in `ns` with a state of the same sequence number, spinning,
 /// until `stop`.
-fn echo(ns: String, stop: Arc<AtomicBool>, ready: Arc<AtomicBool>) -> Result<(), BenchError> {
+fn echo(
+    ns: String,
+    spin: bool,
+    stop: Arc<AtomicBool>,
+    ready: Arc<AtomicBool>,
+) -> Result<(), BenchError> {
     let board = BoardPorts::open(&ns)?;
+    let woken = RelayListener::open(board.session(), Relay::ToBoard)?;
     ready.store(true, Ordering::Release);
     while !stop.load(Ordering::Relaxed) {
         board.drain_commands(|c| {
@@ -101,7 +111,7 @@ fn echo(ns: String, stop: Arc<AtomicBool>, ready: Arc<AtomicBool>) -> Result<(),
             };
             let _ = board.publish_state(&s);
         });
-        std::hint::spin_loop();
+        pause(spin, &woken);
     }
     Ok(())
 }
@@ -110,9 +120,11 @@ fn echo(ns: String, stop: Arc<AtomicBool>, ready: Arc<AtomicBool>) -> Result<(),
 fn ping_pong(
     ns: &str,
     iterations: u64,
+    spin: bool,
     channel: &'static str,
 ) -> Result<Histogram<u64>, BenchError> {
     let central = CentralPorts::open(ns)?;
+    let woken = RelayListener::open(central.session(), Relay::FromBoard)?;
     let mut h = histogram();
     let warm = iterations / 10;
     for i in 1..=warm + iterations {
@@ -128,7 +140,9 @@ fn ping_pong(
             if t.elapsed() > Duration::from_secs(2) {
                 return Err(BenchError::Timeout(channel, i));
             }
-            std::hint::spin_loop();
+            if !answered {
+                pause(spin, &woken);
+            }
         }
         if i > warm {
             let _ = h.record((t.elapsed().as_nanos() / 2) as u64);
@@ -137,13 +151,28 @@ fn ping_pong(
     Ok(h)
 }
 
+/// Between two looks at the subscribers: spin, or sleep until the other end's publisher
+/// notifies (the relay event every publisher rings; a notification that came since the last
+/// look returns at once).
+fn pause(spin: bool, woken: &RelayListener) {
+    if spin {
+        std::hint::spin_loop();
+    } else {
+        woken.wait(Duration::from_millis(10));
+    }
+}
+
 /// Runs the echo in a thread beside `f`, stops it after.
-fn with_echo<T>(ns: &str, f: impl FnOnce() -> Result<T, BenchError>) -> Result<T, BenchError> {
+fn with_echo<T>(
+    ns: &str,
+    spin: bool,
+    f: impl FnOnce() -> Result<T, BenchError>,
+) -> Result<T, BenchError> {
     let stop = Arc::new(AtomicBool::new(false));
     let ready = Arc::new(AtomicBool::new(false));
     let echo = {
         let (ns, stop, ready) = (ns.to_string(), stop.clone(), ready.clone());
-        std::thread::spawn(move || echo(ns, stop, ready))
+        std::thread::spawn(move || echo(ns, spin, stop, ready))
     };
     while !ready.load(Ordering::Acquire) && !echo.is_finished() {
         std::thread::sleep(Duration::from_millis(1));
@@ -244,21 +273,21 @@ fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
             link_name: format!("bench{}", std::process::id()),
             side,
             link,
-            poll: o.poll,
+            safety_interval: bridge::DEFAULT_SAFETY_INTERVAL,
             stamps: bridge::Stamps::Keep,
             clock_skew_ns: 0,
         };
         let stop = stop.clone();
         std::thread::spawn(move || bridge::run(&options, &stop, |_| {}))
     };
-    let result = with_echo(&host_a, || {
+    let result = with_echo(&host_a, o.spin, || {
         let a = spawn(Side::Board, &host_a, Link::Listen(endpoint.clone()));
         let b = spawn(Side::Central, &host_b, Link::Connect(endpoint.clone()));
         // The link is up when a first round trip comes back.
         let t0 = Instant::now();
         let h = loop {
-            match ping_pong(&host_b, 10, "bridge") {
-                Ok(_) => break ping_pong(&host_b, o.iterations, "bridge"),
+            match ping_pong(&host_b, 10, o.spin, "bridge") {
+                Ok(_) => break ping_pong(&host_b, o.iterations, o.spin, "bridge"),
                 Err(_) if t0.elapsed() < Duration::from_secs(10) => continue,
                 Err(e) => break Err(e),
             }
@@ -278,8 +307,8 @@ fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
 pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchError> {
     progress("shared memory (one namespace, no bridge)");
     let direct_ns = unique("bbd");
-    let direct = with_echo(&direct_ns, || {
-        ping_pong(&direct_ns, o.iterations, "shared memory")
+    let direct = with_echo(&direct_ns, o.spin, || {
+        ping_pong(&direct_ns, o.iterations, o.spin, "shared memory")
     });
     remove_namespace(&direct_ns);
     let direct = direct?;
@@ -290,7 +319,8 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchE
     let (z, b) = (latency(&zenoh), latency(&bridged));
     Ok(Report {
         iterations: o.iterations,
-        poll_us: o.poll.as_secs_f64() * 1e6,
+        spin: o.spin,
+        safety_interval_ms: bridge::DEFAULT_SAFETY_INTERVAL.as_secs_f64() * 1e3,
         payload_bytes: size_of::<StateMsg>(),
         shared_memory: latency(&direct),
         bridge: Ratios {
@@ -309,8 +339,9 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchE
 /// The report as a table.
 pub fn print(r: &Report) {
     println!(
-        "one-way latency, {} round trips each, payload {} B, bridge drain period {:.0} µs",
-        r.iterations, r.payload_bytes, r.poll_us
+        "one-way latency, {} round trips each, payload {} B, bridges woken by events \
+         (safety interval {:.0} ms)",
+        r.iterations, r.payload_bytes, r.safety_interval_ms
     );
     println!(
         "{:<34} {:>9} {:>9} {:>9}",

@@ -154,12 +154,13 @@ pub enum SoocError {
     NoPreviousSolution,
 }
 
-/// The open-loop moment problem: moment dynamics and cost over `horizon` steps from a known plant
-/// state `x0` (`P_0 = 0`), with control limits.
+/// The open-loop moment problem: moment dynamics and cost over `horizon` steps from a plant state
+/// `x0` known exactly (`P_0 = 0`) or known up to a covariance `P_0`, with control limits.
 pub struct SoocProblem<'a> {
     pub dynamics: &'a MomentDynamics<'a>,
     pub cost: &'a MomentCost<'a>,
-    /// Initial plant state (the mean; the covariance starts at 0).
+    /// Initial plant state: the mean (`n` values; the covariance starts at 0), or the whole
+    /// moment state, the mean followed by `vech(P_0)` (`n + n(n+1)/2` values).
     pub x0: &'a [f64],
     pub bounds: &'a Bounds,
     pub horizon: usize,
@@ -236,7 +237,7 @@ impl SoocSolver {
         if got != want {
             return Err(SoocError::SizeMismatch { got, want });
         }
-        if problem.x0.len() != self.n {
+        if problem.x0.len() != self.n && problem.x0.len() != self.z[0].len() {
             return Err(SoocError::Length {
                 what: "x0",
                 got: problem.x0.len(),
@@ -396,7 +397,9 @@ impl SoocSolver {
             g.fill(0.0);
         }
         self.z[0].fill(0.0);
-        self.z[0].rows_mut(0, self.n).copy_from_slice(problem.x0);
+        self.z[0]
+            .rows_mut(0, problem.x0.len())
+            .copy_from_slice(problem.x0);
         let cost = rollout(problem, &mut self.z, &self.u);
         if cost.is_finite() {
             Ok(cost)
