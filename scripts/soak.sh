@@ -222,10 +222,10 @@ BEYOND=$(jq -r --argjson shape "$(k knot-dt-1e15)" --argjson version "$(($(k bad
     --argjson stale "$(k stale)" --argjson joints "$(k wrong-joints)" --argjson wto "$WTO" '
     (.rejected_by_reason // {}) as $r | def g($k): ($r[$k] // 0);
     ($r | to_entries | map(select(.key as $k
-        | ["shape", "version", "stale", "joints", "wrong-trial", "overflow"] | index($k) | not))
+        | ["shape", "version", "stale", "out-of-order", "joints", "wrong-trial", "overflow"] | index($k) | not))
         | map("\(.key) \(.value)"))
       + ["shape \(g("shape") - $shape)", "version \(g("version") - $version)",
-         "stale \(g("stale") - $stale)", "joints \(g("joints") - $joints)",
+         "stale + out-of-order \(g("stale") + g("out-of-order") - $stale)", "joints \(g("joints") - $joints)",
          "wrong-trial + overflow + dropped \(g("wrong-trial") + g("overflow") + .dropped_messages - $wto)"]
     | map(select(test(" 0$") | not)) | join(", ")' "$S")
 echo "hostile counted    $REJECTED rejected + $DROPPED dropped + $BRIDGE_VERSION refused by the bridge = $COUNTED for $HOSTILE hostile messages ($SINGLE single, $BURSTS bursts of 2000); beyond the hostile ones: $((COUNTED - HOSTILE)) (${BEYOND:-none}; the planner's own, e.g. slices sent into a latched fault; $TRIALS trials)"
@@ -239,7 +239,11 @@ check() { # name, counted, at least
 ((HOSTILE > 0)) || { echo "FAIL: no hostile message sent" >&2; FAIL=1; }
 check "knot_dt 1e15 (shape)" "$(r shape)" "$(k knot-dt-1e15)"
 check "bad version" "$(($(r version) + BRIDGE_VERSION))" "$(k bad-version)"
-check "stale" "$(r stale)" "$(k stale)"
+# A stale disturbance that arrives after a newer disturbance of another session was accepted in
+# the same trial fails the order check first (docs/PROTOCOL.md: another session must not be
+# older than the last accepted) and is counted as out-of-order; nothing else sends out of order.
+check "stale (as stale, or out-of-order behind a newer disturbance)" \
+    "$(($(r stale) + $(r out-of-order)))" "$(k stale)"
 check "wrong joints" "$(r joints)" "$(k wrong-joints)"
 check "seq u64::MAX, NaN, unbounded stiffness, bursts (wrong trial, overflow, dropped)" \
     $(($(r wrong-trial) + $(r overflow) + DROPPED)) "$WTO"

@@ -245,18 +245,8 @@ impl ArmModel {
 
 #[cfg(test)]
 mod tests {
+    use super::plant::tests::joint;
     use super::*;
-
-    fn joint() -> Plant {
-        Plant::SingleJoint(SingleJoint {
-            inertia: 0.1,
-            mass: 1.0,
-            com: 0.1,
-            length: 0.3,
-            gravity: 9.81,
-            viscosity: 0.05,
-        })
-    }
 
     #[test]
     fn parts_that_do_not_fit_name_the_key_at_fault() {

@@ -205,7 +205,7 @@ impl Plant {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn arm() -> Plant {
@@ -217,6 +217,18 @@ mod tests {
             i1: 0.025,
             i2: 0.045,
             viscosity: [[0.05, 0.025], [0.025, 0.05]],
+        })
+    }
+
+    /// A single joint for the tests of this module and of the model's.
+    pub(crate) fn joint() -> Plant {
+        Plant::SingleJoint(SingleJoint {
+            inertia: 0.1,
+            mass: 1.0,
+            com: 0.1,
+            length: 0.3,
+            gravity: 9.81,
+            viscosity: 0.05,
         })
     }
 
@@ -236,18 +248,10 @@ mod tests {
     fn jacobian_matches_finite_differences_of_the_hand_position() {
         // The cached angles feed both: each is checked against the other and against the
         // forward kinematics written out with plain sin and cos.
-        let joint = Plant::SingleJoint(SingleJoint {
-            inertia: 0.1,
-            mass: 1.0,
-            com: 0.1,
-            length: 0.3,
-            gravity: 9.81,
-            viscosity: 0.05,
-        });
         for (p, q) in [
             (arm(), [0.3_f64, 1.1]),
             (arm(), [-2.0, 2.9]),
-            (joint, [0.7, 0.0]),
+            (joint(), [0.7, 0.0]),
         ] {
             let dof = p.dof();
             let hand = p.hand_position(&q);

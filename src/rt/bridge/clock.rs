@@ -35,7 +35,7 @@ mod estimator;
 
 pub use estimator::{BLOCKS, Estimate, Estimator, Probe, Sample, WINDOW};
 
-use super::{BridgeError, zenoh_error};
+use super::{BridgeError, control_publisher, zenoh_error};
 use crate::rt::transport::monotonic_ns;
 use crate::rt::transport::protocol::{CommandSlice, Control, ControlKind, Disturbance};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -204,13 +204,7 @@ impl Prober {
             .wait()
             .map_err(zenoh_error("subscribing the clock probes' answers"))?;
         let key = probe_key(link_name);
-        let publisher = session
-            .declare_publisher(key.clone())
-            .congestion_control(zenoh::qos::CongestionControl::Drop)
-            .priority(zenoh::qos::Priority::RealTime)
-            .express(true)
-            .wait()
-            .map_err(zenoh_error(format!("declaring {key}")))?;
+        let publisher = control_publisher(session, key)?;
         let thread = std::thread::Builder::new()
             .name("vic-bridge-clock".into())
             .spawn({
@@ -378,13 +372,7 @@ impl Responder {
         skew_ns: i64,
     ) -> Result<Responder, BridgeError> {
         let key = answer_key(link_name);
-        let publisher = session
-            .declare_publisher(key.clone())
-            .congestion_control(zenoh::qos::CongestionControl::Drop)
-            .priority(zenoh::qos::Priority::RealTime)
-            .express(true)
-            .wait()
-            .map_err(zenoh_error(format!("declaring {key}")))?;
+        let publisher = control_publisher(session, key)?;
         let answered = Arc::new(AtomicU64::new(0));
         let malformed = Arc::new(AtomicU64::new(0));
         let clock = move || monotonic_ns().saturating_add_signed(skew_ns);

@@ -291,16 +291,20 @@ impl LinkEnd<'_> {
     }
 
     fn declare_publisher(&self, key: String) -> Result<ZPub, BridgeError> {
-        self.session
-            .declare_publisher(key.clone())
-            // Control traffic: a late sample is worth less than the next one, never block the
-            // bridge behind a congested link.
-            .congestion_control(zenoh::qos::CongestionControl::Drop)
-            .priority(zenoh::qos::Priority::RealTime)
-            .express(true)
-            .wait()
-            .map_err(zenoh_error(format!("declaring {key}")))
+        control_publisher(self.session, key)
     }
+}
+
+/// A publisher of control traffic on the link: a late sample is worth less than the next one,
+/// so never block the bridge behind a congested link (drop), and send at once (express).
+fn control_publisher(session: &zenoh::Session, key: String) -> Result<ZPub, BridgeError> {
+    session
+        .declare_publisher(key.clone())
+        .congestion_control(zenoh::qos::CongestionControl::Drop)
+        .priority(zenoh::qos::Priority::RealTime)
+        .express(true)
+        .wait()
+        .map_err(zenoh_error(format!("declaring {key}")))
 }
 
 /// The bridge beside the board: commands, controls and disturbances from the link into the
