@@ -233,3 +233,55 @@ fn give(layout: Layout, p: *mut u8) -> bool {
     })
     .unwrap_or(false)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::rc::Rc;
+
+    /// Counts its drops; abandoning it does not.
+    #[derive(Debug)]
+    struct Counted(Rc<Cell<u32>>);
+
+    impl Drop for Counted {
+        fn drop(&mut self) {
+            self.0.set(self.0.get() + 1);
+        }
+    }
+
+    impl Abandonable for Counted {
+        unsafe fn abandon_in_place(this: NonNull<Self>) {
+            // SAFETY: the caller's contract; the Rc inside is released, the count not touched.
+            unsafe { core::ptr::drop_in_place(&raw mut (*this.as_ptr()).0) };
+        }
+    }
+
+    // SAFETY: used on one thread only.
+    unsafe impl Send for Counted {}
+
+    #[test]
+    fn the_value_is_dropped_once_by_the_last_reference_and_its_block_reused() {
+        let drops = Rc::new(Cell::new(0));
+        let a = Recycled::new(Counted(drops.clone())).unwrap();
+        let first = a.inner.as_ptr() as usize;
+        let b = a.clone();
+        assert!(Rc::ptr_eq(&a.lock().0, &b.lock().0));
+        drop(a);
+        assert_eq!(drops.get(), 0, "dropped while a reference remained");
+        drop(b);
+        assert_eq!(drops.get(), 1);
+        // The next box of that size is the recycled one.
+        let c = Recycled::new(Counted(drops.clone())).unwrap();
+        assert_eq!(c.inner.as_ptr() as usize, first, "the block was not reused");
+        // Abandoning the last reference releases the value without dropping it.
+        let mut c = core::mem::ManuallyDrop::new(c);
+        // SAFETY: `c` is valid and never used (nor dropped) afterwards.
+        unsafe { Recycled::abandon_in_place(NonNull::from_mut(&mut *c)) };
+        assert_eq!(drops.get(), 1);
+        assert_eq!(
+            Rc::strong_count(&drops),
+            1,
+            "the abandoned value kept its Rc"
+        );
+    }
+}
