@@ -6,63 +6,9 @@
 
 mod common;
 
+use common::bridge::{bridge, port, status, wait_for};
 use common::daemons::{Daemons, run_planner, sooc_plan, unique_namespace};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// A loopback port no other test run picks (derived from the pid).
-fn port() -> u16 {
-    20_000 + (std::process::id() % 20_000) as u16
-}
-
-/// Starts `vic bridge` for `ns` on `side` with `endpoint` (`--listen` or `--connect`).
-fn bridge(d: &mut Daemons, side: &str, ns: &str, link: &str, endpoint: [&str; 2]) -> usize {
-    if !d.namespaces.iter().any(|n| n == ns) {
-        d.namespaces.push(ns.to_string());
-    }
-    let child = Command::new(env!("CARGO_BIN_EXE_vic"))
-        .args([
-            "bridge",
-            "--side",
-            side,
-            "--namespace",
-            ns,
-            "--link-name",
-            link,
-        ])
-        .args(endpoint)
-        .args(["--json"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .unwrap();
-    d.children.push(child);
-    d.children.len() - 1
-}
-
-/// The board's status in `ns` as `vic status --json` gives it, `None` when no board answers.
-fn status(ns: &str) -> Option<serde_json::Value> {
-    let out = Command::new(env!("CARGO_BIN_EXE_vic"))
-        .args(["status", "--namespace", ns, "--json", "--timeout-s", "1"])
-        .stderr(Stdio::null())
-        .output()
-        .unwrap();
-    out.status
-        .success()
-        .then(|| serde_json::from_slice(&out.stdout).unwrap())
-}
-
-/// Polls `vic status` in `ns` until `pred` holds or `timeout` passes.
-fn wait_for(ns: &str, timeout: Duration, pred: impl Fn(&serde_json::Value) -> bool) -> bool {
-    let t0 = Instant::now();
-    while t0.elapsed() < timeout {
-        if status(ns).is_some_and(|s| pred(&s)) {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    false
-}
 
 #[test]
 fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board() {
@@ -73,11 +19,25 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
         unique_namespace("brc"),
     );
     let link = unique_namespace("link");
-    let endpoint = format!("tcp/127.0.0.1:{}", port());
+    let endpoint = format!("tcp/127.0.0.1:{}", port(0));
     let mut d = Daemons::default();
     d.board(&host_a, &[]);
-    let board_side = bridge(&mut d, "board", &host_a, &link, ["--listen", &endpoint]);
-    bridge(&mut d, "central", &host_b, &link, ["--connect", &endpoint]);
+    let board_side = bridge(
+        &mut d,
+        "board",
+        &host_a,
+        &link,
+        ["--listen", &endpoint],
+        &[],
+    );
+    bridge(
+        &mut d,
+        "central",
+        &host_b,
+        &link,
+        ["--connect", &endpoint],
+        &[],
+    );
     // The board's telemetry reaches host B through the two bridges.
     assert!(
         wait_for(&host_b, Duration::from_secs(10), |_| true),
@@ -126,7 +86,14 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
     let before = status(&host_b)
         .and_then(|s| s["tick"].as_u64())
         .unwrap_or(0);
-    bridge(&mut d, "board", &host_a, &link, ["--listen", &endpoint]);
+    bridge(
+        &mut d,
+        "board",
+        &host_a,
+        &link,
+        ["--listen", &endpoint],
+        &[],
+    );
     assert!(
         wait_for(&host_b, Duration::from_secs(10), |s| s["tick"]
             .as_u64()
@@ -151,7 +118,7 @@ fn messages_cross_promptly_without_a_poll_and_stop_is_prompt() {
     let safety = Duration::from_secs(2);
     let (host_a, host_b) = (unique_namespace("bea"), unique_namespace("beb"));
     let link_name = unique_namespace("evl");
-    let endpoint = format!("tcp/127.0.0.1:{}", port() + 1);
+    let endpoint = format!("tcp/127.0.0.1:{}", port(3));
     let stop = Arc::new(AtomicBool::new(false));
     let spawn = |side, ns: &str, link| {
         let options = BridgeOptions {
@@ -160,7 +127,8 @@ fn messages_cross_promptly_without_a_poll_and_stop_is_prompt() {
             side,
             link,
             safety_interval: safety,
-            restamp: false,
+            stamps: vic::rt::bridge::Stamps::Keep,
+            clock_skew_ns: 0,
         };
         let stop = stop.clone();
         std::thread::spawn(move || bridge::run(&options, &stop, |_| {}))

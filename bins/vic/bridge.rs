@@ -1,8 +1,8 @@
 //! `vic bridge`: flags, then [`vic::tools::bridge_command::run`].
 
 use std::time::Duration;
-use vic::rt::bridge::{BridgeOptions, Link, Side};
-use vic::tools::cli::{JsonArg, NamespaceArgs, non_negative_seconds};
+use vic::rt::bridge::{BridgeOptions, Link, Side, Stamps};
+use vic::tools::cli::{JsonArg, NamespaceArgs, input_error, non_negative_seconds};
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum SideArg {
@@ -12,6 +12,14 @@ enum SideArg {
     /// Beside the central process: plays the board to it (state from the link, its commands to
     /// the link).
     Central,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum StampsArg {
+    /// Translate the stamps into this host's clock (measured over the link): two machines.
+    Translate,
+    /// Forward them unchanged: one machine.
+    Keep,
 }
 
 #[derive(clap::Args)]
@@ -37,10 +45,16 @@ pub struct BridgeArgs {
     /// local subscribers without a notification [ms] (1 to 60000).
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=60_000))]
     safety_interval_ms: u64,
-    /// Re-stamp the messages forwarded to the board with this host's clock: needed across hosts
-    /// whose monotonic clocks differ (the age check then covers bridge → board only).
-    #[arg(long)]
-    restamp: bool,
+    /// Board side: what to do with the time stamps of the messages forwarded to the board.
+    /// `translate` measures the offset to the central host's clock (probes over the link, a few
+    /// per second) and moves every stamp into this host's clock, so that the board's age check
+    /// covers the link; nothing is forwarded until the first probe came back. `keep` forwards the
+    /// senders' stamps: only when both daemons share one machine's clock.
+    #[arg(long, value_enum, default_value = "translate")]
+    stamps: StampsArg,
+    /// Central side, tests only: pretend this host's clock is ahead by MS milliseconds.
+    #[arg(long, hide = true, default_value_t = 0, allow_negative_numbers = true)]
+    clock_skew_ms: i64,
     /// Stop after this many seconds (0: run until SIGINT/SIGTERM).
     #[arg(long, default_value_t = 0.0)]
     duration_s: f64,
@@ -52,6 +66,13 @@ impl BridgeArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let namespace = self.namespace.validated()?.to_string();
         let duration = non_negative_seconds("--duration-s", self.duration_s)?;
+        if self.clock_skew_ms != 0 && !matches!(self.side, SideArg::Central) {
+            return Err(input_error("--clock-skew-ms: only with --side central"));
+        }
+        let clock_skew_ns = self
+            .clock_skew_ms
+            .checked_mul(1_000_000)
+            .ok_or_else(|| input_error("--clock-skew-ms: too large"))?;
         let link = match (self.listen, self.connect) {
             (Some(e), None) => Link::Listen(e),
             (None, Some(e)) => Link::Connect(e),
@@ -66,7 +87,11 @@ impl BridgeArgs {
             },
             link,
             safety_interval: Duration::from_millis(self.safety_interval_ms),
-            restamp: self.restamp,
+            stamps: match self.stamps {
+                StampsArg::Translate => Stamps::Translate,
+                StampsArg::Keep => Stamps::Keep,
+            },
+            clock_skew_ns,
         };
         vic::tools::bridge_command::run(&options, duration, self.json.json)
     }

@@ -1,8 +1,11 @@
 //! `vic bridge`: one end of a namespace split across two hosts (see [`crate::rt::bridge`]).
 //! Runs until SIGINT/SIGTERM or `--duration-s`, printing the counts once a second on stderr and
-//! a summary at the end (`--json`: one object).
+//! a summary at the end (`--json`: one object). The board side's line ends with the offset
+//! between the hosts' clocks (board − central), its uncertainty (± half the best probe's round
+//! trip), that round trip and the drift; the central side's with the probes it answered.
 
-use crate::rt::bridge::{self, BridgeError, BridgeOptions, BridgeStats};
+use crate::rt::bridge::clock::ClockStats;
+use crate::rt::bridge::{self, BridgeError, BridgeOptions, BridgeStats, Side, Stamps};
 use crate::tools::cli::{Classify, print_json, stop_on_signal};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -20,16 +23,21 @@ pub fn run(o: &BridgeOptions, duration: Duration, json: bool) -> anyhow::Result<
     let start = Instant::now();
     eprintln!(
         "vic bridge: namespace {} as the {:?} side of link \"{}\" ({:?}), woken by events \
-         (safety interval {} ms)",
+         (safety interval {} ms){}",
         o.namespace,
         o.side,
         o.link_name,
         o.link,
-        o.safety_interval.as_millis()
+        o.safety_interval.as_millis(),
+        match (o.side, o.stamps) {
+            (Side::Board, Stamps::Translate) => ", stamps translated into this host's clock",
+            (Side::Board, Stamps::Keep) => ", senders' stamps kept (one machine)",
+            (Side::Central, _) => "",
+        }
     );
     let result = bridge::run(o, &stop, |s| {
         if !json {
-            eprintln!("{}", line(s));
+            eprintln!("{}{}", line(s), clock_line(o.side, &s.clock));
         }
     });
     let stats = match result {
@@ -45,7 +53,7 @@ pub fn run(o: &BridgeOptions, duration: Duration, json: bool) -> anyhow::Result<
             "stats": stats,
         }))?;
     } else {
-        println!("{}", line(&stats));
+        println!("{}{}", line(&stats), clock_line(o.side, &stats.clock));
     }
     Ok(())
 }
@@ -72,4 +80,33 @@ fn line(s: &BridgeStats) -> String {
         s.malformed_version,
         s.local_errors
     )
+}
+
+/// The clock's part of the line: the estimate on the board side, the answers on the central
+/// side.
+fn clock_line(side: Side, c: &ClockStats) -> String {
+    let ms = |ns: i64| ns as f64 * 1e-6;
+    match (side, c.offset_ns, c.uncertainty_ns, c.round_trip_ns) {
+        (Side::Central, ..) => format!(
+            " | clock: {} probes answered, {} malformed",
+            c.probes_answered, c.probes_malformed
+        ),
+        (Side::Board, Some(offset), Some(u), Some(rtt)) => format!(
+            " | clock: offset {:+.3} ms ± {:.3} ms (round trip {:.3} ms, drift {:+.1} ppm), \
+             {} probes, {} answers, {} refused, {} held back",
+            ms(offset),
+            ms(u as i64),
+            ms(rtt as i64),
+            c.drift_ppb.unwrap_or(0) as f64 / 1000.0,
+            c.probes_sent,
+            c.answers,
+            c.answers_refused,
+            c.held_back
+        ),
+        (Side::Board, ..) if c.probes_sent > 0 => format!(
+            " | clock: no answer to {} probes yet, {} messages held back",
+            c.probes_sent, c.held_back
+        ),
+        (Side::Board, ..) => String::new(),
+    }
 }

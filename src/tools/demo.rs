@@ -17,6 +17,7 @@ use crate::rt::daemon::Children;
 use crate::tools::cli::{
     Classify, DefaultScenarioArgs, JsonArg, SeedArgs, sibling_binary, whole_steps,
 };
+use crate::tools::demo_distributed::{DistributedLink, describe};
 use crate::tools::experiment::column_plot;
 use crate::tools::plan_command::{read_plan, write_plan};
 use crate::tools::report::{StrategyResult, Trajectories};
@@ -69,6 +70,13 @@ pub struct DemoOptions {
     /// Run the board without its real-time settings (no SCHED_FIFO, pinning or spin).
     #[arg(long)]
     pub no_rt: bool,
+    /// Board and planners as two hosts: two namespaces joined by `vic bridge`s over Zenoh on
+    /// loopback; the table adds the link's round trip (feature `zenoh`).
+    #[arg(long)]
+    pub distributed: bool,
+    /// Run only this strategy (e.g. stiffness; every plan is still made).
+    #[arg(long, value_name = "STRATEGY", value_parser = Strategy::from_name)]
+    pub only: Option<Strategy>,
     #[command(flatten)]
     pub json: JsonArg,
 }
@@ -97,6 +105,7 @@ struct StrategyRun<'a> {
 pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
     let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
     whole_steps("--latency-ms", o.latency_ms, scenario.task.dt * 1000.0)?;
+    o.distributed.then(DistributedLink::available).transpose()?;
     let board_bin = sibling_binary("vic-board")?;
     let planner_bin = sibling_binary("vic-planner")?;
     std::fs::create_dir_all(&o.out_dir)
@@ -105,22 +114,28 @@ pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
     let namespace = format!("demo{}", std::process::id());
     let store = PlanStore::new(o.plans_dir.as_deref(), &namespace)?;
     let plans = plan_strategies(o, &store)?;
-    let runs = strategy_runs(o, &plans);
+    let mut runs = strategy_runs(o, &plans);
+    runs.retain(|r| o.only.is_none_or(|s| s == r.strategy));
     let mut children = Children::new(&namespace);
     children
         .children
         .push(start_board(o, &board_bin, &namespace)?);
+    let link = o.distributed.then(|| DistributedLink::start(&namespace));
+    let link = link.transpose()?;
+    let planner_ns = link.as_ref().map_or(namespace.as_str(), |l| l.central_ns());
     let results = runs
         .iter()
-        .map(|r| run_planner(o, &planner_bin, &namespace, r))
+        .map(|r| run_planner(o, &planner_bin, planner_ns, r))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let link = link.map(DistributedLink::stop).transpose()?;
     let mut board = children.children.pop().expect("the board was started");
     let stats = stop_board(&mut board)?;
     drop(children);
     let figure = trajectories_figure(o, &scenario, &runs)?;
     drop(store);
     let leftover = crate::rt::transport::namespace_files(&namespace);
-    let doc = document(o, &results, &stats, &leftover, &figure);
+    let mut doc = document(o, &results, &stats, &leftover, &figure);
+    doc["link"] = link.clone().unwrap_or_default();
     let json_path = o.out_dir.join("demo.json");
     std::fs::write(&json_path, format!("{doc:#}"))
         .map_err(|e| anyhow!("cannot write {}: {e}", json_path.display()))?;
@@ -129,6 +144,7 @@ pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
         return Ok(());
     }
     print_table(&results, &stats);
+    link.inspect(|l| println!("{}", describe(l, o.latency_ms)));
     println!(
         "trajectories: {} (and .svg); table as JSON: {}",
         figure[0].display(),

@@ -22,6 +22,7 @@ pub mod bridge_command;
 pub mod central_daemon;
 pub mod cli;
 pub mod demo;
+pub mod demo_distributed;
 pub mod experiment;
 pub mod identify;
 pub mod identify_command;

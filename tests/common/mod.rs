@@ -3,6 +3,7 @@
 #![allow(dead_code)] // each test binary uses a part
 
 pub mod alloc;
+pub mod bridge;
 pub mod daemons;
 pub mod trial;
 

@@ -15,14 +15,12 @@
 //! and time stamp untouched, so the board validates them as it does local ones; the bridge only
 //! refuses what is not a message of this protocol (size, version) and counts it.
 //!
-//! **Time stamps.** The board checks a message's age against its own monotonic clock. Across
-//! hosts the two clocks differ by an unknown offset, so the bridge on the board's side re-stamps
-//! every message it forwards with its own receive time *only* when `restamp` is set; by default it
-//! keeps the sender's stamp, which is right on one machine (the two "hosts" of the test and the
-//! demo share a clock) and wrong across real hosts. Re-stamping trades the end-to-end age check
-//! for a link-local one: the age the board then sees is the time from the bridge to the board,
-//! and the link's own delay is bounded by the board's watchdog instead (a cut or slow link
-//! starves the board of fresh commands and it holds).
+//! **Time stamps.** The board checks a message's age against its own monotonic clock; across
+//! hosts the sender's stamp is on another clock. The bridge beside the board measures the offset
+//! between the two hosts' clocks over the link and translates every stamp it forwards (a reset's
+//! start time too) into the board's clock ([`clock`]), so the board's age check covers the whole
+//! path, link included, to within ± half the best probe's round trip. [`Stamps::Keep`] forwards
+//! the senders' stamps unchanged: exact when both daemons share one machine's clock.
 //!
 //! **Wake-ups** (event-driven on both sides, no polling). Zenoh delivers to callbacks, which hand
 //! each message to the bridge's thread through a channel and ring a socket the thread's iceoryx2
@@ -34,15 +32,17 @@
 //! set watches that listener. A slow safety interval (`safety_interval`, default 100 ms) drains
 //! the local side anyway, so a message from a client that does not notify is late, not lost.
 
+pub mod clock;
 mod looper;
 pub mod wire;
 
 use crate::rt::transport::ports::Topic;
 use crate::rt::transport::protocol::{
-    BoardEvent, CommandSlice, Control, Disturbance, Header, StateMsg, Telemetry,
+    BoardEvent, CommandSlice, Control, Disturbance, StateMsg, Telemetry,
 };
 use crate::rt::transport::relay::{Relay, RelayListener};
-use crate::rt::transport::{BoardPorts, CentralPorts, ToolPorts, TransportError, monotonic_ns};
+use crate::rt::transport::{BoardPorts, CentralPorts, ToolPorts, TransportError};
+use clock::skewed;
 use looper::{LinkWake, Looper};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, mpsc};
@@ -81,9 +81,20 @@ pub struct BridgeOptions {
     /// notified (messages are forwarded as they are notified; this only bounds the delay of one
     /// whose notification was missed).
     pub safety_interval: Duration,
-    /// Re-stamp forwarded messages with the local receive time (across hosts whose clocks
-    /// differ); see the module documentation.
-    pub restamp: bool,
+    /// What the board-side bridge does with the stamps it forwards.
+    pub stamps: Stamps,
+    /// Central side, tests only: pretend this host's clock is ahead by this much (the stamps of
+    /// what it forwards and its answers to the clock probes), as another host's would be.
+    pub clock_skew_ns: i64,
+}
+
+/// What the bridge beside the board does with the senders' time stamps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stamps {
+    /// Measure the other host's clock and translate every stamp into this one's (two hosts).
+    Translate,
+    /// Forward them unchanged (both daemons on one machine, one clock).
+    Keep,
 }
 
 /// Messages counted per direction and kind.
@@ -99,6 +110,8 @@ pub struct BridgeStats {
     pub malformed_version: u64,
     /// Local publishes that failed (the local daemon gone, ports full).
     pub local_errors: u64,
+    /// The clock probes and the offset between the hosts' clocks.
+    pub clock: clock::ClockStats,
 }
 
 /// One count per kind of message.
@@ -202,14 +215,6 @@ fn put<T: Plain>(p: &ZPub, m: &T, stats: &mut u64, errors: &mut u64) {
     }
 }
 
-/// The header as forwarded to the board: the sender's, or re-stamped with the local time.
-fn restamped(mut h: Header, restamp: bool) -> Header {
-    if restamp {
-        h.time_ns = monotonic_ns();
-    }
-    h
-}
-
 /// Runs a bridge until `stop` is set; `report` is called about once a second with the counts.
 pub fn run(
     o: &BridgeOptions,
@@ -242,7 +247,7 @@ pub fn run(
     };
     match o.side {
         Side::Board => board_side(o, &link, &looper, &mut tick, &mut stats)?,
-        Side::Central => central_side(&o.namespace, &link, &looper, &mut tick, &mut stats)?,
+        Side::Central => central_side(o, &link, &looper, &mut tick, &mut stats)?,
     }
     drop(tx);
     let _ = session.close().wait();
@@ -318,37 +323,48 @@ fn board_side(
     let telemetry = link.publisher::<Telemetry>()?;
     let events = link.declare_publisher(event_key(link.name))?;
     let relay = RelayListener::open(central.session(), Relay::FromBoard)?;
+    let clock = match o.stamps {
+        Stamps::Translate => Some(clock::Prober::start(link.session, link.name)?),
+        Stamps::Keep => None,
+    };
+    // Into the board's clock; false: no estimate yet, the message is held back (counted).
+    let stamp = |m: &mut dyn clock::Stamped| clock.as_ref().is_none_or(|c| c.translate(m));
     looper.run(
         &relay,
         |inbound, r: &mut Counts| match inbound {
             Inbound::Command(mut c) => {
-                c.header = restamped(c.header, o.restamp);
                 r.command += 1;
-                central.publish_command(&c).is_ok()
+                !stamp(&mut c) || central.publish_command(&c).is_ok()
             }
             Inbound::Control(mut c) => {
-                c.header = restamped(c.header, o.restamp);
                 r.control += 1;
-                central.publish_control(&c).is_ok()
+                !stamp(&mut c) || central.publish_control(&c).is_ok()
             }
             Inbound::Disturbance(mut d) => {
-                d.header = restamped(d.header, o.restamp);
                 r.disturbance += 1;
-                tool.publish_disturbance(&d).is_ok()
+                !stamp(&mut d) || tool.publish_disturbance(&d).is_ok()
             }
             _ => true,
         },
         |s| {
+            // Until the clocks are matched the central process sees no board (see `clock`).
+            let linked = clock.as_ref().is_none_or(|c| c.ready());
             let (sent, errors) = (&mut s.sent, &mut s.local_errors);
-            central.drain_states(|m| put(&state, m, &mut sent.state, errors));
-            if let Some(t) = central.latest_telemetry() {
+            central.drain_states(|m| match linked {
+                true => put(&state, m, &mut sent.state, errors),
+                false => clock.iter().for_each(|c| c.hold_back()),
+            });
+            if let Some(t) = central.latest_telemetry().filter(|_| linked) {
                 put(&telemetry, &t, &mut sent.telemetry, errors);
             }
-            if central.take_event() {
+            if central.take_event() && linked {
                 match events.put(Vec::<u8>::new()).wait() {
                     Ok(()) => sent.event += 1,
                     Err(_) => *errors += 1,
                 }
+            }
+            if let Some(c) = &clock {
+                s.clock = c.stats();
             }
             tick(s);
         },
@@ -359,13 +375,13 @@ fn board_side(
 /// The bridge beside the central process, playing the board to it: state, telemetry and events
 /// from the link into the namespace; commands, controls and disturbances out.
 fn central_side(
-    namespace: &str,
+    o: &BridgeOptions,
     link: &LinkEnd,
     looper: &Looper,
     tick: &mut impl FnMut(&BridgeStats),
     stats: &mut BridgeStats,
 ) -> Result<(), BridgeError> {
-    let board = BoardPorts::open(namespace)?;
+    let board = BoardPorts::open(&o.namespace)?;
     let _subs = (
         link.subscribe::<StateMsg>(Inbound::State)?,
         link.subscribe::<Telemetry>(Inbound::Telemetry)?,
@@ -385,6 +401,8 @@ fn central_side(
     let controls = link.publisher::<Control>()?;
     let disturbances = link.publisher::<Disturbance>()?;
     let relay = RelayListener::open(board.session(), Relay::ToBoard)?;
+    let responder = clock::Responder::start(link.session, link.name, o.clock_skew_ns)?;
+    let skew = o.clock_skew_ns;
     looper.run(
         &relay,
         |inbound, r: &mut Counts| match inbound {
@@ -407,9 +425,14 @@ fn central_side(
         },
         |s| {
             let (sent, errors) = (&mut s.sent, &mut s.local_errors);
-            board.drain_commands(|m| put(&commands, m, &mut sent.command, errors));
-            board.drain_controls(|m| put(&controls, m, &mut sent.control, errors));
-            board.drain_disturbances(|m| put(&disturbances, m, &mut sent.disturbance, errors));
+            // The stamps as the central host's clock has them (skewed in tests only).
+            let sk = skew;
+            board.drain_commands(|m| put(&commands, &skewed(m, sk), &mut sent.command, errors));
+            board.drain_controls(|m| put(&controls, &skewed(m, sk), &mut sent.control, errors));
+            board.drain_disturbances(|m| {
+                put(&disturbances, &skewed(m, sk), &mut sent.disturbance, errors)
+            });
+            s.clock = responder.stats();
             tick(s);
         },
         stats,

@@ -274,7 +274,8 @@ fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
             side,
             link,
             safety_interval: bridge::DEFAULT_SAFETY_INTERVAL,
-            restamp: false,
+            stamps: bridge::Stamps::Keep,
+            clock_skew_ns: 0,
         };
         let stop = stop.clone();
         std::thread::spawn(move || bridge::run(&options, &stop, |_| {}))

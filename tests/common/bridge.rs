@@ -1,0 +1,76 @@
+//! Two "hosts" joined by `vic bridge` on loopback: the bridges, and `vic status` on either side.
+
+use super::daemons::Daemons;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A loopback port no other test run picks (derived from the pid), `k` apart for a test's
+/// several links.
+pub fn port(k: u16) -> u16 {
+    20_000 + (std::process::id() % 20_000) as u16 + 7 * k
+}
+
+/// Starts `vic bridge --json` for `ns` on `side` with `endpoint` (`--listen` or `--connect` and
+/// the endpoint) and `extra` flags; its stdout (the final counts) is piped.
+pub fn bridge(
+    d: &mut Daemons,
+    side: &str,
+    ns: &str,
+    link: &str,
+    endpoint: [&str; 2],
+    extra: &[&str],
+) -> usize {
+    if !d.namespaces.iter().any(|n| n == ns) {
+        d.namespaces.push(ns.to_string());
+    }
+    let child = Command::new(env!("CARGO_BIN_EXE_vic"))
+        .args([
+            "bridge",
+            "--side",
+            side,
+            "--namespace",
+            ns,
+            "--link-name",
+            link,
+        ])
+        .args(endpoint)
+        .args(extra)
+        .args(["--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    d.children.push(child);
+    d.children.len() - 1
+}
+
+/// Stops bridge `i` (SIGTERM) and returns the counts it printed.
+pub fn stop_bridge(d: &mut Daemons, i: usize) -> serde_json::Value {
+    let out = d.signal_and_wait(i, libc::SIGTERM);
+    assert!(out.status.success(), "the bridge failed: {:?}", out.status);
+    serde_json::from_slice(&out.stdout).expect("the bridge printed its counts")
+}
+
+/// The board's status in `ns` as `vic status --json` gives it, `None` when no board answers.
+pub fn status(ns: &str) -> Option<serde_json::Value> {
+    let out = Command::new(env!("CARGO_BIN_EXE_vic"))
+        .args(["status", "--namespace", ns, "--json", "--timeout-s", "1"])
+        .stderr(Stdio::null())
+        .output()
+        .unwrap();
+    out.status
+        .success()
+        .then(|| serde_json::from_slice(&out.stdout).unwrap())
+}
+
+/// Polls `vic status` in `ns` until `pred` holds or `timeout` passes.
+pub fn wait_for(ns: &str, timeout: Duration, pred: impl Fn(&serde_json::Value) -> bool) -> bool {
+    let t0 = Instant::now();
+    while t0.elapsed() < timeout {
+        if status(ns).is_some_and(|s| pred(&s)) {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    false
+}
