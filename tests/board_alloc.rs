@@ -1,13 +1,16 @@
-//! A board tick allocates nothing: a counting global allocator watches `Board::step`.
+//! A board tick allocates nothing: a counting global allocator watches `Board::step`, and the
+//! I/O of the real-time loop (`rt::realtime`) around it, with a planner and a tool connected.
 
 mod common;
 
 use common::alloc::{Counting, allocations};
+use common::daemons::unique_namespace;
 use std::path::Path;
 use vic::planning::scenario::Scenario;
 use vic::rt::board::{Board, Inputs};
 use vic::rt::transport::{
-    CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Header,
+    BoardEvent, BoardPorts, CentralPorts, CommandSlice, Control, ControlKind, Disturbance,
+    DisturbanceKind, Header, StateMsg, Telemetry, ToolPorts,
 };
 
 #[global_allocator]
@@ -87,4 +90,108 @@ fn a_board_step_does_not_allocate() {
         "the hold path was not exercised"
     );
     assert!(board.state().iter().all(|v| v.is_finite()));
+}
+
+/// What the real-time loop does with its ports each tick (`rt::realtime`): drain the controls,
+/// disturbances and command slices, publish the state, notify, and every 100th tick publish the
+/// telemetry and notify, with a `CentralPorts` subscribed to the states and telemetry and sending
+/// commands and controls, and a `ToolPorts` sending disturbances. Only the board's calls are
+/// counted. iceoryx2 0.10 allocates the shared state of every loaned sample
+/// (`ChunkMutSharedState::new` through the service's `ArcThreadSafetyPolicy`), so this fails
+/// unless that policy recycles its blocks (`rt::transport::recycled`); the first ticks are a
+/// warm-up (the first loan fills the recycling pool, the first notifications connect).
+#[test]
+fn the_board_ports_do_not_allocate_in_a_tick() {
+    let ns = unique_namespace("bal");
+    {
+        let board = BoardPorts::open(&ns).unwrap();
+        let central = CentralPorts::open(&ns).unwrap();
+        let tool = ToolPorts::open(&ns).unwrap();
+        let mut received = [0usize; 3];
+        // Allocations of the board's calls in one tick: drains, publishes, notifications.
+        let mut tick = |seq: u64| {
+            let mut n = [0u64; 2];
+            let before = allocations();
+            received[0] += board.drain_controls(|c| {
+                std::hint::black_box(c);
+            });
+            received[1] += board.drain_disturbances(|d| {
+                std::hint::black_box(d);
+            });
+            received[2] += board.drain_commands(|c| {
+                std::hint::black_box(c);
+            });
+            let mid = allocations();
+            n[0] = mid - before;
+            let s = StateMsg {
+                header: Header::new(seq, 0),
+                ..Default::default()
+            };
+            board.publish_state(&s).unwrap();
+            board.notify(BoardEvent::Applied);
+            if seq.is_multiple_of(100) {
+                board.publish_telemetry(&Telemetry::default()).unwrap();
+                board.notify(BoardEvent::Telemetry);
+            }
+            n[1] = allocations() - mid;
+            n
+        };
+        // The other side, not counted: a command every 20 ticks, a control and a disturbance now
+        // and then, the states and telemetry read.
+        let other = |seq: u64| {
+            if seq.is_multiple_of(20) {
+                let c = CommandSlice {
+                    header: Header::new(seq, 0),
+                    ..Default::default()
+                };
+                central.publish_command(&c).unwrap();
+            }
+            if seq.is_multiple_of(250) {
+                let c = Control {
+                    header: Header::new(seq, 0),
+                    kind: ControlKind::Reset as u32,
+                    ..Default::default()
+                };
+                central.publish_control(&c).unwrap();
+                let d = Disturbance {
+                    header: Header::new(seq, 0),
+                    kind: DisturbanceKind::Pulse as u32,
+                    ..Default::default()
+                };
+                tool.publish_disturbance(&d).unwrap();
+            }
+            central.drain_states(|s| {
+                std::hint::black_box(s);
+            });
+            std::hint::black_box(central.latest_telemetry());
+        };
+        // Warm-up: up to the first telemetry publish, which connects to the subscriber.
+        let mut warm_up = 0;
+        for seq in 1..=100 {
+            other(seq);
+            warm_up += tick(seq)[1];
+        }
+        let mut drains = 0;
+        let mut publishes = 0;
+        let mut first_allocating = 0;
+        for seq in 101..=1100 {
+            other(seq);
+            let [d, p] = tick(seq);
+            drains += d;
+            publishes += p;
+            if p > 0 && publishes == p {
+                first_allocating = seq;
+            }
+        }
+        assert_eq!(drains, 0, "allocations of the drains in 1000 ticks");
+        assert_eq!(
+            publishes, 0,
+            "allocations of the publishes and notifications in 1000 ticks after {warm_up} in \
+             the warm-up (the first at tick {})",
+            first_allocating
+        );
+        // The drains saw what was sent: the counted path is the one that carries messages.
+        assert_eq!(received, [4, 4, 55], "controls, disturbances, commands");
+    }
+    vic::rt::transport::remove_namespace(&ns);
 }

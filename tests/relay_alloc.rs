@@ -2,8 +2,9 @@
 //! `rt::transport::relay`) allocates nothing: with no bridge listening, and with one that has
 //! connected (the first notification after a listener joins connects to it, once). Measured on
 //! `BoardPorts::notify`, which is the board's event notification plus the relay's, beside a
-//! listener of the board's events (the publishes themselves are iceoryx2's `send_copy`, counted
-//! apart: it allocates once per call with a subscriber connected, in iceoryx2 0.10).
+//! listener of the board's events (the publishes themselves are counted in tests/board_alloc.rs:
+//! iceoryx2 0.10 allocates the shared state of every loaned sample, which vic's service recycles,
+//! `rt::transport::recycled`).
 
 mod common;
 

@@ -22,6 +22,7 @@ pub mod limits;
 pub mod namespace;
 pub mod ports;
 pub mod protocol;
+pub mod recycled;
 pub mod relay;
 pub mod service;
 pub mod session;

@@ -1,10 +1,12 @@
-//! The iceoryx2 service type of every port: iceoryx2's `ipc` service with one difference. Its
+//! The iceoryx2 service type of every port: iceoryx2's `ipc` service with two differences. Its
 //! global management segment (a node counter) is a file in the namespace's private root
 //! directory instead of a POSIX shared-memory object in `/dev/shm`, and that file is owner-only:
 //! iceoryx2 creates it and then makes it world-writable (0666, "global access"), and any local
 //! user could open it in that moment and keep writing to it. [`OwnerOnlyFile`] is iceoryx2's file
 //! storage with the global access switched off, so the file goes from write-only for its owner
-//! (while being initialised) straight to 0600, and it lives in a 0700 directory besides.
+//! (while being initialised) straight to 0600, and it lives in a 0700 directory besides. And its
+//! in-process reference counting recycles its boxes ([`super::recycled`]): iceoryx2 creates one
+//! per loaned sample, which would be a heap allocation per publish in the board's 1 kHz loop.
 //! Every other resource is iceoryx2's own `ipc` one (owner-only shared memory in `/dev/shm`,
 //! service and node files under the root directory), so clients of the plain `ipc` service
 //! (iceoryx2's Python bindings) still talk to the same services.
@@ -52,8 +54,9 @@ impl iceoryx2::service::Service for Service {
     type Event = event::recommended::Ipc;
     type Monitoring = monitoring::recommended::Ipc;
     type Reactor = reactor::recommended::Ipc;
-    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> =
-        arc_sync_policy::single_threaded::SingleThreaded<T>;
+    /// The second change: iceoryx2's single-threaded policy with its boxes recycled, so a
+    /// publish takes no memory from the allocator (`super::recycled`).
+    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> = super::recycled::Recycled<T>;
     type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> =
         dynamic_storage::recommended::Ipc<KeyType>;
     type BlackboardPayload = shared_memory::recommended::Ipc<ShmBumpAllocator>;
