@@ -130,3 +130,60 @@ fn the_lockstep_sweep_runs_the_real_time_code_and_matches_the_monte_carlo_withou
     let e = sweep_latency(&path, &[], &opts, &|_| {}).unwrap_err();
     assert!(e.is_input(), "{e}");
 }
+
+#[test]
+fn the_live_sweep_runs_the_daemons_and_matches_the_lockstep_without_noise() {
+    // `--live` runs a real-time `vic-board` and a `vic-planner` per point over shared memory.
+    // Without noise the daemons must end exactly where the same code in lockstep on a simulated
+    // clock ends, for the strategies whose law is the same in both (the live replanner re-solves
+    // one period ahead on a worker thread, so its law differs: it only has to finish).
+    let run = |mode: &str| -> serde_json::Value {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_vic"))
+            .args(["sweep", "latency", "--config"])
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/single_joint_delay.toml"))
+            .args(["--set", "noise.sigma=0", "--latencies", "100"])
+            .args([
+                "--strategies",
+                "predictor,stiffness,replan",
+                "--trials",
+                "2",
+            ])
+            .args([mode, "--json"])
+            .output()
+            .expect("vic runs");
+        assert!(
+            out.status.success(),
+            "vic sweep latency {mode}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).expect("one JSON object")
+    };
+    let (lockstep, live) = (run("--lockstep"), run("--live"));
+    assert_eq!(live["execution"], "live");
+    let points = |s: &serde_json::Value| s["points"].as_array().expect("points").clone();
+    let (a, b) = (points(&lockstep), points(&live));
+    assert_eq!(a.len(), 3);
+    for (a, b) in a.iter().zip(&b) {
+        assert_eq!(a["strategy"], b["strategy"]);
+        eprintln!(
+            "{}: final lockstep {} live {}; E[C] {} / {}",
+            a["strategy"],
+            a["final_error_mean"],
+            b["final_error_mean"],
+            a["expected_cost_mc"],
+            b["expected_cost_mc"]
+        );
+        assert_eq!(b["diverged"], 0, "{b}");
+        if a["strategy"] == "replan" {
+            continue;
+        }
+        for key in ["final_error_mean", "rms_error", "expected_cost_mc"] {
+            let (x, y) = (a[key].as_f64().unwrap(), b[key].as_f64().unwrap());
+            assert!(
+                (x - y).abs() <= 1e-6 * x.abs().max(y.abs()),
+                "{} {key}: lockstep {x}, live {y}",
+                a["strategy"]
+            );
+        }
+    }
+}

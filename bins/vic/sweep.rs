@@ -15,7 +15,7 @@ pub struct SweepArgs {
 #[derive(clap::Subcommand)]
 enum SweepWhat {
     /// Final error against the feedback latency, per strategy (Monte Carlo, offline; or the
-    /// board and the central controller in lockstep).
+    /// board and the central controller in lockstep; or the live daemons).
     ///
     /// Example: vic sweep latency --config config/single_joint_delay.toml --latencies 0,50,200
     /// --out-dir sweep
@@ -58,8 +58,13 @@ struct LatencyArgs {
     /// Run each point's trials through the real-time code instead of the Monte Carlo: the 1 kHz
     /// board (its own plant integration) and the 50 Hz central controller (the latency in its
     /// delay lines) in lockstep on a simulated clock. Deterministic; no pulse.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "live")]
     lockstep: bool,
+    /// Run each point's trials on the live daemons, as `vic demo` does: one `vic-board` in real
+    /// time for the whole sweep and a `vic-planner` per point over shared memory (about the
+    /// movement's duration per trial; no pulse).
+    #[arg(long)]
+    live: bool,
     /// Write the figure (sweep.png, sweep.svg) and the numbers (sweep.json) into this folder.
     #[arg(long, value_name = "DIR")]
     out_dir: Option<PathBuf>,
@@ -99,10 +104,10 @@ impl SweepArgs {
             seed: a.seed.seed,
             divergence: a.divergence,
             pulse,
-            execution: if a.lockstep {
-                Execution::Lockstep
-            } else {
-                Execution::Offline
+            execution: match (a.lockstep, a.live) {
+                (true, _) => Execution::Lockstep,
+                (_, true) => Execution::Live,
+                _ => Execution::Offline,
             },
         };
         // A bar over the points on a terminal (nothing in pipes and scripts).

@@ -10,7 +10,7 @@
 //! the table's JSON in `--out-dir`. The processes and the namespace's files do not outlive the
 //! run, however it ends.
 
-use crate::planning::plan::{Method, PLAN_VERSION, plan};
+use crate::planning::plan::Method;
 use crate::planning::scenario::Scenario;
 use crate::rt::central::Strategy;
 use crate::rt::daemon::Children;
@@ -19,13 +19,15 @@ use crate::tools::cli::{
 };
 use crate::tools::demo_distributed::{DistributedLink, describe};
 use crate::tools::experiment::column_plot;
-use crate::tools::plan_command::{read_plan, write_plan};
+use crate::tools::live::{
+    BoardFlags, PlanStore, PlannerRun, ScenarioFile, run_planner, start_board, stop_board,
+};
+use crate::tools::plan_command::read_plan;
 use crate::tools::report::{StrategyResult, Trajectories};
-use anyhow::{Context, anyhow, bail};
+use anyhow::anyhow;
 use serde_json::Value;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 
 /// What `vic demo` was asked for: its flags.
 #[derive(clap::Args)]
@@ -81,6 +83,16 @@ pub struct DemoOptions {
     pub json: JsonArg,
 }
 
+impl DemoOptions {
+    /// The scenario the board and the planners load.
+    fn scenario_file(&self) -> ScenarioFile<'_> {
+        ScenarioFile {
+            config: &self.scenario.config,
+            overrides: &self.scenario.set.overrides,
+        }
+    }
+}
+
 /// The plan files of the strategies.
 struct DemoPlans {
     /// SOOC: `stiffness` and `replan`.
@@ -117,15 +129,32 @@ pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
     let mut runs = strategy_runs(o, &plans);
     runs.retain(|r| o.only.is_none_or(|s| s == r.strategy));
     let mut children = Children::new(&namespace);
+    let scenario_file = o.scenario_file();
+    let flags = BoardFlags {
+        spin_us: o.spin_us,
+        no_rt: o.no_rt,
+    };
     children
         .children
-        .push(start_board(o, &board_bin, &namespace)?);
+        .push(start_board(&board_bin, scenario_file, &namespace, flags)?);
     let link = o.distributed.then(|| DistributedLink::start(&namespace));
     let link = link.transpose()?;
     let planner_ns = link.as_ref().map_or(namespace.as_str(), |l| l.central_ns());
     let results = runs
         .iter()
-        .map(|r| run_planner(o, &planner_bin, planner_ns, r))
+        .map(|r| {
+            let run = PlannerRun {
+                strategy: r.strategy,
+                plan: r.plan,
+                latency_ms: r.latency_ms,
+                rate_hz: r.rate_hz,
+                trials: o.trials,
+                seed: o.seed.seed,
+                trajectories: Some(o.out_dir.join(format!("{}.json", r.stem()))),
+                divergence: None,
+            };
+            run_planner(&planner_bin, scenario_file, planner_ns, &run)
+        })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let link = link.map(DistributedLink::stop).transpose()?;
     let mut board = children.children.pop().expect("the board was started");
@@ -183,67 +212,6 @@ fn trajectories_figure(
         crate::tools::plot::joint_figure(&columns, &png, &svg)?;
     }
     Ok([png, svg])
-}
-
-/// Where the demo's plans go: the user's folder (reused across runs) or a temporary one (removed
-/// at the end).
-struct PlanStore {
-    dir: PathBuf,
-    reuse: bool,
-}
-
-impl PlanStore {
-    fn new(plans_dir: Option<&Path>, namespace: &str) -> anyhow::Result<Self> {
-        let store = match plans_dir {
-            Some(d) => PlanStore {
-                dir: d.to_path_buf(),
-                reuse: true,
-            },
-            None => PlanStore {
-                dir: std::env::temp_dir().join(format!("vic-{namespace}")),
-                reuse: false,
-            },
-        };
-        std::fs::create_dir_all(&store.dir)
-            .map_err(|e| anyhow!("cannot create {}: {e}", store.dir.display()))?;
-        Ok(store)
-    }
-
-    /// The plan of `config` with `overrides` by `method`: made afresh, or reused when the
-    /// store keeps plans and holds one made from the same file text, overrides, method and
-    /// plan-file version.
-    fn plan(&self, config: &Path, overrides: &[String], method: Method) -> anyhow::Result<PathBuf> {
-        use std::hash::{Hash, Hasher};
-        let text = std::fs::read_to_string(config)
-            .map_err(|e| format!("{}: cannot read: {e}", config.display()))
-            .input()?;
-        let mut h = std::collections::hash_map::DefaultHasher::new();
-        (text, overrides, method.name(), PLAN_VERSION).hash(&mut h);
-        let path = self
-            .dir
-            .join(format!("{}-{:016x}.json", method.name(), h.finish()));
-        if self.reuse && path.is_file() {
-            return Ok(path);
-        }
-        let scenario = Scenario::load(config, overrides).input()?;
-        let plan = plan(&scenario, method, None)
-            .map_err(|e| format!("{}: {e}", config.display()))
-            .input()?;
-        // Written aside and renamed: a reader never sees half a plan.
-        let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-        write_plan(&plan, &tmp)?;
-        std::fs::rename(&tmp, &path)
-            .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
-        Ok(path)
-    }
-}
-
-impl Drop for PlanStore {
-    fn drop(&mut self) {
-        if !self.reuse {
-            let _ = std::fs::remove_dir_all(&self.dir);
-        }
-    }
 }
 
 /// The plans of the strategies, the SOOC plan beside the ILQG ones on another thread.
@@ -339,80 +307,6 @@ impl StrategyRun<'_> {
             self.latency_ms
         )
     }
-}
-
-/// `--config FILE --set ...` for a child process.
-fn scenario_args(cmd: &mut Command, o: &DemoOptions) {
-    cmd.arg("--config").arg(&o.scenario.config);
-    for s in &o.scenario.set.overrides {
-        cmd.args(["--set", s]);
-    }
-}
-
-/// Starts `vic-board` in `namespace`, its statistics (JSON) piped.
-fn start_board(o: &DemoOptions, bin: &Path, namespace: &str) -> anyhow::Result<Child> {
-    let mut cmd = Command::new(bin);
-    scenario_args(&mut cmd, o);
-    cmd.args(["--namespace", namespace, "--json"]);
-    if let Some(spin) = o.spin_us {
-        cmd.args(["--spin-us", &spin.to_string()]);
-    }
-    if o.no_rt {
-        cmd.arg("--no-rt");
-    }
-    cmd.stdout(Stdio::piped()).stderr(Stdio::inherit());
-    cmd.spawn()
-        .map_err(|e| anyhow!("cannot start {}: {e}", bin.display()))
-}
-
-/// Runs `vic-planner` for one strategy to the end and reads its result.
-fn run_planner(
-    o: &DemoOptions,
-    bin: &Path,
-    namespace: &str,
-    run: &StrategyRun,
-) -> anyhow::Result<StrategyResult> {
-    let mut cmd = Command::new(bin);
-    scenario_args(&mut cmd, o);
-    cmd.arg("--plan")
-        .arg(run.plan)
-        .args([
-            "--strategy",
-            run.strategy.name(),
-            "--namespace",
-            namespace,
-            "--json",
-        ])
-        .arg("--trajectories")
-        .arg(o.out_dir.join(format!("{}.json", run.stem())))
-        .args(["--trials", &o.trials.to_string()])
-        .args(["--seed", &o.seed.seed.to_string()])
-        .args(["--latency-ms", &run.latency_ms.to_string()])
-        .args(["--rate-hz", &run.rate_hz.to_string()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit());
-    let out = cmd
-        .output()
-        .map_err(|e| anyhow!("cannot run {}: {e}", bin.display()))?;
-    if !out.status.success() {
-        bail!(
-            "vic-planner --strategy {} failed ({})",
-            run.strategy.name(),
-            out.status
-        );
-    }
-    serde_json::from_slice(&out.stdout).context("vic-planner printed no result")
-}
-
-/// Stops the board (it prints its statistics at the end of the current tick) and reads them.
-fn stop_board(board: &mut Child) -> anyhow::Result<Value> {
-    use std::io::Read;
-    Children::terminate(board);
-    let mut stdout = String::new();
-    if let Some(mut s) = board.stdout.take() {
-        let _ = s.read_to_string(&mut stdout);
-    }
-    serde_json::from_str(stdout.trim()).context("the board printed no statistics")
 }
 
 /// The JSON document: the run's parameters, every strategy with the board's timing, the board's
@@ -569,20 +463,6 @@ mod tests {
                 row("replan", "s.json", 0.0, 50),
             ]
         );
-    }
-
-    #[test]
-    fn a_temporary_plan_store_is_removed_and_a_kept_one_is_not() {
-        let ns = format!("demotest{}", std::process::id());
-        let tmp = PlanStore::new(None, &ns).unwrap();
-        let dir = tmp.dir.clone();
-        assert!(dir.is_dir());
-        drop(tmp);
-        assert!(!dir.exists());
-        let kept = std::env::temp_dir().join(format!("vic-kept-{ns}"));
-        drop(PlanStore::new(Some(&kept), &ns).unwrap());
-        assert!(kept.is_dir());
-        std::fs::remove_dir_all(&kept).unwrap();
     }
 
     #[test]

@@ -27,6 +27,7 @@ pub mod experiment;
 pub mod identify;
 pub mod identify_command;
 pub mod launch;
+pub mod live;
 pub mod logging;
 #[cfg(feature = "tui")]
 pub mod monitor;

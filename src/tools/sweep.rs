@@ -47,9 +47,19 @@ pub enum SweepError {
         latency_ms: f64,
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+    /// Running a point on the live daemons failed (a daemon missing or failing).
+    #[error("{strategy} at {latency_ms} ms, live: {source:#}")]
+    Live {
+        strategy: &'static str,
+        latency_ms: f64,
+        source: anyhow::Error,
+    },
+    /// The live daemons could not be started.
+    #[error("starting the live board: {0:#}")]
+    LiveStart(anyhow::Error),
     /// A pulse is a disturbance of the offline plant; the board takes its own (`vic inject`).
-    #[error("--pulse runs offline only (the lockstep board takes no scripted pulse yet)")]
-    PulseInLockstep,
+    #[error("--pulse runs offline only (the board takes no scripted pulse yet: use vic inject)")]
+    PulseNotOffline,
 }
 
 impl SweepError {
@@ -60,7 +70,7 @@ impl SweepError {
             SweepError::Config(_)
                 | SweepError::Latency { .. }
                 | SweepError::Lockstep { .. }
-                | SweepError::PulseInLockstep
+                | SweepError::PulseNotOffline
         )
     }
 }
@@ -120,6 +130,10 @@ pub enum Execution {
     /// (50 Hz, the latency split into its sensor and command delay lines) in lockstep on a
     /// simulated clock: the code that runs live, deterministic and as fast as it computes.
     Lockstep,
+    /// The daemons themselves: one `vic-board` (real time) for the whole sweep, one
+    /// `vic-planner` run per point over iceoryx2, as `vic demo` runs them. Wall-clock time:
+    /// about the movement's duration per trial.
+    Live,
 }
 
 /// One strategy at one latency. The errors and the Monte Carlo cost are over the trials that did
@@ -172,9 +186,13 @@ pub fn sweep_latency(
 ) -> Result<Sweep, SweepError> {
     // (method, plan overrides) → the scenario and its plan; a handful of entries at most.
     type PlanKey = (Method, Vec<String>);
-    if opts.execution == Execution::Lockstep && opts.pulse.is_some() {
-        return Err(SweepError::PulseInLockstep);
+    if opts.execution != Execution::Offline && opts.pulse.is_some() {
+        return Err(SweepError::PulseNotOffline);
     }
+    let live = match opts.execution {
+        Execution::Live => Some(LiveRig::start(path, overrides)?),
+        _ => None,
+    };
     let mut plans: Vec<(PlanKey, (Scenario, PlanFile))> = Vec::new();
     let mut points = Vec::new();
     for &strategy in &opts.strategies {
@@ -218,6 +236,30 @@ pub fn sweep_latency(
                     };
                     lockstep_trials(s, &set, p, point, opts)?
                 }
+                Execution::Live => {
+                    let rig = live.as_ref().expect("started above");
+                    let r = rig
+                        .point(i, p, strategy, latency_ms, opts)
+                        .map_err(|source| SweepError::Live {
+                            strategy: strategy.name(),
+                            latency_ms,
+                            source,
+                        })?;
+                    points.push(SweepPoint {
+                        strategy,
+                        latency_ms,
+                        final_error_mean: r.final_error_mean,
+                        final_error_max: r.final_error_max,
+                        rms_error: r.rms_error,
+                        diverged: r.diverged,
+                        diverged_fraction: r.diverged as f64 / r.trials.max(1) as f64,
+                        expected_cost_mc: r.expected_cost,
+                        expected_cost_predicted: predicted_cost(&set, &policy, feedback),
+                        mean_stiffness: p.summary.mean_stiffness,
+                        unit: r.unit,
+                    });
+                    continue;
+                }
             };
             let divergence = opts
                 .divergence
@@ -246,6 +288,71 @@ pub fn sweep_latency(
         pulse: opts.pulse,
         points,
     })
+}
+
+/// The live daemons of a sweep: one board in a fresh namespace, the plans in a temporary folder
+/// (one file per plan of the sweep, written when a point first needs it). Dropping it stops the
+/// board and removes the namespace and the plans.
+struct LiveRig<'a> {
+    scenario: crate::tools::live::ScenarioFile<'a>,
+    namespace: String,
+    planner: std::path::PathBuf,
+    store: crate::tools::live::PlanStore,
+    _board: crate::rt::daemon::Children,
+}
+
+impl<'a> LiveRig<'a> {
+    fn start(path: &'a Path, overrides: &'a [String]) -> Result<Self, SweepError> {
+        use crate::tools::cli::sibling_binary;
+        use crate::tools::live::{BoardFlags, PlanStore, ScenarioFile, start_board};
+        let namespace = format!("sweep{}", std::process::id());
+        let scenario = ScenarioFile {
+            config: path,
+            overrides,
+        };
+        let board_bin = sibling_binary("vic-board").map_err(SweepError::LiveStart)?;
+        let planner = sibling_binary("vic-planner").map_err(SweepError::LiveStart)?;
+        let store = PlanStore::new(None, &namespace).map_err(SweepError::LiveStart)?;
+        let mut board = crate::rt::daemon::Children::new(&namespace);
+        let child = start_board(&board_bin, scenario, &namespace, BoardFlags::default())
+            .map_err(SweepError::LiveStart)?;
+        board.children.push(child);
+        Ok(LiveRig {
+            scenario,
+            namespace,
+            planner,
+            store,
+            _board: board,
+        })
+    }
+
+    /// Runs the trials of one point: plan number `i` of the sweep (`plan`) with `strategy` at
+    /// `latency_ms`, the central controller at 50 Hz.
+    fn point(
+        &self,
+        i: usize,
+        plan: &PlanFile,
+        strategy: Strategy,
+        latency_ms: f64,
+        opts: &SweepOptions,
+    ) -> anyhow::Result<crate::tools::report::StrategyResult> {
+        use crate::tools::live::{PlannerRun, run_planner};
+        let file = self.store.dir().join(format!("plan-{i}.json"));
+        if !file.is_file() {
+            self.store.save(&file, plan)?;
+        }
+        let run = PlannerRun {
+            strategy,
+            plan: &file,
+            latency_ms,
+            rate_hz: 1_000_000_000 / CENTRAL_PERIOD_NS,
+            trials: opts.trials as u64,
+            seed: opts.seed,
+            trajectories: None,
+            divergence: opts.divergence,
+        };
+        run_planner(&self.planner, self.scenario, &self.namespace, &run)
+    }
 }
 
 /// One point of the sweep.
