@@ -292,13 +292,16 @@ give.
 
 **Replanning and feedback on top of stiffness.** `replan` re-solves the stiffness plan every \
 20 ms from the present predicted over the latency. On the arm in the divergent field it ends \
-closer to the target than the stiffness plan at every latency (2.6–4.3 mm against 5.3 mm) and \
-never loses a trial; its expected cost is lower than the stiffness plan's up to 100 ms and at \
-most 13 % higher beyond. Its final error even shrinks at the longest latencies, where its first \
-re-solve comes later in the movement (why that helps is not analysed yet). On the single joint, without a field, replanning buys a lower expected cost only \
-at short latencies and ends a little farther from the target than the plan it replans: there the \
-plan made in advance is already close to what a re-solve from a stale, noisy prediction can \
-give. `stiffness+predictor` (an undelayed ILQG plan with stiffness, its gains on the predicted \
+closer to the target than the stiffness plan at every latency (2.8–4.4 mm against 5.3 mm) and \
+never loses a trial; its expected cost is lower than the stiffness plan's up to 200 ms and 7 % \
+higher at 300 ms. Its final error even shrinks at the longest latencies, where its first \
+re-solve comes later in the movement (why that helps is not analysed yet). On the single joint, \
+without a field, replanning buys a lower expected cost at every latency (18 % lower with no \
+latency, 0.1 % at 300 ms) but ends a little farther from the target than the plan it replans: \
+there the plan made in advance is already close to what a re-solve from a stale, noisy \
+prediction can give. Each re-solve takes at most 3 Newton steps of a model without the flow's \
+third derivatives (the exact Hessian costs five times as much for the same gain from a warm \
+start). `stiffness+predictor` (an undelayed ILQG plan with stiffness, its gains on the predicted \
 present) improves the arm's final error at short latencies, but its feedback also drives the \
 stiffness (on the arm it chatters between its bounds): its expected cost is several times the stiffness \
 plan's at every latency, the trap of optimising a feedback policy over the stiffness (the \
