@@ -1,7 +1,8 @@
 //! The bridge's thread: one iceoryx2 wait set that wakes on the local publishers' relay
 //! notifications and on the Zenoh callbacks' wake-up, with a slow safety interval; no polling.
 
-use super::{BridgeError, BridgeStats, Counts, Inbound};
+use super::trace::{self, Point};
+use super::{BridgeError, BridgeStats, Counts, Inbound, Side};
 use crate::rt::bridge::wire::Malformed;
 use crate::rt::transport::relay::RelayListener;
 use crate::rt::transport::service::Service as Ipc;
@@ -47,14 +48,15 @@ impl LinkWake {
         let _ = self.tx.send(&[1]);
     }
 
-    /// Consumes the pending wake-ups.
-    fn take(&self) {
+    /// Consumes the pending wake-ups; whether there was one.
+    fn take(&self) -> bool {
         let mut buf = [0u8; 16];
+        let mut got = false;
         loop {
             match self.rx.recv(&mut buf) {
-                Ok(_) => continue,
+                Ok(_) => got = true,
                 Err(e) if e.kind() == ErrorKind::Interrupted => continue,
-                Err(_) => break,
+                Err(_) => return got,
             }
         }
     }
@@ -70,6 +72,8 @@ impl SynchronousMultiplexing for LinkWake {}
 
 /// The bridge's loop, the same on both sides.
 pub(super) struct Looper<'a> {
+    /// Which bridge this is (for the trace marks).
+    pub side: Side,
     /// The longest the thread sleeps before draining the local side anyway (a notification
     /// missed, e.g. from a client that does not notify, waits at most this long).
     pub safety: Duration,
@@ -108,7 +112,10 @@ impl Looper<'_> {
         let mut inbound = |m: Inbound, s: &mut BridgeStats| match m {
             Inbound::Malformed(Malformed::Size { .. }) => s.malformed_size += 1,
             Inbound::Malformed(Malformed::Version(_)) => s.malformed_version += 1,
-            m => s.local_errors += (!forward(m, &mut s.received)) as u64,
+            m => {
+                s.local_errors += (!forward(m, &mut s.received)) as u64;
+                trace::mark(self.side, Point::Published);
+            }
         };
         // The first pass drains at once (what was published before the bridge came up).
         let mut deadline = Instant::now();
@@ -135,8 +142,12 @@ impl Looper<'_> {
             // Consume the notifications *before* draining, so that a publish after the drain
             // rings again (consuming them after would lose it); a wait set whose listener is not
             // drained would also wake at once, forever.
-            relay.take();
-            self.wake.take();
+            if relay.take() {
+                trace::mark(self.side, Point::LocalWoke);
+            }
+            if self.wake.take() {
+                trace::mark(self.side, Point::LinkWoke);
+            }
             while let Ok(m) = self.rx.try_recv() {
                 inbound(m, stats);
             }

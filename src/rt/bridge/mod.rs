@@ -34,6 +34,7 @@
 
 pub mod clock;
 mod looper;
+pub mod trace;
 pub mod wire;
 
 use crate::rt::transport::ports::Topic;
@@ -208,9 +209,12 @@ fn open_session(link: &Link) -> Result<zenoh::Session, BridgeError> {
 
 type ZPub = zenoh::pubsub::Publisher<'static>;
 
-fn put<T: Plain>(p: &ZPub, m: &T, stats: &mut u64, errors: &mut u64) {
+fn put<T: Plain>(side: Side, p: &ZPub, m: &T, stats: &mut u64, errors: &mut u64) {
     match p.put(encode(m).to_vec()).wait() {
-        Ok(()) => *stats += 1,
+        Ok(()) => {
+            trace::mark(side, trace::Point::Put);
+            *stats += 1
+        }
         Err(_) => *errors += 1,
     }
 }
@@ -238,8 +242,10 @@ pub fn run(
         tx: &tx,
         wake: &wake,
         name: &o.link_name,
+        side: o.side,
     };
     let looper = Looper {
+        side: o.side,
         safety: o.safety_interval,
         stop,
         rx: &rx,
@@ -261,6 +267,7 @@ struct LinkEnd<'a> {
     tx: &'a mpsc::Sender<Inbound>,
     wake: &'a Arc<LinkWake>,
     name: &'a str,
+    side: Side,
 }
 
 impl LinkEnd<'_> {
@@ -269,11 +276,12 @@ impl LinkEnd<'_> {
         &self,
         wrap: fn(T) -> Inbound,
     ) -> Result<zenoh::pubsub::Subscriber<()>, BridgeError> {
-        let (tx, wake) = (self.tx.clone(), self.wake.clone());
+        let (tx, wake, side) = (self.tx.clone(), self.wake.clone(), self.side);
         let key = key::<T>(self.name);
         self.session
             .declare_subscriber(key.clone())
             .callback(move |sample| {
+                trace::mark(side, trace::Point::Callback);
                 let bytes = sample.payload().to_bytes();
                 let _ = tx.send(match decode::<T>(&bytes) {
                     Ok(m) => wrap(m),
@@ -355,15 +363,18 @@ fn board_side(
             let linked = clock.as_ref().is_none_or(|c| c.ready());
             let (sent, errors) = (&mut s.sent, &mut s.local_errors);
             central.drain_states(|m| match linked {
-                true => put(&state, m, &mut sent.state, errors),
+                true => put(Side::Board, &state, m, &mut sent.state, errors),
                 false => clock.iter().for_each(|c| c.hold_back()),
             });
             if let Some(t) = central.latest_telemetry().filter(|_| linked) {
-                put(&telemetry, &t, &mut sent.telemetry, errors);
+                put(Side::Board, &telemetry, &t, &mut sent.telemetry, errors);
             }
             if central.take_event() && linked {
                 match events.put(Vec::<u8>::new()).wait() {
-                    Ok(()) => sent.event += 1,
+                    Ok(()) => {
+                        trace::mark(Side::Board, trace::Point::Put);
+                        sent.event += 1
+                    }
                     Err(_) => *errors += 1,
                 }
             }
@@ -394,6 +405,7 @@ fn central_side(
             .callback({
                 let (tx, wake) = (link.tx.clone(), link.wake.clone());
                 move |_| {
+                    trace::mark(Side::Central, trace::Point::Callback);
                     let _ = tx.send(Inbound::Event);
                     wake.wake();
                 }
@@ -431,10 +443,32 @@ fn central_side(
             let (sent, errors) = (&mut s.sent, &mut s.local_errors);
             // The stamps as the central host's clock has them (skewed in tests only).
             let sk = skew;
-            board.drain_commands(|m| put(&commands, &skewed(m, sk), &mut sent.command, errors));
-            board.drain_controls(|m| put(&controls, &skewed(m, sk), &mut sent.control, errors));
+            board.drain_commands(|m| {
+                put(
+                    Side::Central,
+                    &commands,
+                    &skewed(m, sk),
+                    &mut sent.command,
+                    errors,
+                )
+            });
+            board.drain_controls(|m| {
+                put(
+                    Side::Central,
+                    &controls,
+                    &skewed(m, sk),
+                    &mut sent.control,
+                    errors,
+                )
+            });
             board.drain_disturbances(|m| {
-                put(&disturbances, &skewed(m, sk), &mut sent.disturbance, errors)
+                put(
+                    Side::Central,
+                    &disturbances,
+                    &skewed(m, sk),
+                    &mut sent.disturbance,
+                    errors,
+                )
             });
             s.clock = responder.stats();
             tick(s);

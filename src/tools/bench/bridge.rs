@@ -7,6 +7,7 @@
 //! measuring thread plays the central process. Both spin on their subscribers, so the figures
 //! are the transport's and the bridges', not a reader's poll period.
 
+use super::bridge_hops::{ECHO_AT, HopPoint, Hops};
 use crate::rt::bridge::{self, BridgeOptions, Link, Side};
 use crate::rt::transport::protocol::{CommandSlice, Header, StateMsg};
 use crate::rt::transport::relay::{Relay, RelayListener};
@@ -27,6 +28,8 @@ pub struct Options {
     pub port: u16,
     /// The endpoints spin on their subscribers instead of sleeping until notified.
     pub spin: bool,
+    /// Also time each hop through the bridges ([`super::bridge_hops`]).
+    pub trace: bool,
 }
 
 /// One channel's one-way latency [µs].
@@ -51,6 +54,8 @@ pub struct Report {
     pub zenoh: Latency,
     pub through_bridge: Latency,
     pub bridge: Ratios,
+    /// With `trace`: the time from each one-way's start to each point on the way.
+    pub hops: Option<Vec<HopPoint>>,
 }
 
 /// The bridge against bare Zenoh.
@@ -105,6 +110,7 @@ fn echo(
     ready.store(true, Ordering::Release);
     while !stop.load(Ordering::Relaxed) {
         board.drain_commands(|c| {
+            ECHO_AT.store(monotonic_ns(), Ordering::Relaxed);
             let s = StateMsg {
                 header: Header::new(c.header.seq, monotonic_ns()),
                 ..Default::default()
@@ -122,6 +128,7 @@ fn ping_pong(
     iterations: u64,
     spin: bool,
     channel: &'static str,
+    mut hops: Option<&mut Hops>,
 ) -> Result<Histogram<u64>, BenchError> {
     let central = CentralPorts::open(ns)?;
     let woken = RelayListener::open(central.session(), Relay::FromBoard)?;
@@ -132,6 +139,10 @@ fn ping_pong(
             header: Header::new(i, monotonic_ns()),
             ..Default::default()
         };
+        if let Some(h) = &hops {
+            h.clear();
+        }
+        let t0 = monotonic_ns();
         let t = Instant::now();
         central.publish_command(&c)?;
         let mut answered = false;
@@ -146,6 +157,9 @@ fn ping_pong(
         }
         if i > warm {
             let _ = h.record((t.elapsed().as_nanos() / 2) as u64);
+            if let Some(hops) = hops.as_deref_mut() {
+                hops.record(t0, monotonic_ns());
+            }
         }
     }
     Ok(h)
@@ -263,7 +277,7 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
 
 /// Two bridges in threads, the echo behind the board-side one, the ping–pong in front of the
 /// central-side one.
-fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
+fn through_bridges(o: &Options) -> Result<(Histogram<u64>, Option<Vec<HopPoint>>), BenchError> {
     let (host_a, host_b) = (unique("bba"), unique("bbb"));
     let endpoint = format!("tcp/127.0.0.1:{}", o.port);
     let stop = Arc::new(AtomicBool::new(false));
@@ -286,8 +300,12 @@ fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
         // The link is up when a first round trip comes back.
         let t0 = Instant::now();
         let h = loop {
-            match ping_pong(&host_b, 10, o.spin, "bridge") {
-                Ok(_) => break ping_pong(&host_b, o.iterations, o.spin, "bridge"),
+            match ping_pong(&host_b, 10, o.spin, "bridge", None) {
+                Ok(_) => {
+                    let mut hops = o.trace.then(Hops::start);
+                    let h = ping_pong(&host_b, o.iterations, o.spin, "bridge", hops.as_mut());
+                    break h.map(|h| (h, hops.map(Hops::finish)));
+                }
                 Err(_) if t0.elapsed() < Duration::from_secs(10) => continue,
                 Err(e) => break Err(e),
             }
@@ -308,14 +326,14 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchE
     progress("shared memory (one namespace, no bridge)");
     let direct_ns = unique("bbd");
     let direct = with_echo(&direct_ns, o.spin, || {
-        ping_pong(&direct_ns, o.iterations, o.spin, "shared memory")
+        ping_pong(&direct_ns, o.iterations, o.spin, "shared memory", None)
     });
     remove_namespace(&direct_ns);
     let direct = direct?;
     progress("bare Zenoh on loopback");
     let zenoh = bare_zenoh(o.port + 1, o.iterations)?;
     progress("through two bridges on loopback");
-    let bridged = through_bridges(o)?;
+    let (bridged, hops) = through_bridges(o)?;
     let (z, b) = (latency(&zenoh), latency(&bridged));
     Ok(Report {
         iterations: o.iterations,
@@ -333,6 +351,7 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchE
         },
         zenoh: z,
         through_bridge: b,
+        hops,
     })
 }
 
@@ -361,4 +380,7 @@ pub fn print(r: &Report) {
         "bridge / bare Zenoh: p50 {:.2}×, p99 {:.2}×",
         r.bridge.ratio_p50, r.bridge.ratio_p99
     );
+    if let Some(h) = &r.hops {
+        super::bridge_hops::print(h);
+    }
 }
