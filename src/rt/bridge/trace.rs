@@ -1,6 +1,6 @@
 //! Per-hop time stamps of the bridge, for `vic bench bridge --trace`: where a message's one-way
 //! time goes (the sending bridge's wake-up, its Zenoh put, the receiving callback, the local
-//! publish). Off by default: then a mark is one relaxed atomic load and nothing else — no clock
+//! publish from that callback). Off by default: then a mark is one relaxed atomic load and nothing else — no clock
 //! read, no allocation, no I/O on the forwarding path.
 //!
 //! A mark keeps only the *last* time each point was passed, per side, so it describes one
@@ -20,13 +20,11 @@ pub enum Point {
     Put,
     /// A Zenoh callback of a subscription on the link was entered.
     Callback,
-    /// The bridge's thread woke and found the link's wake-up (a message queued by a callback).
-    LinkWoke,
     /// A message from the link was published into iceoryx2 (and its listeners notified).
     Published,
 }
 
-const POINTS: usize = 5;
+const POINTS: usize = 4;
 
 static ENABLED: AtomicBool = AtomicBool::new(false);
 static AT: [AtomicU64; 2 * POINTS] = [const { AtomicU64::new(0) }; 2 * POINTS];

@@ -24,7 +24,7 @@ enum At {
 
 /// The command's way (central → board) and the state's (board → central); the central-side
 /// bridge is "B", the board-side one "A".
-const COMMAND: [(&str, At); 6] = [
+const COMMAND: [(&str, At); 5] = [
     (
         "B woke (relay event)",
         At::Bridge(Side::Central, Point::LocalWoke),
@@ -32,16 +32,12 @@ const COMMAND: [(&str, At); 6] = [
     ("B put returned", At::Bridge(Side::Central, Point::Put)),
     ("A Zenoh callback", At::Bridge(Side::Board, Point::Callback)),
     (
-        "A thread woke (link)",
-        At::Bridge(Side::Board, Point::LinkWoke),
-    ),
-    (
         "A published to iceoryx2",
         At::Bridge(Side::Board, Point::Published),
     ),
     ("echo read the command", At::End),
 ];
-const STATE: [(&str, At); 6] = [
+const STATE: [(&str, At); 5] = [
     (
         "A woke (relay event)",
         At::Bridge(Side::Board, Point::LocalWoke),
@@ -50,10 +46,6 @@ const STATE: [(&str, At); 6] = [
     (
         "B Zenoh callback",
         At::Bridge(Side::Central, Point::Callback),
-    ),
-    (
-        "B thread woke (link)",
-        At::Bridge(Side::Central, Point::LinkWoke),
     ),
     (
         "B published to iceoryx2",
@@ -73,7 +65,8 @@ pub struct HopPoint {
     pub since_start_p99_us: f64,
     /// This point's median minus the previous point's (the hop's share of the median one-way).
     pub hop_p50_us: f64,
-    /// Round trips in which the point was passed (0: this bridge has no such hop).
+    /// Round trips in which the point was passed within its one-way (a mark after the reading
+    /// end's is left out: the end may read before the publisher's mark, just after its send).
     pub n: u64,
 }
 
@@ -84,7 +77,7 @@ pub(super) struct Hops {
 }
 
 fn histograms() -> Vec<Histogram<u64>> {
-    (0..6)
+    (0..5)
         .map(|_| Histogram::new_with_bounds(1, 10_000_000_000, 3).expect("valid bounds"))
         .collect()
 }
@@ -113,7 +106,7 @@ impl Hops {
         if echo < t0 || echo > t_end {
             return;
         }
-        let take = |hs: &mut [Histogram<u64>], way: &[(&str, At); 6], start: u64, end: u64| {
+        let take = |hs: &mut [Histogram<u64>], way: &[(&str, At); 5], start: u64, end: u64| {
             for (h, (_, at)) in hs.iter_mut().zip(way) {
                 let t = match at {
                     At::Bridge(side, p) => trace::at(*side, *p),
