@@ -339,8 +339,9 @@ impl LinkEnd<'_> {
 }
 
 /// A publisher of control traffic on the link: a late sample is worth less than the next one,
-/// so never block the bridge behind a congested link (drop), and send at once (express).
-fn control_publisher(session: &zenoh::Session, key: String) -> Result<ZPub, BridgeError> {
+/// so never block the bridge behind a congested link (drop), and send at once (express), at the
+/// highest priority. Public so that `vic bench bridge` measures bare Zenoh with the same QoS.
+pub fn control_publisher(session: &zenoh::Session, key: String) -> Result<ZPub, BridgeError> {
     session
         .declare_publisher(key.clone())
         .congestion_control(zenoh::qos::CongestionControl::Drop)

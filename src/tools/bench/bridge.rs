@@ -207,7 +207,8 @@ fn unique(tag: &str) -> String {
     format!("{tag}{}x{}", std::process::id(), monotonic_ns() % 1_000_000)
 }
 
-/// Bare Zenoh: two sessions on loopback, a ping answered by a pong of the state's size.
+/// Bare Zenoh: two sessions on loopback, a ping answered (inside the callback) by a pong of the
+/// state's size, with the bridge's publisher QoS.
 fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> {
     let z = |e: zenoh::Error| BenchError::Zenoh(e.to_string());
     let endpoint = format!(r#"["tcp/127.0.0.1:{port}"]"#);
@@ -220,11 +221,9 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
     };
     let a = session("listen/endpoints")?;
     let b = session("connect/endpoints")?;
-    let pong = b
-        .declare_publisher("vicbench/pong")
-        .express(true)
-        .wait()
-        .map_err(z)?;
+    // The bridge's QoS (drop, real-time priority, express), so only the bridging differs.
+    let qos = |s: &zenoh::Session, key: &str| bridge::control_publisher(s, key.to_string());
+    let pong = qos(&b, "vicbench/pong")?;
     let _echo = b
         .declare_subscriber("vicbench/ping")
         .callback(move |s| {
@@ -233,11 +232,7 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
         .wait()
         .map_err(z)?;
     let answers = a.declare_subscriber("vicbench/pong").wait().map_err(z)?;
-    let ping = a
-        .declare_publisher("vicbench/ping")
-        .express(true)
-        .wait()
-        .map_err(z)?;
+    let ping = qos(&a, "vicbench/ping")?;
     // Let the two sessions learn each other's subscribers.
     let payload = vec![0u8; size_of::<StateMsg>()];
     let t0 = Instant::now();
