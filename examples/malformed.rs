@@ -6,6 +6,10 @@
 //! `BURST` junk slices at once (rejected, or dropped by iceoryx2 and counted from the sequence
 //! gaps of its session, the planner's slices in between or not), NaN torque, a stiffness above any bound and a wrong
 //! joint count.
+//! After the last period one trailer slice goes out in the flood session with the sequence
+//! number after the last burst's: a burst's tail that is dropped on the way (by iceoryx2's
+//! receive buffer, or by Zenoh across a bridge) is then counted from the gap before it, not
+//! lost with nothing after it to show the gap. It counts as a flood-burst message.
 //! Hostile messages go out on a raw sender's node (`vic-raw-sender`), so the planner that the
 //! soak runs beside it is not refused, each kind from a session of its own. At the end it prints
 //! one JSON line: how many hostile messages it sent, by kind, and in total.
@@ -33,6 +37,12 @@ const KINDS: [&str; 8] = [
     "wrong-joints",
 ];
 
+/// The session of hostile kind `kind`: one session per kind, so the sequence rules of one kind
+/// never touch another's.
+fn session_of(kind: usize) -> u32 {
+    0x4057_0000 + kind as u32
+}
+
 /// A slice for no trial the board runs (trial 0xFFFF), otherwise well formed.
 fn slice(session: u32, seq: u64) -> CommandSlice {
     CommandSlice {
@@ -48,9 +58,8 @@ fn slice(session: u32, seq: u64) -> CommandSlice {
 
 /// Sends hostile message number `n` (kind `n % KINDS.len()`); returns how many messages went out.
 fn hostile(raw: &RawPorts, n: u64) -> u64 {
-    // One session per kind: the sequence rules of one kind never touch another's.
     let kind = (n % KINDS.len() as u64) as usize;
-    let session = 0x4057_0000 + kind as u32;
+    let session = session_of(kind);
     // Consecutive within each kind's session: no gap the board would count as a loss.
     let round = n / KINDS.len() as u64;
     let seq = round + 1;
@@ -128,6 +137,23 @@ fn main() {
             .or_default() += sent;
         hostile_sent += sent;
         std::thread::sleep(every);
+    }
+    // The trailer (see the module doc): the flood session's next sequence number after the
+    // last burst, so the board counts a lost tail of that burst from the gap.
+    let flood = KINDS
+        .iter()
+        .position(|k| *k == "flood-burst")
+        .expect("a flood kind");
+    let flood_rounds = (n + (KINDS.len() - flood) as u64) / KINDS.len() as u64;
+    if flood_rounds > 0 {
+        let last_round = flood_rounds - 1;
+        std::thread::sleep(Duration::from_millis(200));
+        let c = slice(session_of(flood), (last_round + 1) * BURST + 1);
+        let sent = raw.publish_command(&c).is_ok() as u64;
+        *by_kind.entry("flood-burst").or_default() += sent;
+        hostile_sent += sent;
+        // Time for it to cross a bridge before the soak stops the board.
+        std::thread::sleep(Duration::from_millis(300));
     }
     println!(
         "{}",

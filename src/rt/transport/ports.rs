@@ -27,6 +27,19 @@ pub use super::limits::{
     MAX_LISTENERS, MAX_NODES, MAX_NOTIFIERS, MAX_PUBLISHERS, MAX_RELAY_NOTIFIERS, MAX_SUBSCRIBERS,
 };
 
+/// Publishes `value` on `port`, then wakes a bridge beside this process: every message the
+/// link forwards goes out this way (the notify costs one atomic load while no bridge listens).
+fn send_relayed<T: Topic>(
+    session: &Session,
+    port: &Pub<T>,
+    relay: &RelayNotifier,
+    value: &T,
+) -> Result<(), TransportError> {
+    let sent = send(session, port, value);
+    relay.notify();
+    sent
+}
+
 /// The board's node name: how a second board finds the first.
 pub const BOARD_NODE: &str = "vic-board";
 /// The central process's node name: how a second one finds the first.
@@ -79,15 +92,11 @@ impl BoardPorts {
     }
     /// Publishes the plant state.
     pub fn publish_state(&self, s: &StateMsg) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.state, s);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.state, &self.relay, s)
     }
     /// Publishes telemetry.
     pub fn publish_telemetry(&self, t: &Telemetry) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.telemetry, t);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.telemetry, &self.relay, t)
     }
     /// Every command slice received since the last call, oldest first.
     pub fn drain_commands(&self, f: impl FnMut(&CommandSlice)) -> usize {
@@ -235,15 +244,11 @@ impl CentralPorts {
     }
     /// Publishes a command slice.
     pub fn publish_command(&self, c: &CommandSlice) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.commands, c);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.commands, &self.relay, c)
     }
     /// Publishes a control request.
     pub fn publish_control(&self, c: &Control) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.controls, c);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.controls, &self.relay, c)
     }
 }
 
@@ -280,9 +285,7 @@ impl ToolPorts {
     }
     /// Publishes a disturbance.
     pub fn publish_disturbance(&self, d: &Disturbance) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.disturbances, d);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.disturbances, &self.relay, d)
     }
 }
 
@@ -425,21 +428,15 @@ impl RawPorts {
     }
     /// Publishes a command slice as is.
     pub fn publish_command(&self, c: &CommandSlice) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.commands, c);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.commands, &self.relay, c)
     }
     /// Publishes a control request as is.
     pub fn publish_control(&self, c: &Control) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.controls, c);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.controls, &self.relay, c)
     }
     /// Publishes a disturbance as is.
     pub fn publish_disturbance(&self, d: &Disturbance) -> Result<(), TransportError> {
-        let sent = send(&self.session, &self.disturbances, d);
-        self.relay.notify();
-        sent
+        send_relayed(&self.session, &self.disturbances, &self.relay, d)
     }
 }
 

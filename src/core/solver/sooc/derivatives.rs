@@ -38,12 +38,16 @@ impl MomentDynamics<'_> {
     ///   copied, and the backward pass's retries at higher μ reuse the `(n + m)²` contraction;
     /// * `∂²Φ/∂u_a∂u_b` (the pairs that `expand`'s `dA_j` do not cover);
     /// * for a noise gain nonlinear in the state, its second and third derivatives.
+    ///
+    /// With `third` false the flow's third derivatives are left out (`h3 = 0`): the cheaper,
+    /// inexact model of [`crate::core::solver::sooc_newton::SoocOptions::flow_third_derivatives`].
     pub fn second_order(
         &self,
         k: usize,
         z: &[f64],
         u: &[f64],
         lam_next: &[f64],
+        third: bool,
         s: &mut MomentExpansion,
     ) {
         let base = self.base();
@@ -55,7 +59,11 @@ impl MomentDynamics<'_> {
         s.t2.gemm(1.0, &s.t1, &s.p, 0.0);
         let at = At::new(base, k, z, u);
         flow_control_hessian(at, s);
-        flow_third_contracted(at, s);
+        if third {
+            flow_third_contracted(at, s);
+        } else {
+            s.h3.fill(0.0);
+        }
         if s.curved_model && base.nw() > 0 {
             noise_gain_second_order(at, s);
         }

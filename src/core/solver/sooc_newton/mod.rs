@@ -63,6 +63,17 @@ pub struct SoocOptions {
     pub mu_min: f64,
     /// Give up above this μ (default 1e10).
     pub mu_max: f64,
+    /// Whether the Newton model includes the third derivatives of the flow (default true: the
+    /// exact Hessian, which the convergence to a stated criterion needs; see
+    /// [`MomentDynamics::second_order`]). They are ~80 % of a Newton iteration on the arm (100
+    /// triple-nested dual evaluations of the flow per knot). Without them the model keeps the
+    /// curvature that makes stiffness worth buying (the covariance's `A P Aᵀ` is quadratic in
+    /// the controls through the flow's *second* derivatives) and drops the costate-weighted
+    /// change of `∂A/∂v` along `v`: a model that is no longer the exact Hessian, so far from the
+    /// optimum its steps are as good, near it convergence slows to linear (measured on the
+    /// divergent arm: 220 iterations do not reach the tolerances that 52 exact ones do). What a
+    /// few warm-started iterations per re-solve need (the `replan` strategy), not a plan.
+    pub flow_third_derivatives: bool,
 }
 
 impl Default for SoocOptions {
@@ -73,6 +84,7 @@ impl Default for SoocOptions {
             decrease_tolerance: 1e-9,
             mu_min: 1e-6,
             mu_max: 1e10,
+            flow_third_derivatives: true,
         }
     }
 }
@@ -472,6 +484,7 @@ impl SoocSolver {
     /// model.
     fn expand_second_order(&mut self, problem: &SoocProblem) {
         let (z, u, lam) = (&self.z, &self.u, &self.lam);
+        let third = self.options.flow_third_derivatives;
         self.expansions
             .par_iter_mut()
             .enumerate()
@@ -479,7 +492,7 @@ impl SoocSolver {
                 let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
                 problem
                     .dynamics
-                    .second_order(k, zk, uk, lam[k + 1].as_slice(), e);
+                    .second_order(k, zk, uk, lam[k + 1].as_slice(), third, e);
             });
     }
 
