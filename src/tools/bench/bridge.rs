@@ -4,8 +4,10 @@
 //!
 //! One-way latency is half the round trip of a command answered by a state: the echo thread
 //! plays the board (it answers each command with a state of the same sequence number), the
-//! measuring thread plays the central process. Both spin on their subscribers, so the figures
-//! are the transport's and the bridges', not a reader's poll period.
+//! measuring thread plays the central process. They sleep until the other end's publisher
+//! notifies, or spin on their subscribers (`spin`), so the figures are the transport's and the
+//! bridges', not a reader's poll period. With `trace` the hops through the bridges are timed too
+//! ([`super::bridge_hops`]).
 
 use super::bridge_hops::{ECHO_AT, HopPoint, Hops};
 use crate::rt::bridge::{self, BridgeOptions, Link, Side};
