@@ -60,6 +60,10 @@ struct BenchBridgeArgs {
     /// other end's publisher notifies, as the bare Zenoh pair sleeps in its receiver).
     #[arg(long)]
     spin: bool,
+    /// Also time each hop through the bridges (the sending bridge's wake-up, its put, the
+    /// receiving callback, the local publish), from each one-way's start; adds `hops` to the JSON.
+    #[arg(long)]
+    trace: bool,
     #[command(flatten)]
     json: JsonArg,
 }
@@ -151,6 +155,7 @@ impl BenchArgs {
                     iterations: a.iterations,
                     port: a.port,
                     spin: a.spin,
+                    trace: a.trace,
                 },
                 a.json.json,
             ),

@@ -22,30 +22,36 @@
 //! path, link included, to within ± half the best probe's round trip. [`Stamps::Keep`] forwards
 //! the senders' stamps unchanged: exact when both daemons share one machine's clock.
 //!
-//! **Wake-ups** (event-driven on both sides, no polling). Zenoh delivers to callbacks, which hand
-//! each message to the bridge's thread through a channel and ring a socket the thread's iceoryx2
-//! wait set watches ([`looper::LinkWake`]). iceoryx2 publish–subscribe has no wake-up of its
-//! own, so the local publishers notify a relay event service per message
+//! **From the link** a message is published into the namespace inside the Zenoh callback that
+//! received it (decoded and checked by [`wire`], its stamps translated, counted), with ports of
+//! the thread-safe service type ([`crate::rt::transport::link_ports`]): no other thread is woken
+//! on the way. **To the link** (event-driven, no polling): iceoryx2 publish–subscribe has no
+//! wake-up of its own, so the local publishers notify a relay event service per message
 //! ([`crate::rt::transport::relay`]: the board per state, telemetry and event; the central
 //! process per command slice and control; `vic inject` per disturbance); only a bridge listens
-//! there, and while none does a notification costs the publisher one atomic load. The same wait
-//! set watches that listener. A slow safety interval (`safety_interval`, default 100 ms) drains
-//! the local side anyway, so a message from a client that does not notify is late, not lost.
+//! there, and while none does a notification costs the publisher one atomic load. The bridge's
+//! thread sleeps in an iceoryx2 wait set on that listener and puts what it drains on the link. A
+//! slow safety interval (`safety_interval`, default 100 ms) drains the local side anyway, so a
+//! message from a client that does not notify is late, not lost.
+//!
+//! [`trace`] marks each hop's time for `vic bench bridge --trace` (off otherwise).
 
 pub mod clock;
 mod looper;
+pub mod trace;
 pub mod wire;
 
+use crate::rt::transport::link_ports::{FromBoardLink, ToBoardLink};
 use crate::rt::transport::ports::Topic;
 use crate::rt::transport::protocol::{
     BoardEvent, CommandSlice, Control, Disturbance, StateMsg, Telemetry,
 };
 use crate::rt::transport::relay::{Relay, RelayListener};
-use crate::rt::transport::{BoardPorts, CentralPorts, ToolPorts, TransportError};
+use crate::rt::transport::{BoardPorts, CentralPorts, TransportError};
 use clock::skewed;
-use looper::{LinkWake, Looper};
-use std::sync::atomic::AtomicBool;
-use std::sync::{Arc, mpsc};
+use looper::Looper;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use wire::{Malformed, Plain, decode, encode};
 use zenoh::Wait;
@@ -134,7 +140,7 @@ pub enum BridgeError {
     Zenoh { what: String, message: String },
     #[error("--link-name {0:?}: use 1–32 characters of [A-Za-z0-9_-]")]
     LinkName(String),
-    /// The bridge thread's wait set or the link's wake-up could not be set up.
+    /// The bridge thread's wait set could not be set up.
     #[error("waiting for messages: {0}")]
     Wait(String),
 }
@@ -150,17 +156,44 @@ fn zenoh_error(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> BridgeEr
     }
 }
 
-/// What arrives from the link, decoded. The variants differ in size (a command slice is 2 KB),
-/// but each is moved once through the channel, so boxing would only add an allocation each.
-#[allow(clippy::large_enum_variant)]
-enum Inbound {
-    State(StateMsg),
-    Telemetry(Telemetry),
-    Event,
-    Command(CommandSlice),
-    Control(Control),
-    Disturbance(Disturbance),
-    Malformed(Malformed),
+/// What the link's callbacks count (they run on Zenoh's threads, beside the bridge's).
+#[derive(Debug, Default)]
+struct LinkCounts {
+    state: AtomicU64,
+    telemetry: AtomicU64,
+    event: AtomicU64,
+    command: AtomicU64,
+    control: AtomicU64,
+    disturbance: AtomicU64,
+    malformed_size: AtomicU64,
+    malformed_version: AtomicU64,
+    /// Local publishes of what came from the link that failed.
+    local_errors: AtomicU64,
+}
+
+fn add(c: &AtomicU64) {
+    c.fetch_add(1, Ordering::Relaxed);
+}
+
+impl LinkCounts {
+    /// `s` (the bridge thread's counts) with the callbacks' counts in.
+    fn merged(&self, s: &BridgeStats) -> BridgeStats {
+        let l = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        BridgeStats {
+            received: Counts {
+                state: l(&self.state),
+                telemetry: l(&self.telemetry),
+                event: l(&self.event),
+                command: l(&self.command),
+                control: l(&self.control),
+                disturbance: l(&self.disturbance),
+            },
+            malformed_size: l(&self.malformed_size),
+            malformed_version: l(&self.malformed_version),
+            local_errors: s.local_errors + l(&self.local_errors),
+            ..*s
+        }
+    }
 }
 
 /// The key expression of a topic on a link: `vic/{link}/{service name without "vic/"}`.
@@ -208,9 +241,12 @@ fn open_session(link: &Link) -> Result<zenoh::Session, BridgeError> {
 
 type ZPub = zenoh::pubsub::Publisher<'static>;
 
-fn put<T: Plain>(p: &ZPub, m: &T, stats: &mut u64, errors: &mut u64) {
+fn put<T: Plain>(side: Side, p: &ZPub, m: &T, stats: &mut u64, errors: &mut u64) {
     match p.put(encode(m).to_vec()).wait() {
-        Ok(()) => *stats += 1,
+        Ok(()) => {
+            trace::mark(side, trace::Point::Put);
+            *stats += 1
+        }
         Err(_) => *errors += 1,
     }
 }
@@ -223,63 +259,70 @@ pub fn run(
 ) -> Result<BridgeStats, BridgeError> {
     check_link_name(&o.link_name)?;
     let session = open_session(&o.link)?;
-    let (tx, rx) = mpsc::channel();
-    let wake = Arc::new(LinkWake::new()?);
+    let counts = Arc::new(LinkCounts::default());
     let mut stats = BridgeStats::default();
     let mut next_report = Instant::now() + Duration::from_secs(1);
     let mut tick = |stats: &BridgeStats| {
         if Instant::now() >= next_report {
-            report(stats);
+            report(&counts.merged(stats));
             next_report += Duration::from_secs(1);
         }
     };
     let link = LinkEnd {
         session: &session,
-        tx: &tx,
-        wake: &wake,
+        counts: &counts,
         name: &o.link_name,
+        side: o.side,
     };
     let looper = Looper {
+        side: o.side,
         safety: o.safety_interval,
         stop,
-        rx: &rx,
-        wake: &wake,
     };
     match o.side {
         Side::Board => board_side(o, &link, &looper, &mut tick, &mut stats)?,
         Side::Central => central_side(o, &link, &looper, &mut tick, &mut stats)?,
     }
-    drop(tx);
     let _ = session.close().wait();
-    Ok(stats)
+    Ok(counts.merged(&stats))
 }
 
-/// This bridge's end of the Zenoh link: its session, the channel its subscriptions feed, the
-/// wake-up they ring, and the link's name in the key expressions.
+/// This bridge's end of the Zenoh link: its session, what its callbacks count, and the link's
+/// name in the key expressions.
 struct LinkEnd<'a> {
     session: &'a zenoh::Session,
-    tx: &'a mpsc::Sender<Inbound>,
-    wake: &'a Arc<LinkWake>,
+    counts: &'a Arc<LinkCounts>,
     name: &'a str,
+    side: Side,
 }
 
+type ZSub = zenoh::pubsub::Subscriber<()>;
+
 impl LinkEnd<'_> {
-    /// Subscribes topic `T` and hands every sample, decoded, to the bridge's thread.
+    /// Subscribes topic `T`: every sample is checked ([`decode`]: size and protocol version;
+    /// what fails is counted and dropped) and handed to `forward`, on the Zenoh thread that
+    /// received it. `forward` counts the message and publishes it locally; false: the publish
+    /// failed (counted).
     fn subscribe<T: Plain + Topic>(
         &self,
-        wrap: fn(T) -> Inbound,
-    ) -> Result<zenoh::pubsub::Subscriber<()>, BridgeError> {
-        let (tx, wake) = (self.tx.clone(), self.wake.clone());
+        forward: impl Fn(T, &LinkCounts) -> bool + Send + Sync + 'static,
+    ) -> Result<ZSub, BridgeError> {
+        let (counts, side) = (self.counts.clone(), self.side);
         let key = key::<T>(self.name);
         self.session
             .declare_subscriber(key.clone())
             .callback(move |sample| {
-                let bytes = sample.payload().to_bytes();
-                let _ = tx.send(match decode::<T>(&bytes) {
-                    Ok(m) => wrap(m),
-                    Err(e) => Inbound::Malformed(e),
-                });
-                wake.wake();
+                trace::mark(side, trace::Point::Callback);
+                match decode::<T>(&sample.payload().to_bytes()) {
+                    Ok(m) => {
+                        if !forward(m, &counts) {
+                            add(&counts.local_errors);
+                        }
+                        trace::mark(side, trace::Point::Published);
+                    }
+                    Err(Malformed::Size { .. }) => add(&counts.malformed_size),
+                    Err(Malformed::Version(_)) => add(&counts.malformed_version),
+                }
             })
             .wait()
             .map_err(zenoh_error(format!("subscribing {key}")))
@@ -296,8 +339,9 @@ impl LinkEnd<'_> {
 }
 
 /// A publisher of control traffic on the link: a late sample is worth less than the next one,
-/// so never block the bridge behind a congested link (drop), and send at once (express).
-fn control_publisher(session: &zenoh::Session, key: String) -> Result<ZPub, BridgeError> {
+/// so never block the bridge behind a congested link (drop), and send at once (express), at the
+/// highest priority. Public so that `vic bench bridge` measures bare Zenoh with the same QoS.
+pub fn control_publisher(session: &zenoh::Session, key: String) -> Result<ZPub, BridgeError> {
     session
         .declare_publisher(key.clone())
         .congestion_control(zenoh::qos::CongestionControl::Drop)
@@ -316,54 +360,63 @@ fn board_side(
     tick: &mut impl FnMut(&BridgeStats),
     stats: &mut BridgeStats,
 ) -> Result<(), BridgeError> {
+    // The planner's role (its subscribers feed the link; its name refuses a second planner).
     let central = CentralPorts::open(&o.namespace)?;
-    let tool = ToolPorts::open(&o.namespace)?;
-    let _subs = (
-        link.subscribe::<CommandSlice>(Inbound::Command)?,
-        link.subscribe::<Control>(Inbound::Control)?,
-        link.subscribe::<Disturbance>(Inbound::Disturbance)?,
-    );
+    let into = Arc::new(ToBoardLink::open(&o.namespace)?);
     let state = link.publisher::<StateMsg>()?;
     let telemetry = link.publisher::<Telemetry>()?;
     let events = link.declare_publisher(event_key(link.name))?;
     let relay = RelayListener::open(central.session(), Relay::FromBoard)?;
     let clock = match o.stamps {
-        Stamps::Translate => Some(clock::Prober::start(link.session, link.name)?),
+        Stamps::Translate => Some(Arc::new(clock::Prober::start(link.session, link.name)?)),
         Stamps::Keep => None,
     };
     // Into the board's clock; false: no estimate yet, the message is held back (counted).
-    let stamp = |m: &mut dyn clock::Stamped| clock.as_ref().is_none_or(|c| c.translate(m));
+    let stamper = |clock: Option<Arc<clock::Prober>>| {
+        move |m: &mut dyn clock::Stamped| clock.as_ref().is_none_or(|c| c.translate(m))
+    };
+    let _subs = (
+        link.subscribe::<CommandSlice>({
+            let (into, stamp) = (into.clone(), stamper(clock.clone()));
+            move |mut c, n| {
+                add(&n.command);
+                !stamp(&mut c) || into.publish_command(&c).is_ok()
+            }
+        })?,
+        link.subscribe::<Control>({
+            let (into, stamp) = (into.clone(), stamper(clock.clone()));
+            move |mut c, n| {
+                add(&n.control);
+                !stamp(&mut c) || into.publish_control(&c).is_ok()
+            }
+        })?,
+        link.subscribe::<Disturbance>({
+            let (into, stamp) = (into.clone(), stamper(clock.clone()));
+            move |mut d, n| {
+                add(&n.disturbance);
+                !stamp(&mut d) || into.publish_disturbance(&d).is_ok()
+            }
+        })?,
+    );
     looper.run(
         &relay,
-        |inbound, r: &mut Counts| match inbound {
-            Inbound::Command(mut c) => {
-                r.command += 1;
-                !stamp(&mut c) || central.publish_command(&c).is_ok()
-            }
-            Inbound::Control(mut c) => {
-                r.control += 1;
-                !stamp(&mut c) || central.publish_control(&c).is_ok()
-            }
-            Inbound::Disturbance(mut d) => {
-                r.disturbance += 1;
-                !stamp(&mut d) || tool.publish_disturbance(&d).is_ok()
-            }
-            _ => true,
-        },
         |s| {
             // Until the clocks are matched the central process sees no board (see `clock`).
             let linked = clock.as_ref().is_none_or(|c| c.ready());
             let (sent, errors) = (&mut s.sent, &mut s.local_errors);
             central.drain_states(|m| match linked {
-                true => put(&state, m, &mut sent.state, errors),
+                true => put(Side::Board, &state, m, &mut sent.state, errors),
                 false => clock.iter().for_each(|c| c.hold_back()),
             });
             if let Some(t) = central.latest_telemetry().filter(|_| linked) {
-                put(&telemetry, &t, &mut sent.telemetry, errors);
+                put(Side::Board, &telemetry, &t, &mut sent.telemetry, errors);
             }
             if central.take_event() && linked {
                 match events.put(Vec::<u8>::new()).wait() {
-                    Ok(()) => sent.event += 1,
+                    Ok(()) => {
+                        trace::mark(Side::Board, trace::Point::Put);
+                        sent.event += 1
+                    }
                     Err(_) => *errors += 1,
                 }
             }
@@ -385,17 +438,33 @@ fn central_side(
     tick: &mut impl FnMut(&BridgeStats),
     stats: &mut BridgeStats,
 ) -> Result<(), BridgeError> {
+    // The board's role (its subscribers feed the link; its name refuses a second board).
     let board = BoardPorts::open(&o.namespace)?;
+    let from = Arc::new(FromBoardLink::open(&o.namespace)?);
     let _subs = (
-        link.subscribe::<StateMsg>(Inbound::State)?,
-        link.subscribe::<Telemetry>(Inbound::Telemetry)?,
+        link.subscribe::<StateMsg>({
+            let from = from.clone();
+            move |m, n| {
+                add(&n.state);
+                from.publish_state(&m).is_ok()
+            }
+        })?,
+        link.subscribe::<Telemetry>({
+            let from = from.clone();
+            move |t, n| {
+                add(&n.telemetry);
+                from.publish_telemetry(&t).is_ok()
+            }
+        })?,
         link.session
             .declare_subscriber(event_key(link.name))
             .callback({
-                let (tx, wake) = (link.tx.clone(), link.wake.clone());
+                let (from, n) = (from.clone(), link.counts.clone());
                 move |_| {
-                    let _ = tx.send(Inbound::Event);
-                    wake.wake();
+                    trace::mark(Side::Central, trace::Point::Callback);
+                    add(&n.event);
+                    from.notify(BoardEvent::Applied);
+                    trace::mark(Side::Central, trace::Point::Published);
                 }
             })
             .wait()
@@ -409,32 +478,36 @@ fn central_side(
     let skew = o.clock_skew_ns;
     looper.run(
         &relay,
-        |inbound, r: &mut Counts| match inbound {
-            Inbound::State(m) => {
-                r.state += 1;
-                board.publish_state(&m).is_ok()
-            }
-            Inbound::Telemetry(t) => {
-                r.telemetry += 1;
-                let ok = board.publish_telemetry(&t).is_ok();
-                board.notify(BoardEvent::Telemetry);
-                ok
-            }
-            Inbound::Event => {
-                r.event += 1;
-                board.notify(BoardEvent::Applied);
-                true
-            }
-            _ => true,
-        },
         |s| {
             let (sent, errors) = (&mut s.sent, &mut s.local_errors);
             // The stamps as the central host's clock has them (skewed in tests only).
             let sk = skew;
-            board.drain_commands(|m| put(&commands, &skewed(m, sk), &mut sent.command, errors));
-            board.drain_controls(|m| put(&controls, &skewed(m, sk), &mut sent.control, errors));
+            board.drain_commands(|m| {
+                put(
+                    Side::Central,
+                    &commands,
+                    &skewed(m, sk),
+                    &mut sent.command,
+                    errors,
+                )
+            });
+            board.drain_controls(|m| {
+                put(
+                    Side::Central,
+                    &controls,
+                    &skewed(m, sk),
+                    &mut sent.control,
+                    errors,
+                )
+            });
             board.drain_disturbances(|m| {
-                put(&disturbances, &skewed(m, sk), &mut sent.disturbance, errors)
+                put(
+                    Side::Central,
+                    &disturbances,
+                    &skewed(m, sk),
+                    &mut sent.disturbance,
+                    errors,
+                )
             });
             s.clock = responder.stats();
             tick(s);

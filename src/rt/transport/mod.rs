@@ -12,6 +12,8 @@
 //! - [`session`]: one process's node and the services it opens;
 //! - [`relay`]: the event services that wake a relay (the Zenoh bridge) when there is something
 //!   to forward, free for the publishers while no relay listens;
+//! - [`link_ports`]: the bridge's publishers of what arrives over its link, of the thread-safe
+//!   service type, used from Zenoh's callbacks;
 //! - [`ports`]: one type per role ([`BoardPorts`], [`CentralPorts`], [`ToolPorts`],
 //!   [`ObserverPorts`], [`RecorderPorts`]) with plain `publish_*`, `latest_*` and `drain_*`
 //!   methods; no caller touches an iceoryx2 builder.
@@ -19,6 +21,7 @@
 pub mod clock;
 pub mod error;
 pub mod limits;
+pub mod link_ports;
 pub mod namespace;
 pub mod ports;
 pub mod protocol;

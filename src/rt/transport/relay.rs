@@ -29,6 +29,7 @@ use super::session::{EventService, Session};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::PortFactory;
+use iceoryx2::service::Service as IpcService;
 
 /// The event service of each direction.
 pub const FROM_BOARD_SERVICE: &str = "vic/relay-from-board";
@@ -54,14 +55,15 @@ impl Relay {
     }
 }
 
-/// The notifier a publisher holds beside its publishers: it wakes a relay, if one listens.
-pub struct RelayNotifier {
-    notifier: Notifier<Ipc>,
-    service: EventService,
+/// The notifier a publisher holds beside its publishers: it wakes a relay, if one listens. `S`:
+/// the service type of the publisher's session (the bridge's thread-safe ports have their own).
+pub struct RelayNotifier<S: IpcService = Ipc> {
+    notifier: Notifier<S>,
+    service: EventService<S>,
 }
 
-impl RelayNotifier {
-    pub(super) fn open(session: &Session, relay: Relay) -> Result<RelayNotifier, TransportError> {
+impl<S: IpcService> RelayNotifier<S> {
+    pub(super) fn open(session: &Session<S>, relay: Relay) -> Result<Self, TransportError> {
         let (notifier, service) = session.notifier_on(relay.service(), MAX_RELAY_NOTIFIERS)?;
         Ok(RelayNotifier { notifier, service })
     }
@@ -125,8 +127,8 @@ mod tests {
     fn a_relay_notifier_calls_nothing_without_a_listener() {
         let ns = format!("rl{}x{}", std::process::id(), monotonic_ns() % 100_000);
         {
-            let a = Session::open(&ns, "vic-test-a").unwrap();
-            let b = Session::open(&ns, "vic-test-b").unwrap();
+            let a: Session = Session::open(&ns, "vic-test-a").unwrap();
+            let b: Session = Session::open(&ns, "vic-test-b").unwrap();
             let n = RelayNotifier::open(&a, Relay::FromBoard).unwrap();
             assert_eq!(n.notify(), None, "notified without a listener");
             {

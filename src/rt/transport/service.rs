@@ -10,6 +10,9 @@
 //! Every other resource is iceoryx2's own `ipc` one (owner-only shared memory in `/dev/shm`,
 //! service and node files under the root directory), so clients of the plain `ipc` service
 //! (iceoryx2's Python bindings) still talk to the same services.
+//!
+//! [`ThreadSafe`] is the same service with iceoryx2's mutex-protected reference counting instead
+//! (ports that may be used from any thread): the bridge publishes from Zenoh's callbacks with it.
 
 use core::fmt::Debug;
 use core::mem::MaybeUninit;
@@ -33,37 +36,64 @@ use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator as ShmBumpAllocat
 use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
 use iceoryx2_cal::*;
 
-/// iceoryx2's `ipc` service with its global management segment an owner-only file in the private
-/// root directory.
-#[derive(Debug, Clone)]
-pub struct Service {}
+/// Both service types: iceoryx2's `ipc` resources with the owner-only global file; `$policy` is
+/// the in-process reference counting of the ports' shared state (the only difference).
+macro_rules! vic_service {
+    ($(#[$doc:meta])* $name:ident, $policy:ident) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone)]
+        pub struct $name {}
 
-impl iceoryx2::service::Service for Service {
-    type StaticStorage = <ipc::Service as iceoryx2::service::Service>::StaticStorage;
-    type ConfigSerializer = <ipc::Service as iceoryx2::service::Service>::ConfigSerializer;
-    /// The one change: an owner-only file under `global.root_path` (the private directory).
-    type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
-        OwnerOnlyFile<T>;
-    type Bag = bag::recommended::Recommended;
-    type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::Ipc<T>;
-    type ServiceNameHasher = hash::recommended::Recommended;
-    type SharedMemory = shared_memory::recommended::Ipc<PoolAllocator>;
-    type ResizableSharedMemory = resizable_shared_memory::recommended::Ipc<PoolAllocator>;
-    type Connection = zero_copy_connection::recommended::Ipc;
-    type Event = event::recommended::Ipc;
-    type Monitoring = monitoring::recommended::Ipc;
-    type Reactor = reactor::recommended::Ipc;
-    /// The second change: iceoryx2's single-threaded policy with its boxes recycled, so a
-    /// publish takes no memory from the allocator (`super::recycled`).
-    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> = super::recycled::Recycled<T>;
-    type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::Ipc<KeyType>;
-    type BlackboardPayload = shared_memory::recommended::Ipc<ShmBumpAllocator>;
-    type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
+        impl iceoryx2::service::Service for $name {
+            type StaticStorage = <ipc::Service as iceoryx2::service::Service>::StaticStorage;
+            type ConfigSerializer =
+                <ipc::Service as iceoryx2::service::Service>::ConfigSerializer;
+            /// The one change of resource: an owner-only file under `global.root_path` (the
+            /// private directory).
+            type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
+                OwnerOnlyFile<T>;
+            type Bag = bag::recommended::Recommended;
+            type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
+                dynamic_storage::recommended::Ipc<T>;
+            type ServiceNameHasher = hash::recommended::Recommended;
+            type SharedMemory = shared_memory::recommended::Ipc<PoolAllocator>;
+            type ResizableSharedMemory = resizable_shared_memory::recommended::Ipc<PoolAllocator>;
+            type Connection = zero_copy_connection::recommended::Ipc;
+            type Event = event::recommended::Ipc;
+            type Monitoring = monitoring::recommended::Ipc;
+            type Reactor = reactor::recommended::Ipc;
+            type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> = $policy<T>;
+            type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> =
+                dynamic_storage::recommended::Ipc<KeyType>;
+            type BlackboardPayload = shared_memory::recommended::Ipc<ShmBumpAllocator>;
+            type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
+        }
+
+        impl iceoryx2::service::internal::ServiceInternal<$name> for $name {}
+    };
 }
 
-impl iceoryx2::service::internal::ServiceInternal<Service> for Service {}
+use super::recycled::Recycled;
+use iceoryx2_cal::arc_sync_policy::mutex_protected::MutexProtected;
+
+vic_service!(
+    /// iceoryx2's `ipc` service with its global management segment an owner-only file in the
+    /// private root directory, and iceoryx2's single-threaded reference counting with its boxes
+    /// recycled, so a publish takes no memory from the allocator (`super::recycled`). Its ports
+    /// are neither `Send` nor `Sync`. Every daemon's service type.
+    Service,
+    Recycled
+);
+
+vic_service!(
+    /// [`Service`]'s thread-safe sibling: the same resources (so its ports and [`Service`]'s
+    /// talk to each other on one service, and the namespace's files and their modes are the
+    /// same), with iceoryx2's `MutexProtected` policy (as `ipc_threadsafe`): its ports are `Send`
+    /// and `Sync`, at the cost of a mutex per port operation and an allocation per loan. For
+    /// the bridge's publishers, which run on Zenoh's threads; never in the board's 1 kHz loop.
+    ThreadSafe,
+    MutexProtected
+);
 
 type File<T> = dynamic_storage::file::Storage<T>;
 type FileBuilder<'b, T> = dynamic_storage::file::Builder<'b, T>;

@@ -18,6 +18,7 @@ use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::*;
+use iceoryx2::service::Service as IpcService;
 use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
 use iceoryx2::service::builder::publish_subscribe::{
     PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
@@ -63,25 +64,30 @@ impl Topic for Disturbance {
 /// The board's event service ([`super::protocol::BoardEvent`] ids).
 pub const EVENT_SERVICE: &str = "vic/board-event";
 
-pub(super) type Pub<T> = Publisher<Ipc, T, ()>;
-pub(super) type Sub<T> = Subscriber<Ipc, T, ()>;
-type PubSubService<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>;
-pub(super) type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
+pub(super) type Pub<T, S = Ipc> = Publisher<S, T, ()>;
+pub(super) type Sub<T, S = Ipc> = Subscriber<S, T, ()>;
+type PubSubService<T, S> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>;
+pub(super) type EventService<S = Ipc> = iceoryx2::service::port_factory::event::PortFactory<S>;
 
 /// One process's node in a namespace. Drop it after its ports (declare it last): the last process
 /// of a namespace to leave also removes the namespace's files, so that a clean shutdown leaves
 /// nothing in `/dev/shm`.
-pub struct Session {
+///
+/// `S` is the iceoryx2 service type of the node and its ports: vic's single-threaded [`Ipc`]
+/// (every daemon), or its thread-safe sibling ([`super::service::ThreadSafe`], the bridge's
+/// publishers that run on Zenoh's threads). Both use the same resources, so their ports talk.
+pub struct Session<S: IpcService = Ipc> {
     namespace: String,
     config: Config,
-    node: Option<Node<Ipc>>,
+    node: Option<Node<S>>,
     /// Dead nodes of the namespace whose resources were removed when this session opened.
     cleaned_dead_nodes: usize,
     /// Process ids of the other live nodes with this session's node name when it opened.
     pub(super) same_name_alive: Vec<u32>,
 }
 
-impl Drop for Session {
+impl<S: IpcService> Drop for Session<S> {
     fn drop(&mut self) {
         self.node = None;
         if !any_node_alive(&self.config) {
@@ -90,9 +96,9 @@ impl Drop for Session {
     }
 }
 
-impl Session {
+impl<S: IpcService> Session<S> {
     /// Creates the node `node_name` in namespace `ns`, removing what killed processes left.
-    pub(super) fn open(ns: &str, node_name: &str) -> Result<Session, TransportError> {
+    pub(super) fn open(ns: &str, node_name: &str) -> Result<Session<S>, TransportError> {
         set_log_level(LogLevel::Error);
         let cfg = config(ns)?;
         // The private directory first (iceoryx2 would create it with its own modes), then no
@@ -107,7 +113,7 @@ impl Session {
             .name(&name)
             .config(&cfg)
             .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<Ipc>()
+            .create::<S>()
             .map_err(|e| TransportError::ipc(ns, "cannot create a node", e))?;
         // The resources of the rest are removed here so that the services open cleanly.
         let (same_name_alive, _) = live_nodes_named(ns, &cfg, node_name, node.id())?;
@@ -122,7 +128,7 @@ impl Session {
         })
     }
 
-    fn node(&self) -> &Node<Ipc> {
+    fn node(&self) -> &Node<S> {
         self.node
             .as_ref()
             .expect("the node lives as long as the session")
@@ -161,7 +167,7 @@ impl Session {
         )
     }
 
-    fn service<T: Topic>(&self) -> Result<PubSubService<T>, TransportError> {
+    fn service<T: Topic>(&self) -> Result<PubSubService<T, S>, TransportError> {
         let ns = &self.namespace;
         let name =
             ServiceName::new(T::SERVICE).map_err(|e| TransportError::ipc(ns, T::SERVICE, e))?;
@@ -183,7 +189,7 @@ impl Session {
             })
     }
 
-    pub(super) fn publisher<T: Topic>(&self) -> Result<Pub<T>, TransportError> {
+    pub(super) fn publisher<T: Topic>(&self) -> Result<Pub<T, S>, TransportError> {
         let svc = self.service::<T>()?;
         svc.publisher_builder().create().map_err(|e| match e {
             PublisherCreateError::ExceedsMaxSupportedPublishers => self.too_many_ports(
@@ -201,14 +207,14 @@ impl Session {
         })
     }
 
-    pub(super) fn subscriber<T: Topic>(&self) -> Result<Sub<T>, TransportError> {
+    pub(super) fn subscriber<T: Topic>(&self) -> Result<Sub<T, S>, TransportError> {
         self.subscriber_with_buffer(T::BUFFER)
     }
 
     pub(super) fn subscriber_with_buffer<T: Topic>(
         &self,
         buffer: usize,
-    ) -> Result<Sub<T>, TransportError> {
+    ) -> Result<Sub<T, S>, TransportError> {
         let svc = self.service::<T>()?;
         let builder = svc.subscriber_builder().buffer_size(buffer);
         builder.create().map_err(|e| match e {
@@ -232,7 +238,7 @@ impl Session {
         &self,
         name: &'static str,
         max_notifiers: usize,
-    ) -> Result<EventService, TransportError> {
+    ) -> Result<EventService<S>, TransportError> {
         let ns = &self.namespace;
         let service = ServiceName::new(name).map_err(|e| TransportError::ipc(ns, name, e))?;
         self.node()
@@ -251,7 +257,7 @@ impl Session {
     }
 
     /// A listener of the board's events.
-    pub(super) fn listener(&self) -> Result<Listener<Ipc>, TransportError> {
+    pub(super) fn listener(&self) -> Result<Listener<S>, TransportError> {
         self.listener_on(EVENT_SERVICE, MAX_NOTIFIERS)
     }
 
@@ -260,7 +266,7 @@ impl Session {
         &self,
         name: &'static str,
         max_notifiers: usize,
-    ) -> Result<Listener<Ipc>, TransportError> {
+    ) -> Result<Listener<S>, TransportError> {
         let svc = self.event_service(name, max_notifiers)?;
         svc.listener_builder().create().map_err(|e| match e {
             ListenerCreateError::ExceedsMaxSupportedListeners => self.too_many_ports(
@@ -279,7 +285,7 @@ impl Session {
     }
 
     /// The board's notifier of its events.
-    pub(super) fn notifier(&self) -> Result<Notifier<Ipc>, TransportError> {
+    pub(super) fn notifier(&self) -> Result<Notifier<S>, TransportError> {
         Ok(self.notifier_on(EVENT_SERVICE, MAX_NOTIFIERS)?.0)
     }
 
@@ -289,7 +295,7 @@ impl Session {
         &self,
         name: &'static str,
         max_notifiers: usize,
-    ) -> Result<(Notifier<Ipc>, EventService), TransportError> {
+    ) -> Result<(Notifier<S>, EventService<S>), TransportError> {
         let svc = self.event_service(name, max_notifiers)?;
         let notifier = svc.notifier_builder().create().map_err(|e| match e {
             NotifierCreateError::ExceedsMaxSupportedNotifiers => self.too_many_ports(
@@ -319,9 +325,9 @@ impl Session {
     }
 }
 
-pub(super) fn send<T: Topic>(
-    session: &Session,
-    port: &Pub<T>,
+pub(super) fn send<T: Topic, S: IpcService>(
+    session: &Session<S>,
+    port: &Pub<T, S>,
     value: &T,
 ) -> Result<(), TransportError> {
     port.send_copy(*value).map(|_| ()).map_err(|e| {
@@ -330,7 +336,7 @@ pub(super) fn send<T: Topic>(
 }
 
 /// Calls `f` on every message waiting on `port`, oldest first; returns how many there were.
-pub(super) fn drain<T: Topic>(port: &Sub<T>, mut f: impl FnMut(&T)) -> usize {
+pub(super) fn drain<T: Topic, S: IpcService>(port: &Sub<T, S>, mut f: impl FnMut(&T)) -> usize {
     let mut n = 0;
     while let Ok(Some(sample)) = port.receive() {
         f(&sample);
@@ -340,7 +346,7 @@ pub(super) fn drain<T: Topic>(port: &Sub<T>, mut f: impl FnMut(&T)) -> usize {
 }
 
 /// The newest message waiting on `port`, if any (the older ones are consumed).
-pub(super) fn latest<T: Topic>(port: &Sub<T>) -> Option<T> {
+pub(super) fn latest<T: Topic, S: IpcService>(port: &Sub<T, S>) -> Option<T> {
     let mut last = None;
     drain(port, |m| last = Some(*m));
     last

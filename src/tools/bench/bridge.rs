@@ -4,9 +4,12 @@
 //!
 //! One-way latency is half the round trip of a command answered by a state: the echo thread
 //! plays the board (it answers each command with a state of the same sequence number), the
-//! measuring thread plays the central process. Both spin on their subscribers, so the figures
-//! are the transport's and the bridges', not a reader's poll period.
+//! measuring thread plays the central process. They sleep until the other end's publisher
+//! notifies, or spin on their subscribers (`spin`), so the figures are the transport's and the
+//! bridges', not a reader's poll period. With `trace` the hops through the bridges are timed too
+//! ([`super::bridge_hops`]).
 
+use super::bridge_hops::{ECHO_AT, HopPoint, Hops};
 use crate::rt::bridge::{self, BridgeOptions, Link, Side};
 use crate::rt::transport::protocol::{CommandSlice, Header, StateMsg};
 use crate::rt::transport::relay::{Relay, RelayListener};
@@ -27,6 +30,8 @@ pub struct Options {
     pub port: u16,
     /// The endpoints spin on their subscribers instead of sleeping until notified.
     pub spin: bool,
+    /// Also time each hop through the bridges ([`super::bridge_hops`]).
+    pub trace: bool,
 }
 
 /// One channel's one-way latency [µs].
@@ -51,6 +56,8 @@ pub struct Report {
     pub zenoh: Latency,
     pub through_bridge: Latency,
     pub bridge: Ratios,
+    /// With `trace`: the time from each one-way's start to each point on the way.
+    pub hops: Option<Vec<HopPoint>>,
 }
 
 /// The bridge against bare Zenoh.
@@ -105,6 +112,7 @@ fn echo(
     ready.store(true, Ordering::Release);
     while !stop.load(Ordering::Relaxed) {
         board.drain_commands(|c| {
+            ECHO_AT.store(monotonic_ns(), Ordering::Relaxed);
             let s = StateMsg {
                 header: Header::new(c.header.seq, monotonic_ns()),
                 ..Default::default()
@@ -122,6 +130,7 @@ fn ping_pong(
     iterations: u64,
     spin: bool,
     channel: &'static str,
+    mut hops: Option<&mut Hops>,
 ) -> Result<Histogram<u64>, BenchError> {
     let central = CentralPorts::open(ns)?;
     let woken = RelayListener::open(central.session(), Relay::FromBoard)?;
@@ -132,6 +141,10 @@ fn ping_pong(
             header: Header::new(i, monotonic_ns()),
             ..Default::default()
         };
+        if let Some(h) = &hops {
+            h.clear();
+        }
+        let t0 = monotonic_ns();
         let t = Instant::now();
         central.publish_command(&c)?;
         let mut answered = false;
@@ -146,6 +159,9 @@ fn ping_pong(
         }
         if i > warm {
             let _ = h.record((t.elapsed().as_nanos() / 2) as u64);
+            if let Some(hops) = hops.as_deref_mut() {
+                hops.record(t0, monotonic_ns());
+            }
         }
     }
     Ok(h)
@@ -193,7 +209,8 @@ fn unique(tag: &str) -> String {
     format!("{tag}{}x{}", std::process::id(), monotonic_ns() % 1_000_000)
 }
 
-/// Bare Zenoh: two sessions on loopback, a ping answered by a pong of the state's size.
+/// Bare Zenoh: two sessions on loopback, a ping answered (inside the callback) by a pong of the
+/// state's size, with the bridge's publisher QoS.
 fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> {
     let z = |e: zenoh::Error| BenchError::Zenoh(e.to_string());
     let endpoint = format!(r#"["tcp/127.0.0.1:{port}"]"#);
@@ -206,11 +223,9 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
     };
     let a = session("listen/endpoints")?;
     let b = session("connect/endpoints")?;
-    let pong = b
-        .declare_publisher("vicbench/pong")
-        .express(true)
-        .wait()
-        .map_err(z)?;
+    // The bridge's QoS (drop, real-time priority, express), so only the bridging differs.
+    let qos = |s: &zenoh::Session, key: &str| bridge::control_publisher(s, key.to_string());
+    let pong = qos(&b, "vicbench/pong")?;
     let _echo = b
         .declare_subscriber("vicbench/ping")
         .callback(move |s| {
@@ -219,11 +234,7 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
         .wait()
         .map_err(z)?;
     let answers = a.declare_subscriber("vicbench/pong").wait().map_err(z)?;
-    let ping = a
-        .declare_publisher("vicbench/ping")
-        .express(true)
-        .wait()
-        .map_err(z)?;
+    let ping = qos(&a, "vicbench/ping")?;
     // Let the two sessions learn each other's subscribers.
     let payload = vec![0u8; size_of::<StateMsg>()];
     let t0 = Instant::now();
@@ -263,7 +274,7 @@ fn bare_zenoh(port: u16, iterations: u64) -> Result<Histogram<u64>, BenchError> 
 
 /// Two bridges in threads, the echo behind the board-side one, the ping–pong in front of the
 /// central-side one.
-fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
+fn through_bridges(o: &Options) -> Result<(Histogram<u64>, Option<Vec<HopPoint>>), BenchError> {
     let (host_a, host_b) = (unique("bba"), unique("bbb"));
     let endpoint = format!("tcp/127.0.0.1:{}", o.port);
     let stop = Arc::new(AtomicBool::new(false));
@@ -286,8 +297,12 @@ fn through_bridges(o: &Options) -> Result<Histogram<u64>, BenchError> {
         // The link is up when a first round trip comes back.
         let t0 = Instant::now();
         let h = loop {
-            match ping_pong(&host_b, 10, o.spin, "bridge") {
-                Ok(_) => break ping_pong(&host_b, o.iterations, o.spin, "bridge"),
+            match ping_pong(&host_b, 10, o.spin, "bridge", None) {
+                Ok(_) => {
+                    let mut hops = o.trace.then(Hops::start);
+                    let h = ping_pong(&host_b, o.iterations, o.spin, "bridge", hops.as_mut());
+                    break h.map(|h| (h, hops.map(Hops::finish)));
+                }
                 Err(_) if t0.elapsed() < Duration::from_secs(10) => continue,
                 Err(e) => break Err(e),
             }
@@ -308,14 +323,14 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchE
     progress("shared memory (one namespace, no bridge)");
     let direct_ns = unique("bbd");
     let direct = with_echo(&direct_ns, o.spin, || {
-        ping_pong(&direct_ns, o.iterations, o.spin, "shared memory")
+        ping_pong(&direct_ns, o.iterations, o.spin, "shared memory", None)
     });
     remove_namespace(&direct_ns);
     let direct = direct?;
     progress("bare Zenoh on loopback");
     let zenoh = bare_zenoh(o.port + 1, o.iterations)?;
     progress("through two bridges on loopback");
-    let bridged = through_bridges(o)?;
+    let (bridged, hops) = through_bridges(o)?;
     let (z, b) = (latency(&zenoh), latency(&bridged));
     Ok(Report {
         iterations: o.iterations,
@@ -333,6 +348,7 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchE
         },
         zenoh: z,
         through_bridge: b,
+        hops,
     })
 }
 
@@ -361,4 +377,7 @@ pub fn print(r: &Report) {
         "bridge / bare Zenoh: p50 {:.2}×, p99 {:.2}×",
         r.bridge.ratio_p50, r.bridge.ratio_p99
     );
+    if let Some(h) = &r.hops {
+        super::bridge_hops::print(h);
+    }
 }

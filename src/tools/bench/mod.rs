@@ -6,6 +6,8 @@
 
 #[cfg(feature = "zenoh")]
 pub mod bridge;
+#[cfg(feature = "zenoh")]
+pub mod bridge_hops;
 pub mod cyclictest;
 pub mod error;
 pub mod ipc;
