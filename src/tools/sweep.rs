@@ -158,6 +158,16 @@ pub struct SweepPoint {
     pub unit: Unit,
 }
 
+/// What a point's trials measured, offline or live (the fields of [`SweepPoint`] of that name;
+/// `final_error`: mean and max, `diverged`: count and fraction).
+struct Measured {
+    final_error: (Option<f64>, Option<f64>),
+    rms_error: Option<f64>,
+    diverged: (usize, f64),
+    expected_cost_mc: Option<f64>,
+    unit: Unit,
+}
+
 /// The whole curve.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Sweep {
@@ -219,23 +229,7 @@ pub fn sweep_latency(
             let steps = latency_steps(latency_ms, s.task.dt)?;
             let feedback = strategy.feedback(steps);
             let policy = p.policy(&set).map_err(plan_error)?;
-            let trials = match opts.execution {
-                Execution::Offline => run_trials_disturbed(
-                    &set,
-                    &policy,
-                    feedback,
-                    opts.pulse.as_ref(),
-                    opts.trials,
-                    opts.seed,
-                ),
-                Execution::Lockstep => {
-                    let point = Point {
-                        strategy,
-                        latency_ms,
-                        latency_steps: steps,
-                    };
-                    lockstep_trials(s, &set, p, point, opts)?
-                }
+            let m = match opts.execution {
                 Execution::Live => {
                     let rig = live.as_ref().expect("started above");
                     let r = rig
@@ -245,38 +239,59 @@ pub fn sweep_latency(
                             latency_ms,
                             source,
                         })?;
-                    points.push(SweepPoint {
-                        strategy,
-                        latency_ms,
-                        final_error_mean: r.final_error_mean,
-                        final_error_max: r.final_error_max,
+                    let fraction = r.diverged as f64 / r.trials.max(1) as f64;
+                    Measured {
+                        final_error: (r.final_error_mean, r.final_error_max),
                         rms_error: r.rms_error,
-                        diverged: r.diverged,
-                        diverged_fraction: r.diverged as f64 / r.trials.max(1) as f64,
+                        diverged: (r.diverged, fraction),
                         expected_cost_mc: r.expected_cost,
-                        expected_cost_predicted: predicted_cost(&set, &policy, feedback),
-                        mean_stiffness: p.summary.mean_stiffness,
                         unit: r.unit,
-                    });
-                    continue;
+                    }
+                }
+                Execution::Offline | Execution::Lockstep => {
+                    let trials = match opts.execution {
+                        Execution::Lockstep => {
+                            let point = Point {
+                                strategy,
+                                latency_ms,
+                                latency_steps: steps,
+                            };
+                            lockstep_trials(s, &set, p, point, opts)?
+                        }
+                        _ => run_trials_disturbed(
+                            &set,
+                            &policy,
+                            feedback,
+                            opts.pulse.as_ref(),
+                            opts.trials,
+                            opts.seed,
+                        ),
+                    };
+                    let divergence = opts
+                        .divergence
+                        .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
+                    let r = summarize(&set, &trials, divergence);
+                    Measured {
+                        final_error: (r.final_error_mean, r.final_error_max),
+                        rms_error: r.rms_error,
+                        diverged: (r.diverged, r.diverged_fraction),
+                        expected_cost_mc: r.expected_cost_mc,
+                        unit: r.unit,
+                    }
                 }
             };
-            let divergence = opts
-                .divergence
-                .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
-            let r = summarize(&set, &trials, divergence);
             points.push(SweepPoint {
                 strategy,
                 latency_ms,
-                final_error_mean: r.final_error_mean,
-                final_error_max: r.final_error_max,
-                rms_error: r.rms_error,
-                diverged: r.diverged,
-                diverged_fraction: r.diverged_fraction,
-                expected_cost_mc: r.expected_cost_mc,
+                final_error_mean: m.final_error.0,
+                final_error_max: m.final_error.1,
+                rms_error: m.rms_error,
+                diverged: m.diverged.0,
+                diverged_fraction: m.diverged.1,
+                expected_cost_mc: m.expected_cost_mc,
                 expected_cost_predicted: predicted_cost(&set, &policy, feedback),
                 mean_stiffness: p.summary.mean_stiffness,
-                unit: r.unit,
+                unit: m.unit,
             });
         }
     }

@@ -287,6 +287,18 @@ pub fn run(
     Ok(counts.merged(&stats))
 }
 
+/// [`put`] from the central side, the stamps as the central host's clock has them
+/// ([`skewed`]: by `skew_ns`, in tests only).
+fn put_skewed<T: Plain + clock::Stamped + Copy>(
+    p: &ZPub,
+    m: &T,
+    skew_ns: i64,
+    sent: &mut u64,
+    errors: &mut u64,
+) {
+    put(Side::Central, p, &skewed(m, skew_ns), sent, errors)
+}
+
 /// This bridge's end of the Zenoh link: its session, what its callbacks count, and the link's
 /// name in the key expressions.
 struct LinkEnd<'a> {
@@ -482,33 +494,10 @@ fn central_side(
             let (sent, errors) = (&mut s.sent, &mut s.local_errors);
             // The stamps as the central host's clock has them (skewed in tests only).
             let sk = skew;
-            board.drain_commands(|m| {
-                put(
-                    Side::Central,
-                    &commands,
-                    &skewed(m, sk),
-                    &mut sent.command,
-                    errors,
-                )
-            });
-            board.drain_controls(|m| {
-                put(
-                    Side::Central,
-                    &controls,
-                    &skewed(m, sk),
-                    &mut sent.control,
-                    errors,
-                )
-            });
-            board.drain_disturbances(|m| {
-                put(
-                    Side::Central,
-                    &disturbances,
-                    &skewed(m, sk),
-                    &mut sent.disturbance,
-                    errors,
-                )
-            });
+            board.drain_commands(|m| put_skewed(&commands, m, sk, &mut sent.command, errors));
+            board.drain_controls(|m| put_skewed(&controls, m, sk, &mut sent.control, errors));
+            let n = &mut sent.disturbance;
+            board.drain_disturbances(|m| put_skewed(&disturbances, m, sk, n, errors));
             s.clock = responder.stats();
             tick(s);
         },
