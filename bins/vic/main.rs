@@ -53,16 +53,19 @@ enum Command {
     ///
     /// Example: vic results --out-dir docs
     Results(results::ResultsArgs),
-    /// Delay versus stiffness as a curve: for each feedback latency and strategy (naive delayed
-    /// feedback, a predictor, the stiffness plan), plan, run the Monte Carlo and report the final
-    /// error, divergence and cost; --out-dir receives the figure.
+    /// Delay versus stiffness as a curve: for each feedback latency and strategy (naive-delayed,
+    /// predictor, stiffness, stiffness+predictor, replan), plan, run the trials (Monte Carlo by
+    /// default, --lockstep or --live on the daemons) and report the final error, divergence and
+    /// cost; --pulse adds a torque pulse no controller knows of; --out-dir receives the figure.
     ///
     /// Example: vic sweep latency --config config/single_joint_delay.toml --out-dir sweep
     Sweep(sweep::SweepArgs),
-    /// Run the real-time pair: start a board and a planner in a fresh namespace, run the
-    /// `stiffness` and `delayed-feedback` strategies at --latency-ms with the same noise seeds,
-    /// and delayed feedback at 0 ms latency as the reference (the planner at 250 Hz); print the
-    /// comparison and the board's timing, and shut everything down.
+    /// Run the real-time pair: start a board and a planner in a fresh namespace, run the five
+    /// strategies of a central controller (naive-delayed, predictor, stiffness,
+    /// stiffness+predictor, replan) at --latency-ms with the same noise seeds, and naive-delayed
+    /// at 0 ms as the reference (the planner at 250 Hz); print the comparison, the board's timing
+    /// and the central loop's compute time, write the trajectories figure, and shut everything
+    /// down.
     ///
     /// Example: vic demo --latency-ms 200 --trials 3
     Demo(vic::tools::demo::DemoOptions),

@@ -26,7 +26,7 @@ const CURVE_COLOURS: [RGBColor; 5] = [
 
 impl Figure for CurveFigure<'_> {
     fn size(&self) -> (u32, u32) {
-        (760, 520)
+        (760 + LEGEND_WIDTH, 520)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
@@ -38,8 +38,9 @@ impl Figure for CurveFigure<'_> {
             .collect();
         let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = values.iter().copied().fold(0.0, f64::max);
+        // The bottom at a power of ten: plotters labels a log axis from its first power of ten.
         let (lo, hi) = if lo.is_finite() && hi > lo {
-            (lo / 2.0, hi * 2.0)
+            (0.999 * 10f64.powf((lo / 1.5).log10().floor()), hi * 2.0)
         } else {
             (1e-3, 1.0)
         };
@@ -48,7 +49,10 @@ impl Figure for CurveFigure<'_> {
             .iter()
             .flat_map(|c| c.points.iter().map(|p| p.0))
             .fold(1.0, f64::max);
-        let mut chart = ChartBuilder::on(root)
+        // The legend has a strip of its own on the right, so that it never hides a curve or the
+        // crosses of diverged points at the top of the frame.
+        let (plot, key) = root.split_horizontally(760);
+        let mut chart = ChartBuilder::on(&plot)
             .caption(self.title, (FONT, TITLE_SIZE).into_font())
             .margin(14)
             .x_label_area_size(40)
@@ -59,6 +63,9 @@ impl Figure for CurveFigure<'_> {
             .light_line_style(GRID)
             .x_desc("feedback latency [ms]")
             .y_desc(self.y_label)
+            .y_labels(40)
+            .y_label_formatter(&|v| log_tick(*v))
+            .x_label_formatter(&|v| tick(*v))
             .label_style((FONT, TICK_SIZE).into_font())
             .axis_desc_style((FONT, DESC_SIZE).into_font())
             .draw()?;
@@ -79,15 +86,8 @@ impl Figure for CurveFigure<'_> {
                     .map(|&(x, m, _)| m.filter(|m| *m > 0.0).map(|m| (x, m))),
             );
             let style = colour.stroke_width(2);
-            let mut labelled = false;
             for s in segments.into_iter().filter(|s| !s.is_empty()) {
-                let series = chart.draw_series(LineSeries::new(s.clone(), style))?;
-                if !labelled {
-                    series
-                        .label(c.name.as_str())
-                        .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], style));
-                    labelled = true;
-                }
+                chart.draw_series(LineSeries::new(s.clone(), style))?;
                 chart.draw_series(s.iter().map(|&p| Circle::new(p, 3, colour.filled())))?;
             }
             // Every trial diverged: a cross at the top of the frame.
@@ -98,15 +98,57 @@ impl Figure for CurveFigure<'_> {
                     .map(|p| Cross::new((p.0, hi / 1.3), 6, colour.stroke_width(2))),
             )?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(0.3))
-            .label_font((FONT, TICK_SIZE).into_font())
-            .draw()?;
+        draw_key(&key, self.curves)?;
         Ok(())
     }
+}
+
+/// Width of the legend's strip right of the chart [px].
+const LEGEND_WIDTH: u32 = 170;
+
+/// The legend, in its own strip: one line per curve, and what a cross means.
+fn draw_key<DB: DrawingBackend>(
+    key: &DrawingArea<DB, Shift>,
+    curves: &[Curve],
+) -> DrawResult<(), DB> {
+    let font = (FONT, TICK_SIZE).into_font();
+    let row = |i: usize| 60 + 22 * i as i32;
+    for (i, c) in curves.iter().enumerate() {
+        let style = CURVE_COLOURS[i % CURVE_COLOURS.len()].stroke_width(2);
+        key.draw(&PathElement::new([(4, row(i)), (26, row(i))], style))?;
+        key.draw(&Text::new(c.name.clone(), (32, row(i) - 7), font.clone()))?;
+    }
+    if curves
+        .iter()
+        .any(|c| c.points.iter().any(|p| p.1.is_none()))
+    {
+        let y = row(curves.len()) + 8;
+        key.draw(&Cross::new((15, y), 6, BLACK.stroke_width(2)))?;
+        key.draw(&Text::new("all trials diverged", (32, y - 7), font))?;
+    }
+    Ok(())
+}
+
+/// A label at 1, 2 and 5 times a power of ten (`tick`), none at the grid's other lines.
+fn log_tick(v: f64) -> String {
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    match [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .any(|m| (mantissa - m).abs() < 1e-6 * m)
+    {
+        true => tick(v),
+        false => String::new(),
+    }
+}
+
+/// A tick label: as few digits as the value needs (`5`, `0.05`, `200`).
+fn tick(v: f64) -> String {
+    if v != 0.0 && v.abs() < 1e-3 {
+        return format!("{v:.0e}");
+    }
+    let s = format!("{v:.4}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    s.to_string()
 }
 
 /// The runs of consecutive `Some` values.
@@ -120,4 +162,23 @@ fn runs<T>(values: impl Iterator<Item = Option<T>>) -> Vec<Vec<T>> {
     }
     out.retain(|r| !r.is_empty());
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_axis_labels_only_1_2_5_and_with_no_trailing_zeros() {
+        let labels: Vec<String> = [0.01, 0.03, 0.05, 0.2, 1.0, 3.0, 20.0, 500.0, 700.0]
+            .iter()
+            .map(|v| log_tick(*v))
+            .collect();
+        assert_eq!(
+            labels,
+            ["0.01", "", "0.05", "0.2", "1", "", "20", "500", ""]
+        );
+        assert_eq!(tick(1.8e-4), "2e-4");
+        assert_eq!(tick(250.0), "250");
+    }
 }
