@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::bridge::{bridge, port, status, wait_for};
+use common::bridge::{bridge, port, status, two_hosts, wait_for};
 use common::daemons::{Daemons, run_planner, sooc_plan, unique_namespace};
 use std::time::{Duration, Instant};
 
@@ -21,28 +21,8 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
     let link = unique_namespace("link");
     let endpoint = format!("tcp/127.0.0.1:{}", port(0));
     let mut d = Daemons::default();
-    d.board(&host_a, &[]);
-    let board_side = bridge(
-        &mut d,
-        "board",
-        &host_a,
-        &link,
-        ["--listen", &endpoint],
-        &[],
-    );
-    bridge(
-        &mut d,
-        "central",
-        &host_b,
-        &link,
-        ["--connect", &endpoint],
-        &[],
-    );
     // The board's telemetry reaches host B through the two bridges.
-    assert!(
-        wait_for(&host_b, Duration::from_secs(10), |_| true),
-        "no board answered on host B through the bridge"
-    );
+    let board_side = two_hosts(&mut d, [&host_a, &host_b], &link, &endpoint, [&[], &[]]);
 
     // The same trials (same seeds) on one host and across the link.
     d.board(&alone, &[]);

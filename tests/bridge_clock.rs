@@ -8,10 +8,9 @@
 
 mod common;
 
-use common::bridge::{bridge, port, status, stop_bridge, wait_for};
+use common::bridge::{port, status, stop_bridge, two_hosts};
 use common::daemons::{Daemons, planner_command, run_planner, sooc_plan, unique_namespace};
 use std::process::Stdio;
-use std::time::Duration;
 
 const SKEW_NS: i64 = 5_000_000_000;
 
@@ -26,28 +25,8 @@ fn a_trial_between_hosts_whose_clocks_differ_by_5_s_ends_as_on_one_host() {
     let link = unique_namespace("clk");
     let endpoint = format!("tcp/127.0.0.1:{}", port(1));
     let mut d = Daemons::default();
-    d.board(&host_a, &[]);
-    let board_side = bridge(
-        &mut d,
-        "board",
-        &host_a,
-        &link,
-        ["--listen", &endpoint],
-        &[],
-    );
     let skew = ["--clock-skew-ms", "5000"];
-    bridge(
-        &mut d,
-        "central",
-        &host_b,
-        &link,
-        ["--connect", &endpoint],
-        &skew,
-    );
-    assert!(
-        wait_for(&host_b, Duration::from_secs(10), |_| true),
-        "no board answered on host B through the bridge"
-    );
+    let board_side = two_hosts(&mut d, [&host_a, &host_b], &link, &endpoint, [&[], &skew]);
 
     d.board(&alone, &[]);
     let across = run_planner(&host_b, &sooc, "stiffness", 1, false);
@@ -99,29 +78,8 @@ fn without_the_translation_the_board_rejects_the_skewed_host_as_from_the_future(
     let link = unique_namespace("cln");
     let endpoint = format!("tcp/127.0.0.1:{}", port(2));
     let mut d = Daemons::default();
-    d.board(&host_a, &[]);
-    let keep = ["--stamps", "keep"];
-    bridge(
-        &mut d,
-        "board",
-        &host_a,
-        &link,
-        ["--listen", &endpoint],
-        &keep,
-    );
-    let skew = ["--clock-skew-ms", "5000"];
-    bridge(
-        &mut d,
-        "central",
-        &host_b,
-        &link,
-        ["--connect", &endpoint],
-        &skew,
-    );
-    assert!(
-        wait_for(&host_b, Duration::from_secs(10), |_| true),
-        "no board answered on host B through the bridge"
-    );
+    let (keep, skew) = (["--stamps", "keep"], ["--clock-skew-ms", "5000"]);
+    two_hosts(&mut d, [&host_a, &host_b], &link, &endpoint, [&keep, &skew]);
     // The planner's reset is 5 s "in the future" for the board: never acknowledged.
     let out = planner_command(&host_b, &sooc, "stiffness", 1)
         .stderr(Stdio::null())

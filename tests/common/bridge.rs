@@ -74,3 +74,37 @@ pub fn wait_for(ns: &str, timeout: Duration, pred: impl Fn(&serde_json::Value) -
     }
     false
 }
+
+/// Two hosts joined by a link: a board in `host_a`, its bridge listening on `endpoint`, the
+/// central side's bridge in `host_b` connecting to it (each with its `extra` flags), and the
+/// board's telemetry seen on host B. Returns the board-side bridge's index in `d`.
+pub fn two_hosts(
+    d: &mut Daemons,
+    [host_a, host_b]: [&str; 2],
+    link: &str,
+    endpoint: &str,
+    [board_extra, central_extra]: [&[&str]; 2],
+) -> usize {
+    d.board(host_a, &[]);
+    let board_side = bridge(
+        d,
+        "board",
+        host_a,
+        link,
+        ["--listen", endpoint],
+        board_extra,
+    );
+    bridge(
+        d,
+        "central",
+        host_b,
+        link,
+        ["--connect", endpoint],
+        central_extra,
+    );
+    assert!(
+        wait_for(host_b, Duration::from_secs(10), |_| true),
+        "no board answered on host B through the bridge"
+    );
+    board_side
+}
