@@ -287,6 +287,23 @@ pub fn run(
     Ok(counts.merged(&stats))
 }
 
+/// What the board side's callbacks do with a message of type `T` from the link: count it
+/// (`count`), translate its stamps into the board's clock and `publish` it into the namespace.
+/// Without a clock estimate yet the message is held back (counted by the clock), not an error.
+fn into_board<T: clock::Stamped + Copy + 'static>(
+    into: &Arc<ToBoardLink>,
+    clock: &Option<Arc<clock::Prober>>,
+    count: fn(&LinkCounts) -> &AtomicU64,
+    publish: fn(&ToBoardLink, &T) -> bool,
+) -> impl Fn(T, &LinkCounts) -> bool + Send + Sync + 'static {
+    let (into, clock) = (into.clone(), clock.clone());
+    move |mut m, n| {
+        add(count(n));
+        let stamped = clock.as_ref().is_none_or(|c| c.translate(&mut m));
+        !stamped || publish(&into, &m)
+    }
+}
+
 /// [`put`] from the central side, the stamps as the central host's clock has them
 /// ([`skewed`]: by `skew_ns`, in tests only).
 fn put_skewed<T: Plain + clock::Stamped + Copy>(
@@ -383,32 +400,25 @@ fn board_side(
         Stamps::Translate => Some(Arc::new(clock::Prober::start(link.session, link.name)?)),
         Stamps::Keep => None,
     };
-    // Into the board's clock; false: no estimate yet, the message is held back (counted).
-    let stamper = |clock: Option<Arc<clock::Prober>>| {
-        move |m: &mut dyn clock::Stamped| clock.as_ref().is_none_or(|c| c.translate(m))
-    };
     let _subs = (
-        link.subscribe::<CommandSlice>({
-            let (into, stamp) = (into.clone(), stamper(clock.clone()));
-            move |mut c, n| {
-                add(&n.command);
-                !stamp(&mut c) || into.publish_command(&c).is_ok()
-            }
-        })?,
-        link.subscribe::<Control>({
-            let (into, stamp) = (into.clone(), stamper(clock.clone()));
-            move |mut c, n| {
-                add(&n.control);
-                !stamp(&mut c) || into.publish_control(&c).is_ok()
-            }
-        })?,
-        link.subscribe::<Disturbance>({
-            let (into, stamp) = (into.clone(), stamper(clock.clone()));
-            move |mut d, n| {
-                add(&n.disturbance);
-                !stamp(&mut d) || into.publish_disturbance(&d).is_ok()
-            }
-        })?,
+        link.subscribe(into_board(
+            &into,
+            &clock,
+            |n| &n.command,
+            |t, c| t.publish_command(c).is_ok(),
+        ))?,
+        link.subscribe(into_board(
+            &into,
+            &clock,
+            |n| &n.control,
+            |t, c| t.publish_control(c).is_ok(),
+        ))?,
+        link.subscribe(into_board(
+            &into,
+            &clock,
+            |n| &n.disturbance,
+            |t, d| t.publish_disturbance(d).is_ok(),
+        ))?,
     );
     looper.run(
         &relay,
