@@ -2,6 +2,8 @@
 //! ordering the paper's argument rests on.
 
 use std::path::Path;
+use vic::planning::plan::{Method, plan};
+use vic::planning::scenario::Scenario;
 use vic::tools::sweep::{Execution, Strategy, SweepOptions, sweep_latency, write_figure};
 
 const STRATEGIES: [Strategy; 3] = [
@@ -53,6 +55,15 @@ fn the_sweep_orders_the_strategies_as_the_paper_argues() {
     assert_eq!(s0.final_error_mean, s200.final_error_mean);
     assert!(s0.mean_stiffness > 0.0);
     assert_eq!(at(Strategy::Predictor, 0.0).mean_stiffness, 0.0);
+    // The stiffness the trials commanded is the open-loop plan's, which no measurement changes.
+    let scenario = Scenario::load(&path, &[]).expect("scenario");
+    let planned = plan(&scenario, Method::Sooc, None).expect("plan");
+    let k = planned.summary.mean_stiffness;
+    assert!(
+        (s0.mean_stiffness - k).abs() <= 1e-9 * k,
+        "{} vs {k}",
+        s0.mean_stiffness
+    );
     let dir = std::env::temp_dir().join(format!("vic_sweep_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (png, svg) = (dir.join("sweep.png"), dir.join("sweep.svg"));
@@ -177,7 +188,12 @@ fn the_live_sweep_runs_the_daemons_and_matches_the_lockstep_without_noise() {
         if a["strategy"] == "replan" {
             continue;
         }
-        for key in ["final_error_mean", "rms_error", "expected_cost_mc"] {
+        for key in [
+            "final_error_mean",
+            "rms_error",
+            "expected_cost_mc",
+            "mean_stiffness",
+        ] {
             let (x, y) = (a[key].as_f64().unwrap(), b[key].as_f64().unwrap());
             assert!(
                 (x - y).abs() <= 1e-6 * x.abs().max(y.abs()),

@@ -266,22 +266,30 @@ pub(crate) fn plan_file(
 /// Largest and time-averaged planned stiffness over all joints [N m/rad] (0 without a stiffness
 /// control).
 fn stiffness_figures(model: &ArmModel, sol: &Solution) -> (f64, f64) {
+    commanded_stiffness(model, &sol.u)
+}
+
+/// Largest and mean stiffness of the commands `u` over all joints and knots [N m/rad]: of a plan,
+/// or of what trials executed (a replanner's new plans, a feedback law's stiffness). 0 without a
+/// stiffness control; commands that are not finite (a diverged trial's) are left out.
+pub fn commanded_stiffness<'a>(
+    model: &ArmModel,
+    u: impl IntoIterator<Item = &'a DVector<f64>>,
+) -> (f64, f64) {
     let dof = model.dof();
-    let stiffness: Vec<f64> = match model.actuator.stiffness_offset(dof) {
-        Some(off) => sol
-            .u
-            .iter()
-            .flat_map(|u| u.rows(off, dof).iter().copied().collect::<Vec<_>>())
-            .collect(),
-        None => vec![],
+    let Some(off) = model.actuator.stiffness_offset(dof) else {
+        return (0.0, 0.0);
     };
-    let max_stiffness = stiffness.iter().copied().fold(0.0, f64::max);
-    let mean_stiffness = if stiffness.is_empty() {
-        0.0
-    } else {
-        stiffness.iter().sum::<f64>() / stiffness.len() as f64
-    };
-    (max_stiffness, mean_stiffness)
+    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
+    for k in u
+        .into_iter()
+        .flat_map(|u| u.rows(off, dof).iter().copied().collect::<Vec<_>>())
+    {
+        if k.is_finite() {
+            (max, sum, n) = (max.max(k), sum + k, n + 1);
+        }
+    }
+    (max, if n == 0 { 0.0 } else { sum / n as f64 })
 }
 
 /// Names of the plant state's components: `q`, `q_dot` (single joint) or `q1`, `q2`, `q1_dot`,

@@ -17,8 +17,9 @@
 pub use crate::core::policy::Strategy;
 use crate::planning::evaluation::{predicted_cost, summarize};
 pub use crate::planning::montecarlo::Pulse;
-use crate::planning::montecarlo::run_trials_disturbed;
+use crate::planning::montecarlo::{Trial, run_trials_disturbed};
 use crate::planning::plan::{Method, PlanError, PlanFile, plan, setup};
+use crate::planning::plan_file::commanded_stiffness;
 use crate::planning::scenario::{ConfigError, Scenario};
 use crate::planning::unit::Unit;
 use serde::{Deserialize, Serialize};
@@ -154,6 +155,8 @@ pub struct SweepPoint {
     /// The executed policy's expected cost predicted by closed-loop covariance propagation
     /// ([`predicted_cost`]); `None` for `naive-delayed`, whose law it does not model.
     pub expected_cost_predicted: Option<f64>,
+    /// Mean stiffness the trials commanded [N m/rad]: the plan's for `stiffness`, the re-solved
+    /// plans' for `replan`, with the feedback's share for `stiffness+predictor`.
     pub mean_stiffness: f64,
     pub unit: Unit,
 }
@@ -165,6 +168,8 @@ struct Measured {
     rms_error: Option<f64>,
     diverged: (usize, f64),
     expected_cost_mc: Option<f64>,
+    /// Mean stiffness the trials commanded ([`commanded_stiffness`]).
+    mean_stiffness: f64,
     unit: Unit,
 }
 
@@ -232,19 +237,20 @@ pub fn sweep_latency(
             let m = match opts.execution {
                 Execution::Live => {
                     let rig = live.as_ref().expect("started above");
-                    let r = rig
-                        .point(i, p, strategy, latency_ms, opts)
-                        .map_err(|source| SweepError::Live {
-                            strategy: strategy.name(),
-                            latency_ms,
-                            source,
-                        })?;
+                    let (r, trials) =
+                        rig.point(i, p, strategy, latency_ms, opts)
+                            .map_err(|source| SweepError::Live {
+                                strategy: strategy.name(),
+                                latency_ms,
+                                source,
+                            })?;
                     let fraction = r.diverged as f64 / r.trials.max(1) as f64;
                     Measured {
                         final_error: (r.final_error_mean, r.final_error_max),
                         rms_error: r.rms_error,
                         diverged: (r.diverged, fraction),
                         expected_cost_mc: r.expected_cost,
+                        mean_stiffness: executed_stiffness(&set, &trials),
                         unit: r.unit,
                     }
                 }
@@ -276,6 +282,7 @@ pub fn sweep_latency(
                         rms_error: r.rms_error,
                         diverged: (r.diverged, r.diverged_fraction),
                         expected_cost_mc: r.expected_cost_mc,
+                        mean_stiffness: executed_stiffness(&set, &trials),
                         unit: r.unit,
                     }
                 }
@@ -290,7 +297,7 @@ pub fn sweep_latency(
                 diverged_fraction: m.diverged.1,
                 expected_cost_mc: m.expected_cost_mc,
                 expected_cost_predicted: predicted_cost(&set, &policy, feedback),
-                mean_stiffness: p.summary.mean_stiffness,
+                mean_stiffness: m.mean_stiffness,
                 unit: m.unit,
             });
         }
@@ -350,12 +357,13 @@ impl<'a> LiveRig<'a> {
         strategy: Strategy,
         latency_ms: f64,
         opts: &SweepOptions,
-    ) -> anyhow::Result<crate::tools::report::StrategyResult> {
+    ) -> anyhow::Result<(crate::tools::report::StrategyResult, Vec<Trial>)> {
         use crate::tools::live::{PlannerRun, run_planner};
         let file = self.store.dir().join(format!("plan-{i}.json"));
         if !file.is_file() {
             self.store.save(&file, plan)?;
         }
+        let traj = self.store.dir().join("trajectories.json");
         let run = PlannerRun {
             strategy,
             plan: &file,
@@ -363,11 +371,22 @@ impl<'a> LiveRig<'a> {
             rate_hz: 1_000_000_000 / CENTRAL_PERIOD_NS,
             trials: opts.trials as u64,
             seed: opts.seed,
-            trajectories: None,
+            trajectories: Some(traj.clone()),
             divergence: opts.divergence,
         };
-        run_planner(&self.planner, self.scenario, &self.namespace, &run)
+        let result = run_planner(&self.planner, self.scenario, &self.namespace, &run)?;
+        let text = std::fs::read_to_string(&traj)
+            .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", traj.display()))?;
+        let trajectories: crate::tools::report::Trajectories = serde_json::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: not trajectories: {e}", traj.display()))?;
+        Ok((result, trajectories.to_trials()))
     }
+}
+
+/// The mean stiffness `trials` commanded on `set`'s model (the plan's for `stiffness`, the new
+/// plans' for `replan`, the feedback's for `stiffness+predictor`).
+fn executed_stiffness(set: &crate::planning::plan::Setup, trials: &[Trial]) -> f64 {
+    commanded_stiffness(&set.dynamics.model, trials.iter().flat_map(|t| &t.u)).1
 }
 
 /// One point of the sweep.
