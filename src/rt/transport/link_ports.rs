@@ -48,6 +48,18 @@ impl Node {
             TransportError::ipc(&self.namespace, format!("cannot send {}", T::SERVICE), e)
         })
     }
+    /// [`Node::send`], then wakes another relay of the namespace, as a local publisher would
+    /// (the ports' `send_relayed`).
+    fn send_relayed<T: Topic>(
+        &self,
+        port: &Pub<T, ThreadSafe>,
+        relay: &RelayNotifier<ThreadSafe>,
+        value: &T,
+    ) -> Result<(), TransportError> {
+        let sent = self.send(port, value);
+        relay.notify();
+        sent
+    }
 }
 
 /// What the bridge beside the board publishes: the command slices and control requests of the
@@ -76,21 +88,15 @@ impl ToBoardLink {
     }
     /// Publishes a command slice.
     pub fn publish_command(&self, c: &CommandSlice) -> Result<(), TransportError> {
-        let sent = self.node.send(&self.commands, c);
-        self.relay.notify();
-        sent
+        self.node.send_relayed(&self.commands, &self.relay, c)
     }
     /// Publishes a control request.
     pub fn publish_control(&self, c: &Control) -> Result<(), TransportError> {
-        let sent = self.node.send(&self.controls, c);
-        self.relay.notify();
-        sent
+        self.node.send_relayed(&self.controls, &self.relay, c)
     }
     /// Publishes a disturbance.
     pub fn publish_disturbance(&self, d: &Disturbance) -> Result<(), TransportError> {
-        let sent = self.node.send(&self.disturbances, d);
-        self.relay.notify();
-        sent
+        self.node.send_relayed(&self.disturbances, &self.relay, d)
     }
 }
 
@@ -118,9 +124,7 @@ impl FromBoardLink {
     }
     /// Publishes a state.
     pub fn publish_state(&self, s: &StateMsg) -> Result<(), TransportError> {
-        let sent = self.node.send(&self.state, s);
-        self.relay.notify();
-        sent
+        self.node.send_relayed(&self.state, &self.relay, s)
     }
     /// Publishes telemetry and wakes the board's listeners with [`BoardEvent::Telemetry`], as
     /// the board does.
