@@ -5,6 +5,7 @@
 //! parallel); a further test fails when a file in `config/` has no test here.
 
 use std::path::{Path, PathBuf};
+use vic::planning::method::Method;
 use vic::planning::plan::plan;
 use vic::planning::scenario::Scenario;
 
@@ -30,8 +31,11 @@ fn check(stem: &str) {
     let path = config_dir().join(format!("{stem}.toml"));
     let scenario = Scenario::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
     // The scenario's own method, as `vic plan` uses by default.
-    let file =
-        plan(&scenario, scenario.solver.method, None).unwrap_or_else(|e| panic!("{stem}: {e}"));
+    check_with(stem, &scenario, scenario.solver.method);
+}
+
+fn check_with(stem: &str, scenario: &Scenario, method: Method) {
+    let file = plan(scenario, method, None).unwrap_or_else(|e| panic!("{stem}: {e}"));
     let s = &file.summary;
     let steps = scenario.task.steps;
     // The plan file is complete and finite.
@@ -125,6 +129,19 @@ fn two_link_reach() {
 #[test]
 fn two_link_torque_divergent() {
     check("two_link_torque_divergent");
+}
+
+/// SOOC (`--method sooc`) converges on the scenarios where it once stopped at its iteration
+/// limit and that are cheap enough to plan in every test run: the deterministic plant (the
+/// criterion's curvature cap; no stiffness start without noise) and the torque actuator (the
+/// configured room). The VSA scenarios take 1–2 minutes each: see docs/BENCHMARKS.md.
+#[test]
+fn sooc_converges_without_noise_and_without_stiffness() {
+    for stem in ["two_link_deterministic", "two_link_torque_divergent"] {
+        let path = config_dir().join(format!("{stem}.toml"));
+        let scenario = Scenario::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
+        check_with(stem, &scenario, Method::Sooc);
+    }
 }
 
 #[test]

@@ -299,7 +299,8 @@ fn divergent() -> &'static (Scenario, Setup, SoocSolution) {
 /// The KKT conditions of the box-limited problem at the converged plan, checked independently of
 /// the solver's adjoint: central finite differences of the open-loop expected cost
 /// ([`predict_open_loop`], the covariance rollout every plan reports) over every control, projected
-/// onto the box, scaled as the stated criterion scales them, relative to `J`.
+/// onto the box, scaled as the stated criterion scales them (the box width or 1 N m, capped at
+/// `√(2J / ∂²J/∂u²)` with the curvature by a second difference), relative to `J`.
 #[test]
 fn converged_sooc_plan_satisfies_the_kkt_conditions_by_finite_differences() {
     let (_, setup, sol) = divergent();
@@ -320,7 +321,7 @@ fn converged_sooc_plan_satisfies_the_kkt_conditions_by_finite_differences() {
         })
         .collect();
     let mut u = sol.u.clone();
-    let (mut worst, mut at_bound) = (0.0_f64, 0);
+    let (mut worst, mut uncapped, mut at_bound) = (0.0_f64, 0.0_f64, 0);
     for k in 0..u.len() {
         for i in 0..u[k].len() {
             let v = u[k][i];
@@ -331,22 +332,83 @@ fn converged_sooc_plan_satisfies_the_kkt_conditions_by_finite_differences() {
             let minus = predict_open_loop(setup, &u).expected_cost;
             u[k][i] = v;
             let g = (plus - minus) / (2.0 * h);
+            // The control's own curvature by a wider second difference (round-off of J over
+            // h² would swamp a 1e-5 step), for the criterion's cap on the scale.
+            let h2 = 1e-3 * (1.0 + v.abs());
+            u[k][i] = v + h2;
+            let plus2 = predict_open_loop(setup, &u).expected_cost;
+            u[k][i] = v - h2;
+            let minus2 = predict_open_loop(setup, &u).expected_cost;
+            u[k][i] = v;
+            let curvature = (plus2 - 2.0 * j + minus2) / (h2 * h2);
+            let s = if curvature > 0.0 {
+                scale[i].min((2.0 * j / curvature).sqrt())
+            } else {
+                scale[i]
+            };
             let blocked = (v <= lo[i] && g > 0.0) || (v >= hi[i] && g < 0.0);
             if v <= lo[i] || v >= hi[i] {
                 at_bound += 1;
             }
             if !blocked {
-                worst = worst.max(scale[i] * g.abs() / j);
+                worst = worst.max(s * g.abs() / j);
+                uncapped = uncapped.max(scale[i] * g.abs() / j);
             }
         }
     }
     eprintln!(
-        "finite-difference projected gradient {worst:.3e} of J (solver's {:.3e}, tolerance \
-         {:.1e}); {at_bound} controls at a bound",
+        "finite-difference projected gradient {worst:.3e} of J ({uncapped:.3e} without the \
+         curvature cap; solver's {:.3e}, tolerance {:.1e}); {at_bound} controls at a bound",
         sol.optimality.projected_gradient, sol.optimality.gradient_tolerance
     );
     // Finite differences add ~1e-9 of J; allow twice the tolerance.
     assert!(worst <= 2.0 * sol.optimality.gradient_tolerance);
+}
+
+/// The diagonal of the exact Hessian that the criterion's curvature cap uses (stagewise, with the
+/// costate-weighted second and third derivatives of the moment step) against central second
+/// differences of the open-loop expected cost, at the converged plan, every 7th knot.
+#[test]
+fn hessian_diagonal_matches_second_differences() {
+    let (_, setup, sol) = divergent();
+    let moments = MomentDynamics::new(&setup.dynamics);
+    let cost = MomentCost::new(&setup.cost, sol.u.len());
+    let problem = SoocProblem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: &setup.x0,
+        bounds: &setup.bounds,
+        horizon: sol.u.len(),
+    };
+    let mut solver = SoocSolver::new(&moments, sol.u.len(), SoocOptions::default());
+    // From the converged controls the solve stops at once, its model at those controls.
+    let again = solver.solve(&problem, &sol.u).expect("solves");
+    assert_eq!(again.stop, SoocStop::Converged);
+    assert_eq!(again.iterations, 0);
+    let diag = solver.hessian_diagonal();
+    let j = again.expected_cost;
+    let mut u = sol.u.clone();
+    let mut worst = 0.0_f64;
+    for k in (0..u.len()).step_by(7) {
+        for i in 0..u[k].len() {
+            let v = u[k][i];
+            let h = 1e-3 * (1.0 + v.abs());
+            u[k][i] = v + h;
+            let plus = predict_open_loop(setup, &u).expected_cost;
+            u[k][i] = v - h;
+            let minus = predict_open_loop(setup, &u).expected_cost;
+            u[k][i] = v;
+            let fd = (plus - 2.0 * j + minus) / (h * h);
+            let err = (diag[k][i] - fd).abs() / (fd.abs() + 1e-2);
+            worst = worst.max(err);
+            assert!(
+                err <= 1e-3,
+                "knot {k} control {i}: Hessian diagonal {:.6e}, second difference {fd:.6e}",
+                diag[k][i]
+            );
+        }
+    }
+    eprintln!("largest relative difference {worst:.2e}");
 }
 
 /// Three different starts from the inverse-dynamics guess (the configured 30 N m/rad; 20 N m/rad;

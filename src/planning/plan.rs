@@ -5,6 +5,7 @@
 use crate::core::cost::TrackingCost;
 use crate::core::delay::Delayed;
 use crate::core::dynamics::Dynamics;
+use crate::core::model::Noise;
 use crate::core::solver::ilqg::Progress;
 use crate::core::solver::sooc::{MomentCost, MomentDynamics, unpack};
 use crate::core::solver::sooc_newton::{
@@ -229,10 +230,15 @@ fn plan_sooc(
     let first = det.solve(plain, &setup.u_init);
     // The deterministic optimum has almost no stiffness (it buys nothing without noise),
     // and from there the open-loop problem starts in an unstable field with a huge
-    // variance. Start the stiffness from the configured initial value instead.
+    // variance. Start the stiffness from the configured initial value instead. Without noise
+    // the deterministic optimum *is* the open-loop problem's (the covariance stays 0), and
+    // stiffness there would only move the mean through its damping: start from it as it is
+    // (measured on two_link_deterministic: from 30 N m/rad, 220 iterations crawl to J = 0.353;
+    // from the deterministic optimum one Newton step confirms J = 0.265).
     let mut warm = first.u.clone();
     if let Some(off) = s.model.actuator.stiffness_offset(s.model.dof())
         && s.initial_stiffness > 0.0
+        && s.model.noise != Noise::None
     {
         for u in &mut warm {
             for i in 0..s.model.dof() {

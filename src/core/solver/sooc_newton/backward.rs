@@ -23,6 +23,11 @@ pub(super) struct Backward {
     huu: DMatrix<f64>,
     kt_quu: DMatrix<f64>,
     t_mz: DMatrix<f64>,
+    /// The open-loop second derivative of the cost-to-go in `z` (every later control held):
+    /// `S_k = ℓ_zz + H_zz + Aᵀ S_{k+1} A`, for the diagonal of `∇²J`.
+    s: DMatrix<f64>,
+    sa: DMatrix<f64>,
+    sb: DMatrix<f64>,
 }
 
 impl Backward {
@@ -43,6 +48,9 @@ impl Backward {
             huu: zm(m, m),
             kt_quu: zm(nz, m),
             t_mz: zm(m, nz),
+            s: zm(nz, nz),
+            sa: zm(nz, nz),
+            sb: zm(nz, m),
         }
     }
 
@@ -83,25 +91,52 @@ impl Backward {
 impl SoocSolver {
     /// The Riccati recursion of the Newton step with box-limited stage QPs; the predicted
     /// decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)`, or `None` if some stage QP is not convex at
-    /// this μ.
+    /// this μ. With `diagonal` (and the Newton model) it also fills `hess_diag` with the
+    /// diagonal of the exact `∇²J`.
     pub(super) fn backward(
         &mut self,
         bounds: &Bounds,
         mu: f64,
         newton: bool,
+        diagonal: bool,
     ) -> Option<(f64, f64)> {
         let h = self.horizon;
+        let diagonal = diagonal && newton;
         self.bw.v.copy_from(&self.derivs[h].lxx);
         self.bw.vv.copy_from(&self.derivs[h].lx);
+        if diagonal {
+            self.bw.s.copy_from(&self.derivs[h].lxx);
+        }
         let (mut dv1, mut dv2) = (0.0, 0.0);
         for k in (0..h).rev() {
             self.q_function(k, newton);
+            if diagonal {
+                self.open_loop_diagonal(k);
+            }
             self.stage_policy(k, bounds, mu)?;
             let (d1, d2) = self.bw.value_update(&self.ff[k], &self.gains[k]);
             dv1 += d1;
             dv2 += d2;
         }
         Some((dv1, dv2))
+    }
+
+    /// `∂²J/∂u_{k,j}²` with every other control held (`ℓ_uu + H_uu + Bᵀ S_{k+1} B`, diagonal)
+    /// into `hess_diag[k]`, then `S_k` from `S_{k+1}`. After [`Self::q_function`] at `k`, whose
+    /// costate-weighted curvature `H` it reuses.
+    fn open_loop_diagonal(&mut self, k: usize) {
+        let bw = &mut self.bw;
+        let e = &self.expansions[k];
+        let d = &self.derivs[k];
+        bw.sb.gemm(1.0, &bw.s, &e.b, 0.0);
+        let diag = &mut self.hess_diag[k];
+        for j in 0..diag.len() {
+            diag[j] = d.luu[(j, j)] + bw.huu[(j, j)] + e.b.column(j).dot(&bw.sb.column(j));
+        }
+        bw.sa.gemm(1.0, &bw.s, &e.a, 0.0);
+        bw.s.copy_from(&d.lxx);
+        bw.s += &bw.hzz;
+        bw.s.gemm_tr(1.0, &e.a, &bw.sa, 1.0);
     }
 
     /// `Q` at knot `k` from the value `(V, v)` of knot `k + 1`: the Gauss–Newton terms plus, for

@@ -19,8 +19,9 @@
 //! how cheap the control is in the cost) guards indefinite models.
 //!
 //! Convergence ([`Optimality`]) is judged on the exact gradient from the adjoint, not on the
-//! model: the scaled projected gradient and the Newton model's predicted decrease, both relative
-//! to `J`.
+//! model: the scaled projected gradient (each control's scale capped by its own exact curvature,
+//! the diagonal of `∇²J` that the backward pass also yields) and the Newton model's predicted
+//! decrease, both relative to `J`.
 
 use super::Bounds;
 use super::boxqp::MAX_QP;
@@ -34,9 +35,12 @@ use std::time::{Duration, Instant};
 
 mod backward;
 mod forward;
+mod optimality;
 
 use backward::Backward;
 use forward::rollout;
+pub use optimality::Optimality;
+use optimality::control_scales;
 
 /// Relative regularisation above which an iteration gives up on the Newton model and takes a
 /// Gauss–Newton step instead.
@@ -99,30 +103,6 @@ pub enum SoocStop {
     MaxIterations,
     /// Regularisation grew past its limit without a descent step.
     RegularizationLimit,
-}
-
-/// The first-order optimality of a control sequence for the box-limited problem, relative to the
-/// cost: what `converged` means.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Optimality {
-    /// `max_{k,j} s_j |Π(∇J)_{k,j}| / |J|`: the largest first-order change of `J` from moving one
-    /// control by its scale `s_j`, relative to `J`. `Π` zeroes the components at a bound whose
-    /// gradient pushes out of the box (the KKT conditions); `s_j` is the width of the control's
-    /// box where it is finite (the stiffness) and 1 (N m) where it is not (the torques).
-    pub projected_gradient: f64,
-    /// `-ΔJ_pred / |J|`: the decrease the Newton model predicts for its full step.
-    pub predicted_decrease: f64,
-    /// The tolerances they were tested against.
-    pub gradient_tolerance: f64,
-    pub decrease_tolerance: f64,
-}
-
-impl Optimality {
-    /// Whether both tests pass.
-    pub fn met(&self) -> bool {
-        self.projected_gradient <= self.gradient_tolerance
-            && self.predicted_decrease <= self.decrease_tolerance
-    }
 }
 
 /// A solution of the open-loop moment problem.
@@ -202,6 +182,9 @@ pub struct SoocSolver {
     grad: Vec<DVector<f64>>,
     ff: Vec<DVector<f64>>,
     gains: Vec<DMatrix<f64>>,
+    /// The diagonal of the exact `∇²J` (each control moved alone), from the last Newton
+    /// backward pass: the curvature part of the criterion's scales.
+    hess_diag: Vec<DVector<f64>>,
     bw: Backward,
     dz: DVector<f64>,
     /// Whether `u` holds a solution that [`SoocSolver::resolve_shifted`] may shift.
@@ -232,6 +215,7 @@ impl SoocSolver {
             grad: (0..horizon).map(|_| DVector::zeros(m)).collect(),
             ff: (0..horizon).map(|_| DVector::zeros(m)).collect(),
             gains: (0..horizon).map(|_| DMatrix::zeros(m, nz)).collect(),
+            hess_diag: (0..horizon).map(|_| DVector::zeros(m)).collect(),
             bw: Backward::new(nz, m),
             dz: DVector::zeros(nz),
             solved: false,
@@ -329,9 +313,11 @@ impl SoocSolver {
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
             // in between.
             let try_newton = self.prepare_model(problem, &mut model);
-            let pg = self.projected_gradient(problem.bounds, &scale) / cost.abs().max(1e-300);
             let (predicted, newton) =
                 self.regularized_backward(problem.bounds, &mut damping, try_newton);
+            // The Newton backward pass also gave the Hessian's diagonal for the scales.
+            let pg = self.projected_gradient(problem.bounds, &scale, newton.then_some(cost))
+                / cost.abs().max(1e-300);
             if newton {
                 model.gauss_newton_run = 0;
             } else {
@@ -386,6 +372,12 @@ impl SoocSolver {
             solve_time: start.elapsed(),
             history,
         })
+    }
+
+    /// The diagonal of the exact `∇²J` (`∂²J/∂u_{k,j}²`, each control moved alone) at the
+    /// returned controls of a converged solve: what the criterion caps the scales with.
+    pub fn hessian_diagonal(&self) -> &[DVector<f64>] {
+        &self.hess_diag
     }
 
     /// Tells the observer, if any, of an accepted step.
@@ -462,7 +454,7 @@ impl SoocSolver {
         let mut newton = try_newton;
         let mut mu_here = damping.mu;
         let predicted = loop {
-            if let Some(dv) = self.backward(bounds, mu_here, newton) {
+            if let Some(dv) = self.backward(bounds, mu_here, newton, true) {
                 break Some(dv);
             }
             damping.step = (damping.step * 2.0).max(2.0);
@@ -533,34 +525,6 @@ impl SoocSolver {
             self.grad[k].gemv_tr(1.0, &e.b, next, 1.0);
         }
     }
-
-    /// `max_{k,j} s_j |Π(∇J)_{k,j}|`, `Π` zeroing the components that push out of the box at a
-    /// bound.
-    fn projected_gradient(&self, bounds: &Bounds, scale: &[f64]) -> f64 {
-        let mut worst = 0.0_f64;
-        for (u, g) in self.u.iter().zip(&self.grad) {
-            for j in 0..self.nu {
-                let gj = g[j];
-                let blocked =
-                    (u[j] <= bounds.lower[j] && gj > 0.0) || (u[j] >= bounds.upper[j] && gj < 0.0);
-                if !blocked {
-                    worst = worst.max(scale[j] * gj.abs());
-                }
-            }
-        }
-        worst
-    }
-}
-
-/// Control scales: the box width where finite, else 1 (N m).
-fn control_scales(bounds: &Bounds) -> [f64; MAX_QP] {
-    let mut scale = [1.0; MAX_QP];
-    for (s, (lo, hi)) in scale.iter_mut().zip(bounds.lower.iter().zip(&bounds.upper)) {
-        if lo.is_finite() && hi.is_finite() && hi > lo {
-            *s = hi - lo;
-        }
-    }
-    scale
 }
 
 /// Levenberg–Marquardt regularisation μ (relative to each control's Gauss–Newton curvature) with
