@@ -91,28 +91,19 @@ impl Backward {
 impl SoocSolver {
     /// The Riccati recursion of the Newton step with box-limited stage QPs; the predicted
     /// decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)`, or `None` if some stage QP is not convex at
-    /// this μ. With `diagonal` (and the Newton model) it also fills `hess_diag` with the
-    /// diagonal of the exact `∇²J`.
+    /// this μ.
     pub(super) fn backward(
         &mut self,
         bounds: &Bounds,
         mu: f64,
         newton: bool,
-        diagonal: bool,
     ) -> Option<(f64, f64)> {
         let h = self.horizon;
-        let diagonal = diagonal && newton;
         self.bw.v.copy_from(&self.derivs[h].lxx);
         self.bw.vv.copy_from(&self.derivs[h].lx);
-        if diagonal {
-            self.bw.s.copy_from(&self.derivs[h].lxx);
-        }
         let (mut dv1, mut dv2) = (0.0, 0.0);
         for k in (0..h).rev() {
             self.q_function(k, newton);
-            if diagonal {
-                self.open_loop_diagonal(k);
-            }
             self.stage_policy(k, bounds, mu)?;
             let (d1, d2) = self.bw.value_update(&self.ff[k], &self.gains[k]);
             dv1 += d1;
@@ -121,9 +112,27 @@ impl SoocSolver {
         Some((dv1, dv2))
     }
 
-    /// `∂²J/∂u_{k,j}²` with every other control held (`ℓ_uu + H_uu + Bᵀ S_{k+1} B`, diagonal)
-    /// into `hess_diag[k]`, then `S_k` from `S_{k+1}`. After [`Self::q_function`] at `k`, whose
-    /// costate-weighted curvature `H` it reuses.
+    /// The diagonal of the exact `∇²J` into `hess_diag`: per knot from the last,
+    /// `∂²J/∂u_{k,j}²` with every other control held, `ℓ_uu + H_uu + Bᵀ S_{k+1} B`, and
+    /// `S_k = ℓ_zz + H_zz + Aᵀ S_{k+1} A` (`H` the costate-weighted curvature of the moment step;
+    /// needs the Newton model's second-order expansion at the current controls). A pass of its
+    /// own, run only when the convergence test needs it.
+    pub(super) fn hessian_diagonal_pass(&mut self) {
+        let h = self.horizon;
+        self.bw.s.copy_from(&self.derivs[h].lxx);
+        for k in (0..h).rev() {
+            let bw = &mut self.bw;
+            self.expansions[k].curvature(
+                self.lam[k + 1].as_slice(),
+                &mut bw.hzz,
+                &mut bw.huz,
+                &mut bw.huu,
+            );
+            self.open_loop_diagonal(k);
+        }
+    }
+
+    /// One knot of [`Self::hessian_diagonal_pass`], with `H` in the scratch.
     fn open_loop_diagonal(&mut self, k: usize) {
         let bw = &mut self.bw;
         let e = &self.expansions[k];

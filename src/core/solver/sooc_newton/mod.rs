@@ -182,9 +182,11 @@ pub struct SoocSolver {
     grad: Vec<DVector<f64>>,
     ff: Vec<DVector<f64>>,
     gains: Vec<DMatrix<f64>>,
-    /// The diagonal of the exact `∇²J` (each control moved alone), from the last Newton
-    /// backward pass: the curvature part of the criterion's scales.
+    /// The diagonal of the exact `∇²J` (each control moved alone), when the convergence test
+    /// last needed it: the curvature cap of the criterion's scales.
     hess_diag: Vec<DVector<f64>>,
+    /// The expansions hold the Newton model at the current controls.
+    newton_model: bool,
     bw: Backward,
     dz: DVector<f64>,
     /// Whether `u` holds a solution that [`SoocSolver::resolve_shifted`] may shift.
@@ -216,6 +218,7 @@ impl SoocSolver {
             ff: (0..horizon).map(|_| DVector::zeros(m)).collect(),
             gains: (0..horizon).map(|_| DMatrix::zeros(m, nz)).collect(),
             hess_diag: (0..horizon).map(|_| DVector::zeros(m)).collect(),
+            newton_model: false,
             bw: Backward::new(nz, m),
             dz: DVector::zeros(nz),
             solved: false,
@@ -315,9 +318,8 @@ impl SoocSolver {
             let try_newton = self.prepare_model(problem, &mut model);
             let (predicted, newton) =
                 self.regularized_backward(problem.bounds, &mut damping, try_newton);
-            // The Newton backward pass also gave the Hessian's diagonal for the scales.
-            let pg = self.projected_gradient(problem.bounds, &scale, newton.then_some(cost))
-                / cost.abs().max(1e-300);
+            let pg =
+                self.projected_gradient_tested(problem.bounds, &scale, cost, newton, predicted);
             if newton {
                 model.gauss_newton_run = 0;
             } else {
@@ -375,9 +377,14 @@ impl SoocSolver {
     }
 
     /// The diagonal of the exact `∇²J` (`∂²J/∂u_{k,j}²`, each control moved alone) at the
-    /// returned controls of a converged solve: what the criterion caps the scales with.
-    pub fn hessian_diagonal(&self) -> &[DVector<f64>] {
-        &self.hess_diag
+    /// returned controls, what the criterion caps the scales with; `None` unless the last
+    /// iteration had the Newton model there (it has whenever the solve converged).
+    pub fn hessian_diagonal(&mut self) -> Option<&[DVector<f64>]> {
+        if !self.newton_model {
+            return None;
+        }
+        self.hessian_diagonal_pass();
+        Some(&self.hess_diag)
     }
 
     /// Tells the observer, if any, of an accepted step.
@@ -454,7 +461,7 @@ impl SoocSolver {
         let mut newton = try_newton;
         let mut mu_here = damping.mu;
         let predicted = loop {
-            if let Some(dv) = self.backward(bounds, mu_here, newton, true) {
+            if let Some(dv) = self.backward(bounds, mu_here, newton) {
                 break Some(dv);
             }
             damping.step = (damping.step * 2.0).max(2.0);

@@ -34,6 +34,32 @@ impl Optimality {
 }
 
 impl SoocSolver {
+    /// The projected gradient of the convergence test, relative to `J`. The curvature cap only
+    /// lowers it, and costs a pass of its own (the Hessian's diagonal), so it is applied only
+    /// when it can decide the test: after a Newton backward pass (`newton`, whose `predicted`
+    /// decrease already passes) while the uncapped value fails.
+    pub(super) fn projected_gradient_tested(
+        &mut self,
+        bounds: &Bounds,
+        scale: &[f64],
+        cost: f64,
+        newton: bool,
+        predicted: Option<(f64, f64)>,
+    ) -> f64 {
+        self.newton_model = newton;
+        let relative = |v: f64| v / cost.abs().max(1e-300);
+        let plain = relative(self.projected_gradient(bounds, scale, None));
+        let decided = plain <= self.options.gradient_tolerance
+            || !newton
+            || predicted
+                .is_none_or(|(d1, d2)| relative(-(d1 + d2)) > self.options.decrease_tolerance);
+        if decided {
+            return plain;
+        }
+        self.hessian_diagonal_pass();
+        relative(self.projected_gradient(bounds, scale, Some(cost)))
+    }
+
     /// `max_{k,j} s_{k,j} |Π(∇J)_{k,j}|`, `Π` zeroing the components that push out of the box
     /// at a bound. With the cost `J` (after a Newton backward pass), each scale is capped by the
     /// control's own curvature: [`curvature_capped`].
