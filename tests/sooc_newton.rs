@@ -296,6 +296,18 @@ fn divergent() -> &'static (Scenario, Setup, SoocSolution) {
     })
 }
 
+/// The open-loop expected cost with control `i` at knot `k` moved by `+h` and by `−h` (`u` is
+/// left as it was).
+fn moved(setup: &Setup, u: &mut [DVector<f64>], k: usize, i: usize, h: f64) -> (f64, f64) {
+    let v = u[k][i];
+    u[k][i] = v + h;
+    let plus = predict_open_loop(setup, u).expected_cost;
+    u[k][i] = v - h;
+    let minus = predict_open_loop(setup, u).expected_cost;
+    u[k][i] = v;
+    (plus, minus)
+}
+
 /// The KKT conditions of the box-limited problem at the converged plan, checked independently of
 /// the solver's adjoint: central finite differences of the open-loop expected cost
 /// ([`predict_open_loop`], the covariance rollout every plan reports) over every control, projected
@@ -326,20 +338,12 @@ fn converged_sooc_plan_satisfies_the_kkt_conditions_by_finite_differences() {
         for i in 0..u[k].len() {
             let v = u[k][i];
             let h = 1e-5 * (1.0 + v.abs());
-            u[k][i] = v + h;
-            let plus = predict_open_loop(setup, &u).expected_cost;
-            u[k][i] = v - h;
-            let minus = predict_open_loop(setup, &u).expected_cost;
-            u[k][i] = v;
+            let (plus, minus) = moved(setup, &mut u, k, i, h);
             let g = (plus - minus) / (2.0 * h);
             // The control's own curvature by a wider second difference (round-off of J over
             // h² would swamp a 1e-5 step), for the criterion's cap on the scale.
             let h2 = 1e-3 * (1.0 + v.abs());
-            u[k][i] = v + h2;
-            let plus2 = predict_open_loop(setup, &u).expected_cost;
-            u[k][i] = v - h2;
-            let minus2 = predict_open_loop(setup, &u).expected_cost;
-            u[k][i] = v;
+            let (plus2, minus2) = moved(setup, &mut u, k, i, h2);
             let curvature = (plus2 - 2.0 * j + minus2) / (h2 * h2);
             let s = if curvature > 0.0 {
                 scale[i].min((2.0 * j / curvature).sqrt())
@@ -394,13 +398,8 @@ fn hessian_diagonal_matches_second_differences() {
     let mut worst = 0.0_f64;
     for k in (0..u.len()).step_by(7) {
         for i in 0..u[k].len() {
-            let v = u[k][i];
-            let h = 1e-3 * (1.0 + v.abs());
-            u[k][i] = v + h;
-            let plus = predict_open_loop(setup, &u).expected_cost;
-            u[k][i] = v - h;
-            let minus = predict_open_loop(setup, &u).expected_cost;
-            u[k][i] = v;
+            let h = 1e-3 * (1.0 + u[k][i].abs());
+            let (plus, minus) = moved(setup, &mut u, k, i, h);
             let fd = (plus - 2.0 * j + minus) / (h * h);
             let err = (diag[k][i] - fd).abs() / (fd.abs() + 1e-2);
             worst = worst.max(err);
