@@ -20,8 +20,8 @@
 //!
 //! Convergence ([`Optimality`]) is judged on the exact gradient from the adjoint, not on the
 //! model: the scaled projected gradient (each control's scale capped by its own exact curvature,
-//! the diagonal of `∇²J` that the backward pass also yields) and the Newton model's predicted
-//! decrease, both relative to `J`.
+//! the diagonal of `∇²J`, from a pass beside the backward one when it decides the test) and the
+//! Newton model's predicted decrease, both relative to `J`.
 
 use super::Bounds;
 use super::boxqp::MAX_QP;

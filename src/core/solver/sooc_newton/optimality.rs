@@ -16,7 +16,8 @@ pub struct Optimality {
     /// control's box where it is finite (the stiffness) and 1 (N m) where it is not (the
     /// torques), but never more than `√(2|J| / ∂²J/∂u_{k,j}²)`, the step over which the
     /// control's own curvature changes `J` by `J`: beyond it a first-order change means nothing
-    /// (in the divergent field an early torque's curvature is ~10⁹ times a late one's).
+    /// (in the divergent field without noise an early torque's curvature is ≈ 2·10⁹ at
+    /// `J ≈ 0.27`).
     pub projected_gradient: f64,
     /// `-ΔJ_pred / |J|`: the decrease the Newton model predicts for its full step.
     pub predicted_decrease: f64,
@@ -61,8 +62,8 @@ impl SoocSolver {
     }
 
     /// `max_{k,j} s_{k,j} |Π(∇J)_{k,j}|`, `Π` zeroing the components that push out of the box
-    /// at a bound. With the cost `J` (after a Newton backward pass), each scale is capped by the
-    /// control's own curvature: [`curvature_capped`].
+    /// at a bound. With the cost `J` (after [`Self::hessian_diagonal_pass`]), each scale is
+    /// capped by the control's own curvature: [`curvature_capped`].
     pub(super) fn projected_gradient(
         &self,
         bounds: &Bounds,
