@@ -318,6 +318,7 @@ impl SoocSolver {
             let try_newton = self.prepare_model(problem, &mut model);
             let (predicted, newton) =
                 self.regularized_backward(problem.bounds, &mut damping, try_newton);
+            self.newton_model = newton;
             let pg =
                 self.projected_gradient_tested(problem.bounds, &scale, cost, newton, predicted);
             if newton {

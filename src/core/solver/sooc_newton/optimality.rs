@@ -47,7 +47,6 @@ impl SoocSolver {
         newton: bool,
         predicted: Option<(f64, f64)>,
     ) -> f64 {
-        self.newton_model = newton;
         let relative = |v: f64| v / cost.abs().max(1e-300);
         let plain = relative(self.projected_gradient(bounds, scale, None));
         let decided = plain <= self.options.gradient_tolerance
