@@ -76,6 +76,7 @@ pub fn solve_sooc(
     let horizon = u.len();
     let options = SoocOptions {
         max_iterations: solver.options.max_iterations,
+        indefinite: solver.indefinite,
         ..SoocOptions::default()
     };
     let sizing = MomentDynamics::new(&setup.dynamics);

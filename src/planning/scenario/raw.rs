@@ -6,6 +6,7 @@
 
 use crate::core::dynamics::Integrator;
 use crate::core::solver::IlqgOptions;
+use crate::core::solver::sooc_newton::Indefinite;
 use crate::planning::method::Method;
 use serde::Deserialize;
 
@@ -261,6 +262,8 @@ pub(super) struct RawSolver {
     pub damp_short_steps: bool,
     /// SOOC: fractions of the noise solved in turn, ending at 1.
     pub noise_continuation: Vec<f64>,
+    /// SOOC: what to do with an indefinite Newton model.
+    pub indefinite: Indefinite,
 }
 
 impl Default for RawSolver {
@@ -277,6 +280,7 @@ impl Default for RawSolver {
             stochastic: d.stochastic,
             damp_short_steps: d.damp_short_steps,
             noise_continuation: vec![1.0],
+            indefinite: Indefinite::default(),
         }
     }
 }

@@ -3,6 +3,7 @@
 use super::error::{ConfigError, FileCheck};
 use super::raw::RawSolver;
 use crate::core::solver::IlqgOptions;
+use crate::core::solver::sooc_newton::Indefinite;
 use crate::planning::method::Method;
 
 /// The `[solver]` section: the method and the solver's options (every key optional).
@@ -16,6 +17,9 @@ pub struct SolverSection {
     /// add iterations on the type-2 arm: 22 Newton steps at [1.0], 44 over [0.1, 0.3, 1.0], same
     /// optimum. The VSA scenarios keep [0.1, 0.3, 1.0] in their files).
     pub noise_continuation: Vec<f64>,
+    /// SOOC: what a backward pass does with a stage whose Newton model is indefinite (default
+    /// `regularize`: raise μ for every stage; `saddle_free`: convexify that stage alone).
+    pub indefinite: Indefinite,
 }
 
 impl Default for SolverSection {
@@ -25,6 +29,7 @@ impl Default for SolverSection {
             method: raw.method,
             options: raw.options(),
             noise_continuation: raw.noise_continuation,
+            indefinite: raw.indefinite,
         }
     }
 }
@@ -66,6 +71,7 @@ impl RawSolver {
             method: self.method,
             options: self.options(),
             noise_continuation: self.noise_continuation,
+            indefinite: self.indefinite,
         })
     }
 }

@@ -5,7 +5,11 @@
 use super::SoocSolver;
 use crate::core::solver::Bounds;
 use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, solve_box_qp};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix};
+
+/// The smallest eigenvalue a convexified stage `Q_uu` keeps, relative to the controls'
+/// Gauss–Newton curvature (see [`convexify`]).
+const EIGEN_FLOOR: f64 = 0.1;
 
 /// Scratch of the backward pass.
 pub(super) struct Backward {
@@ -90,26 +94,31 @@ impl Backward {
 
 impl SoocSolver {
     /// The Riccati recursion of the Newton step with box-limited stage QPs; the predicted
-    /// decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)`, or `None` if some stage QP is not convex at
-    /// this μ.
+    /// decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)` and how many stages were convexified, or
+    /// `None` if some stage QP is not convex at this μ. With `convexify_stages` (the
+    /// [`Indefinite::SaddleFree`] treatment of a Newton model) a stage whose `Q_uu` is not
+    /// positive definite is convexified ([`convexify`]) instead of failing the pass.
     pub(super) fn backward(
         &mut self,
         bounds: &Bounds,
         mu: f64,
         newton: bool,
-    ) -> Option<(f64, f64)> {
+        convexify_stages: bool,
+    ) -> Option<Backstep> {
         let h = self.horizon;
         self.bw.v.copy_from(&self.derivs[h].lxx);
         self.bw.vv.copy_from(&self.derivs[h].lx);
-        let (mut dv1, mut dv2) = (0.0, 0.0);
+        let mut step = Backstep::default();
         for k in (0..h).rev() {
             self.q_function(k, newton);
-            self.stage_policy(k, bounds, mu)?;
+            if self.stage_policy(k, bounds, mu, convexify_stages)? {
+                step.convexified += 1;
+            }
             let (d1, d2) = self.bw.value_update(&self.ff[k], &self.gains[k]);
-            dv1 += d1;
-            dv2 += d2;
+            step.dv1 += d1;
+            step.dv2 += d2;
         }
-        Some((dv1, dv2))
+        Some(step)
     }
 
     /// The diagonal of the exact `∇²J` into `hess_diag`: per knot from the last,
@@ -184,14 +193,22 @@ impl SoocSolver {
     }
 
     /// The stage QP on the regularised `Q_uu` within the box around `u_k` into `ff[k]`, and the
-    /// gains: free rows `−(Q_uu,ff)⁻¹ Q_uz,f`, clamped rows 0. `None` when not convex.
-    fn stage_policy(&mut self, k: usize, bounds: &Bounds, mu: f64) -> Option<()> {
+    /// gains: free rows `−(Q_uu,ff)⁻¹ Q_uz,f`, clamped rows 0. `None` when not convex (and not
+    /// to be convexified); `Some(true)` when `Q_uu` was convexified.
+    fn stage_policy(
+        &mut self,
+        k: usize,
+        bounds: &Bounds,
+        mu: f64,
+        convexify_stage: bool,
+    ) -> Option<bool> {
         let m = self.nu;
-        let bw = &self.bw;
         let d = &self.derivs[k];
         let mut lo = [0.0; MAX_QP];
         let mut hi = [0.0; MAX_QP];
         let mut reg = [0.0; MAX_QP];
+        let mut curvature = [0.0; MAX_QP];
+        let bw = &self.bw;
         for j in 0..m {
             lo[j] = bounds.lower[j] - self.u[k][j];
             hi[j] = bounds.upper[j] - self.u[k][j];
@@ -202,24 +219,87 @@ impl SoocSolver {
             // convexify an indefinite Newton model before μ reached its limit, and the solver
             // fell back to Gauss–Newton steps that crawl (the VSA plans stalled that way).
             let gauss_newton = (bw.quu[(j, j)] - bw.huu[(j, j)]).abs();
-            reg[j] = mu * gauss_newton.max(d.luu[(j, j)].abs()).max(1e-12);
+            curvature[j] = gauss_newton.max(d.luu[(j, j)].abs()).max(1e-12);
+            reg[j] = mu * curvature[j];
         }
-        let quu = &bw.quu;
-        let hq = |i: usize, j: usize| {
-            0.5 * (quu[(i, j)] + quu[(j, i)]) + if i == j { reg[i] } else { 0.0 }
-        };
-        let qp = solve_box_qp(
-            hq,
-            bw.qu.as_slice(),
-            &lo[..m],
-            &hi[..m],
-            self.ff[k].as_slice(),
-        );
-        if qp.status == QpStatus::NotPositiveDefinite {
-            return None;
+        let mut convexified = false;
+        loop {
+            let quu = &self.bw.quu;
+            let hq = |i: usize, j: usize| {
+                0.5 * (quu[(i, j)] + quu[(j, i)]) + if i == j { reg[i] } else { 0.0 }
+            };
+            let qp = solve_box_qp(
+                hq,
+                self.bw.qu.as_slice(),
+                &lo[..m],
+                &hi[..m],
+                self.ff[k].as_slice(),
+            );
+            if qp.status == QpStatus::NotPositiveDefinite {
+                if !convexify_stage || convexified {
+                    return None;
+                }
+                convexify(&mut self.bw.quu, &curvature[..m], &reg[..m]);
+                convexified = true;
+                continue;
+            }
+            self.ff[k].copy_from_slice(&qp.x[..m]);
+            feedback_gains(&qp, &self.bw.quz, &mut self.gains[k])?;
+            return Some(convexified);
         }
-        self.ff[k].copy_from_slice(&qp.x[..m]);
-        feedback_gains(&qp, &bw.quz, &mut self.gains[k])
+    }
+}
+
+/// What a backward pass predicts: the decrease terms `(Σ kᵀ Q_u, Σ ½ kᵀ Q_uu k)` and how many
+/// stage `Q_uu` were convexified (0: the model is the regularised Newton one throughout).
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Backstep {
+    pub(super) dv1: f64,
+    pub(super) dv2: f64,
+    pub(super) convexified: usize,
+}
+
+/// Replaces an indefinite stage `Q_uu` by its absolute value, `|Q_uu + R|` with `R` the
+/// regularisation, each eigenvalue `λ` by `max(|λ|, EIGEN_FLOOR)`, in the coordinates in which
+/// each control's Gauss–Newton curvature `c_j` is 1 (so the floor and the eigenvectors do not
+/// depend on units); then `R` is taken off again so that the value update sees the stage cost
+/// the step minimises.
+///
+/// Why: regularising with one μ for the whole horizon damps every stage because a few are
+/// indefinite (on the light VSA in the divergent field the Newton model needs μ ≈ 8–34 times the
+/// Gauss–Newton curvature, and the steps crawl). Adding `½ δuᵀ (|Q| − Q) δu`, positive
+/// semidefinite, to one stage's model keeps the others' Newton steps; the modified model is
+/// convex in the controls, so its minimiser is a descent direction of `J` (the saddle-free Newton
+/// step of Dauphin et al. 2014, stage by stage), and along negative curvature it moves by
+/// `|g / λ|` instead of stopping.
+fn convexify(quu: &mut DMatrix<f64>, curvature: &[f64], reg: &[f64]) {
+    let m = curvature.len();
+    let s: [f64; MAX_QP] = std::array::from_fn(|j| {
+        if j < m {
+            1.0 / curvature[j].sqrt()
+        } else {
+            1.0
+        }
+    });
+    // Padded with the identity to the fixed size: no allocation, and the padding's eigenvalues
+    // (1) are kept as they are.
+    let mut scaled = SMatrix::<f64, MAX_QP, MAX_QP>::identity();
+    for i in 0..m {
+        for j in 0..m {
+            let h = 0.5 * (quu[(i, j)] + quu[(j, i)]) + if i == j { reg[i] } else { 0.0 };
+            scaled[(i, j)] = s[i] * h * s[j];
+        }
+    }
+    let eigen = scaled.symmetric_eigen();
+    let v = &eigen.eigenvectors;
+    for i in 0..m {
+        for j in 0..m {
+            let mut h = 0.0;
+            for (l, lambda) in eigen.eigenvalues.iter().enumerate() {
+                h += v[(i, l)] * lambda.abs().max(EIGEN_FLOOR) * v[(j, l)];
+            }
+            quu[(i, j)] = h / (s[i] * s[j]) - if i == j { reg[i] } else { 0.0 };
+        }
     }
 }
 
@@ -251,4 +331,68 @@ fn feedback_gains(qp: &QpSolution, quz: &DMatrix<f64>, gain: &mut DMatrix<f64>) 
         }
     }
     Some(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `S (Q + R) S` with `S = diag(1/√c)`: the matrix [`convexify`] works on.
+    fn scaled(q: &DMatrix<f64>, c: &[f64], reg: &[f64]) -> DMatrix<f64> {
+        DMatrix::from_fn(c.len(), c.len(), |i, j| {
+            (q[(i, j)] + if i == j { reg[i] } else { 0.0 }) / (c[i] * c[j]).sqrt()
+        })
+    }
+
+    #[test]
+    fn convexify_takes_the_absolute_value_in_the_scaled_coordinates() {
+        // Units far apart (a torque and a stiffness), indefinite, every |λ| above the floor.
+        let c: [f64; 3] = [4e4, 1e-4, 2.0];
+        let reg = [0.5, 1e-6, 0.0];
+        let a = DMatrix::from_row_slice(3, 3, &[3.0, -2.0, 0.5, -2.0, -1.0, 0.3, 0.5, 0.3, 0.7]);
+        let s = DMatrix::from_diagonal(&DVector::from_iterator(3, c.iter().map(|c| c.sqrt())));
+        let mut q = &s * &a * &s;
+        for j in 0..3 {
+            q[(j, j)] -= reg[j];
+        }
+        let before = scaled(&q, &c, &reg);
+        let eig = before.clone().symmetric_eigen();
+        assert!(eig.eigenvalues.min() < 0.0, "the case is indefinite");
+        assert!(eig.eigenvalues.iter().all(|l| l.abs() > EIGEN_FLOOR));
+        let mut after = q.clone();
+        convexify(&mut after, &c, &reg);
+        let m = scaled(&after, &c, &reg);
+        // |A| is the unique positive definite square root of A²: M² = A² and M > 0.
+        let diff = (&m * &m - &before * &before).abs().max();
+        assert!(diff < 1e-12 * before.norm_squared(), "M² − A² = {diff}");
+        assert!(m.clone().symmetric_eigen().eigenvalues.min() > 0.0);
+        // What was added, in the original units, is positive semidefinite.
+        let added = (&after - &q).symmetric_eigen().eigenvalues.min();
+        assert!(added > -1e-9 * q.norm(), "added {added}");
+    }
+
+    #[test]
+    fn convexify_keeps_a_positive_definite_matrix_and_floors_small_eigenvalues() {
+        let c = [1.0, 9.0];
+        let reg = [0.0, 0.0];
+        let pd = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 9.0]);
+        let mut same = pd.clone();
+        convexify(&mut same, &c, &reg);
+        assert!((&same - &pd).abs().max() < 1e-12);
+        // Singular: eigenvalues 0 and 2 in the scaled coordinates; the 0 is raised to the floor.
+        let singular = DMatrix::from_row_slice(2, 2, &[1.0, 3.0, 3.0, 9.0]);
+        let mut raised = singular.clone();
+        convexify(&mut raised, &c, &reg);
+        let mut l: Vec<f64> = scaled(&raised, &c, &reg)
+            .symmetric_eigen()
+            .eigenvalues
+            .iter()
+            .copied()
+            .collect();
+        l.sort_by(f64::total_cmp);
+        assert!(
+            (l[0] - EIGEN_FLOOR).abs() < 1e-12 && (l[1] - 2.0).abs() < 1e-12,
+            "{l:?}"
+        );
+    }
 }

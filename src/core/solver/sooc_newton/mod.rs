@@ -37,7 +37,7 @@ mod backward;
 mod forward;
 mod optimality;
 
-use backward::Backward;
+use backward::{Backstep, Backward};
 use forward::rollout;
 pub use optimality::Optimality;
 use optimality::control_scales;
@@ -78,6 +78,22 @@ pub struct SoocOptions {
     /// divergent arm: 220 iterations do not reach the tolerances that 52 exact ones do). What a
     /// few warm-started iterations per re-solve need (the `replan` strategy), not a plan.
     pub flow_third_derivatives: bool,
+    /// What a backward pass does with a stage whose Newton `Q_uu` is not positive definite
+    /// (default [`Indefinite::Regularize`]).
+    pub indefinite: Indefinite,
+}
+
+/// The treatment of an indefinite Newton model (far from an optimum, or near a saddle).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Indefinite {
+    /// Raise the Levenberg–Marquardt μ, for every stage, until every stage QP is convex.
+    #[default]
+    Regularize,
+    /// Convexify only the indefinite stages: their `Q_uu` by its absolute value (the
+    /// saddle-free Newton step, stage by stage; see the backward pass), μ raised only when a
+    /// step fails.
+    SaddleFree,
 }
 
 impl Default for SoocOptions {
@@ -89,6 +105,7 @@ impl Default for SoocOptions {
             mu_min: 1e-6,
             mu_max: 1e10,
             flow_third_derivatives: true,
+            indefinite: Indefinite::Regularize,
         }
     }
 }
@@ -122,6 +139,9 @@ pub struct SoocSolution {
     pub solve_time: Duration,
     /// `J` after each accepted step.
     pub history: Vec<f64>,
+    /// Stage `Q_uu` convexified over the solve, summed over the backward passes
+    /// ([`Indefinite::SaddleFree`]; always 0 with [`Indefinite::Regularize`]).
+    pub convexified: usize,
 }
 
 /// Errors of a solve: the problem does not fit the workspace, or cannot be started.
@@ -311,29 +331,38 @@ impl SoocSolver {
         };
         let mut history = Vec::new();
         let mut iterations = 0;
+        let mut convexified = 0;
         let (stop, optimality) = loop {
             // The Newton model costs the flow's third derivatives. While it keeps failing (far
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
             // in between.
             let try_newton = self.prepare_model(problem, &mut model);
-            let (predicted, newton) =
+            let (step, newton) =
                 self.regularized_backward(problem.bounds, &mut damping, try_newton);
             self.newton_model = newton;
-            let pg =
-                self.projected_gradient_tested(problem.bounds, &scale, cost, newton, predicted);
+            // Only the Newton model itself (no stage convexified) predicts what a Newton step
+            // gains; the Gauss–Newton model's prediction says nothing about optimality.
+            let exact = step.filter(|s| newton && s.convexified == 0);
+            let pg = self.projected_gradient_tested(
+                problem.bounds,
+                &scale,
+                cost,
+                exact.is_some(),
+                exact.map(|s| (s.dv1, s.dv2)),
+            );
             if newton {
                 model.gauss_newton_run = 0;
             } else {
                 model.gauss_newton_run += 1;
             }
-            let Some((dv1, dv2)) = predicted else {
+            convexified += step.map_or(0, |s| s.convexified);
+            let Some(Backstep { dv1, dv2, .. }) = step else {
                 break (
                     SoocStop::RegularizationLimit,
                     self.optimality(pg, None, cost),
                 );
             };
-            // The Gauss–Newton model's prediction says nothing about optimality.
-            let optimality = self.optimality(pg, newton.then_some(dv1 + dv2), cost);
+            let optimality = self.optimality(pg, exact.map(|s| s.dv1 + s.dv2), cost);
             if optimality.met() {
                 break (SoocStop::Converged, optimality);
             }
@@ -374,6 +403,7 @@ impl SoocSolver {
             optimality,
             solve_time: start.elapsed(),
             history,
+            convexified,
         })
     }
 
@@ -451,18 +481,20 @@ impl SoocSolver {
     /// Backward passes, raising μ until every stage QP is convex. Far from the optimum the
     /// Newton model can be too indefinite for any sensible μ; then this iteration uses the
     /// Gauss–Newton model (no curvature term, the ILQG model), which is convex in the controls,
-    /// and a later iteration tries Newton again. The predicted decrease terms (`None`: μ passed
-    /// its limit) and whether they are Newton's.
+    /// and a later iteration tries Newton again. With [`Indefinite::SaddleFree`] a Newton pass
+    /// convexifies the indefinite stages instead. The backward pass's prediction (`None`: μ
+    /// passed its limit) and whether it is from the Newton model.
     fn regularized_backward(
         &mut self,
         bounds: &Bounds,
         damping: &mut Damping,
         try_newton: bool,
-    ) -> (Option<(f64, f64)>, bool) {
+    ) -> (Option<Backstep>, bool) {
         let mut newton = try_newton;
         let mut mu_here = damping.mu;
+        let saddle_free = self.options.indefinite == Indefinite::SaddleFree;
         let predicted = loop {
-            if let Some(dv) = self.backward(bounds, mu_here, newton) {
+            if let Some(dv) = self.backward(bounds, mu_here, newton, newton && saddle_free) {
                 break Some(dv);
             }
             damping.step = (damping.step * 2.0).max(2.0);
