@@ -6,6 +6,20 @@ use super::SoocSolver;
 use crate::core::solver::Bounds;
 use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, solve_box_qp};
 use nalgebra::{DMatrix, DVector, SMatrix};
+use serde::{Deserialize, Serialize};
+
+/// The treatment of an indefinite Newton model (far from an optimum, or near a saddle).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Indefinite {
+    /// Raise the Levenberg–Marquardt μ, for every stage, until every stage QP is convex.
+    #[default]
+    Regularize,
+    /// Convexify only the indefinite stages: their `Q_uu` by its absolute value (the
+    /// saddle-free Newton step, stage by stage; see the backward pass), μ raised only when a
+    /// step fails.
+    SaddleFree,
+}
 
 /// The smallest eigenvalue a convexified stage `Q_uu` keeps, relative to the controls'
 /// Gauss–Newton curvature (see [`convexify`]).

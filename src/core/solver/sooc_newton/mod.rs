@@ -37,6 +37,7 @@ mod backward;
 mod forward;
 mod optimality;
 
+pub use backward::Indefinite;
 use backward::{Backstep, Backward};
 use forward::rollout;
 pub use optimality::Optimality;
@@ -81,19 +82,6 @@ pub struct SoocOptions {
     /// What a backward pass does with a stage whose Newton `Q_uu` is not positive definite
     /// (default [`Indefinite::Regularize`]).
     pub indefinite: Indefinite,
-}
-
-/// The treatment of an indefinite Newton model (far from an optimum, or near a saddle).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Indefinite {
-    /// Raise the Levenberg–Marquardt μ, for every stage, until every stage QP is convex.
-    #[default]
-    Regularize,
-    /// Convexify only the indefinite stages: their `Q_uu` by its absolute value (the
-    /// saddle-free Newton step, stage by stage; see the backward pass), μ raised only when a
-    /// step fails.
-    SaddleFree,
 }
 
 impl Default for SoocOptions {
