@@ -189,3 +189,88 @@ fn with_noise_lockstep_and_monte_carlo_predictor_agree_within_their_spread() {
         "the naive law at 200 ms should be far worse"
     );
 }
+
+/// One trial like [`lockstep`], except that the board misses its tick at trial time `skip_ms`,
+/// if given (it wakes a period late) and integrates both periods at the next one, as the live loop does.
+fn lockstep_missing_a_tick(
+    s: &Scenario,
+    set: &Setup,
+    p: &PlanFile,
+    strategy: Strategy,
+    skip_ms: Option<u64>,
+) -> TrialRecord {
+    let track = Track::new(
+        p.policy(set).expect("policy"),
+        set.dynamics.clone(),
+        set.cost.clone(),
+        set.x0.as_slice(),
+    )
+    .unwrap();
+    let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
+    let (sensor, command) = split_latency_ms(100.0, lookahead_ms);
+    let timing = Timing {
+        latency_steps: 10,
+        sensor_latency_ns: (sensor * 1e6) as u64,
+        command_latency_ns: (command * 1e6) as u64,
+        lookahead_ns: (lookahead_ms * 1e6) as u64,
+    };
+    let mut central = Central::new(track, strategy, timing);
+    let period = 1_000_000;
+    let mut board = Board::new(
+        s.model.clone(),
+        vic::tools::launch::board_config(s, period),
+        set.x0.as_slice(),
+    )
+    .expect("board");
+    let mut now: u64 = 1_000_000_000;
+    let start = (now + central.lead_time_ns(PLANNER_PERIOD_NS)).div_ceil(period) * period;
+    let mut inputs = vic::rt::board::Inputs::default();
+    inputs.push_control(&central.begin_trial(0, 1, start, now));
+    let mut out = Vec::new();
+    while !central.trial_done() && now < start + 5_000_000_000 {
+        if now.is_multiple_of(PLANNER_PERIOD_NS) {
+            out.clear();
+            central.poll(now, &mut out);
+            for c in &out {
+                inputs.push_command(c);
+            }
+        }
+        if Some(now) != skip_ms.map(|ms| start + ms * 1_000_000) {
+            let o = board.step(now, &mut inputs);
+            central.on_state(&o.state, now);
+        }
+        now += period;
+    }
+    central.record()
+}
+
+#[test]
+fn a_late_board_tick_is_counted_and_leaves_the_open_loop_plant_where_it_was() {
+    // The live sweep compares its daemons with lockstep and skips the points whose counts say the
+    // schedule slipped; this is what those counts and that comparison rest on. A board that
+    // wakes a period late integrates both periods, the law evaluated in each: the open-loop plan
+    // reads no state, so its plant must end exactly where it ends on time, while the state
+    // recorded (and fed back) for the knot of the missed tick is a period off, and counted.
+    let (s, mut set, p) = joint(0.0);
+    set.x0[0] += 3f64.to_radians();
+    let on_time = lockstep_missing_a_tick(&s, &set, &p, Strategy::Stiffness, None);
+    let late = lockstep_missing_a_tick(&s, &set, &p, Strategy::Stiffness, Some(200));
+    assert_eq!(on_time.off_knot_states, 0);
+    assert_eq!(late.off_knot_states, 1);
+    assert_eq!((late.missing_states, late.stale_feedback), (0, 0));
+    let n = on_time.x.len() - 1;
+    assert_eq!(on_time.x[n], late.x[n], "the open-loop plant moved");
+    assert_ne!(
+        on_time.x[20], late.x[20],
+        "knot 20 recorded from the late tick"
+    );
+    for k in (0..=n).filter(|&k| k != 20) {
+        assert_eq!(on_time.x[k], late.x[k], "knot {k}");
+    }
+    // The predictor feeds that state back (10 knots later): its commands change.
+    let on_time = lockstep_missing_a_tick(&s, &set, &p, Strategy::Predictor, None);
+    let late = lockstep_missing_a_tick(&s, &set, &p, Strategy::Predictor, Some(200));
+    assert_eq!(late.off_knot_states, 1);
+    assert_eq!(on_time.u[..30], late.u[..30]);
+    assert_ne!(on_time.u[30..], late.u[30..]);
+}

@@ -163,6 +163,23 @@ impl SweepArgs {
                 p.mean_stiffness
             );
         }
+        // Live: say which points the schedule touched (a late state changes what feedback saw).
+        for p in &sweep.points {
+            if let Some(t) = p.live.filter(|t| !t.on_schedule()) {
+                println!(
+                    "note: {} at {} ms ran off schedule: {} stale feedback knots, {} missing \
+                     and {} off-knot states, {} central overruns, {} safe-hold and {} stalled trials",
+                    p.strategy.name(),
+                    p.latency_ms,
+                    t.stale_feedback,
+                    t.missing_states,
+                    t.off_knot_states,
+                    t.central_overruns,
+                    t.safe_hold_trials,
+                    t.stalled_trials
+                );
+            }
+        }
         Ok(())
     }
 }

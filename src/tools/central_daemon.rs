@@ -283,13 +283,15 @@ fn print_result(result: &StrategyResult, delays: &Delays) {
         f(result.max_error)
     );
     println!(
-        "diverged {} of {}; safe hold in {}, fault in {}, stalled {} trials; {} stale feedback knots",
+        "diverged {} of {}; safe hold in {}, fault in {}, stalled {} trials; {} stale feedback \
+         knots, {} off-knot states",
         result.diverged,
         result.trials,
         result.safe_hold_trials,
         result.fault_trials,
         result.stalled_trials,
-        result.stale_feedback
+        result.stale_feedback,
+        result.off_knot_states
     );
     let c = &result.central;
     println!(

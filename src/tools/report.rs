@@ -99,6 +99,9 @@ pub struct StrategyResult {
     /// Knots whose feedback used a state older than the latency (all trials).
     pub stale_feedback: usize,
     pub missing_states: usize,
+    /// Knots whose state came from a later board tick than the knot's (all trials).
+    #[serde(default)]
+    pub off_knot_states: usize,
     /// Monte Carlo expected cost over the trials that did not diverge.
     pub expected_cost: Option<f64>,
     /// The central loop's compute time per period and its overruns (all trials).
@@ -202,6 +205,7 @@ pub fn summarize(
         stalled_trials: records.iter().filter(|r| r.stalled).count(),
         stale_feedback: records.iter().map(|r| r.stale_feedback).sum(),
         missing_states: records.iter().map(|r| r.missing_states).sum(),
+        off_knot_states: records.iter().map(|r| r.off_knot_states).sum(),
         expected_cost: some(kept.iter().map(|t| t.cost).sum::<f64>() / count),
         central: central.compute_timing(),
     }

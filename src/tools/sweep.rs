@@ -159,6 +159,37 @@ pub struct SweepPoint {
     /// plans' for `replan`, with the feedback's share for `stiffness+predictor`.
     pub mean_stiffness: f64,
     pub unit: Unit,
+    /// Live only: what the daemons' schedule did to the trials (`None` offline and in lockstep,
+    /// where nothing can be late).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub live: Option<LiveTiming>,
+}
+
+/// What the live schedule did to a point's trials, over all of them. With every count zero, each
+/// state reached the central controller in its period and each slice the board, so the run is
+/// the one lockstep computes on a simulated clock; a count above zero says where a loaded
+/// machine made the live run differ (the feedback strategies see it, the open-loop plan not).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LiveTiming {
+    /// Knots whose feedback used a state older than the latency (its state was late).
+    pub stale_feedback: usize,
+    /// Knots with no state recorded.
+    pub missing_states: usize,
+    /// Knots whose state came from a later board tick than the knot's (a late board tick or a
+    /// lost state): what was recorded and fed back there is a board period or more off.
+    pub off_knot_states: usize,
+    /// Central periods whose work overran the period (the previous slice went out again).
+    pub central_overruns: u64,
+    /// Trials in which the board fell back to safe hold, or that stalled.
+    pub safe_hold_trials: usize,
+    pub stalled_trials: usize,
+}
+
+impl LiveTiming {
+    /// Every state and slice came in its period.
+    pub fn on_schedule(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 /// What a point's trials measured, offline or live (the fields of [`SweepPoint`] of that name;
@@ -171,6 +202,7 @@ struct Measured {
     /// Mean stiffness the trials commanded ([`commanded_stiffness`]).
     mean_stiffness: f64,
     unit: Unit,
+    live: Option<LiveTiming>,
 }
 
 /// The whole curve.
@@ -252,6 +284,14 @@ pub fn sweep_latency(
                         expected_cost_mc: r.expected_cost,
                         mean_stiffness: executed_stiffness(&set, &trials),
                         unit: r.unit,
+                        live: Some(LiveTiming {
+                            stale_feedback: r.stale_feedback,
+                            missing_states: r.missing_states,
+                            off_knot_states: r.off_knot_states,
+                            central_overruns: r.central.overruns,
+                            safe_hold_trials: r.safe_hold_trials,
+                            stalled_trials: r.stalled_trials,
+                        }),
                     }
                 }
                 Execution::Offline | Execution::Lockstep => {
@@ -284,6 +324,7 @@ pub fn sweep_latency(
                         expected_cost_mc: r.expected_cost_mc,
                         mean_stiffness: executed_stiffness(&set, &trials),
                         unit: r.unit,
+                        live: None,
                     }
                 }
             };
@@ -299,6 +340,7 @@ pub fn sweep_latency(
                 expected_cost_predicted: predicted_cost(&set, &policy, feedback),
                 mean_stiffness: m.mean_stiffness,
                 unit: m.unit,
+                live: m.live,
             });
         }
     }

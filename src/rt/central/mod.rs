@@ -130,6 +130,10 @@ pub struct TrialRecord {
     pub stale_feedback: usize,
     /// Knots with no state recorded.
     pub missing_states: usize,
+    /// Knots whose state was recorded from a later tick than the knot's (the board skipped the
+    /// knot's tick, or its state was lost): the truth recorded there, and what the feedback saw
+    /// of that knot, is up to a few board periods off.
+    pub off_knot_states: usize,
     /// The board went to safe hold or fault during the movement.
     pub safe_hold: bool,
     pub fault: bool,
@@ -159,6 +163,7 @@ pub struct Central {
     knots: Vec<Knot>,
     sent_u: Vec<[f64; MAX_NU]>,
     stale_feedback: usize,
+    off_knot_states: usize,
     safe_hold: bool,
     fault: bool,
     /// A state acknowledging this trial's reset arrived.
@@ -248,6 +253,7 @@ impl Central {
             knots: Vec::with_capacity(n),
             sent_u: Vec::with_capacity(n),
             stale_feedback: 0,
+            off_knot_states: 0,
             safe_hold: false,
             fault: false,
             acknowledged: false,
@@ -318,6 +324,7 @@ impl Central {
         self.knots.clear();
         self.sent_u.clear();
         self.stale_feedback = 0;
+        self.off_knot_states = 0;
         self.safe_hold = false;
         self.fault = false;
         self.acknowledged = false;
@@ -390,6 +397,7 @@ impl Central {
             }
         }
         if self.recorded[k].is_none() {
+            self.off_knot_states += (s.trial_time_ns != k as u64 * dt) as usize;
             self.recorded[k] = Some(x);
             self.sensor_line
                 .push_back((recv_ns + self.timing.sensor_latency_ns, k, x));
@@ -582,6 +590,7 @@ impl Central {
             u,
             stale_feedback: self.stale_feedback,
             missing_states: missing,
+            off_knot_states: self.off_knot_states,
             safe_hold: self.safe_hold,
             fault: self.fault,
             stalled: self.stalled || !self.trial_done(),

@@ -329,6 +329,7 @@ mod tests {
             expected_cost_predicted: v,
             mean_stiffness: 0.0,
             unit: Unit::Millimetre,
+            live: None,
         };
         let lat = [0.0, 50.0, 100.0];
         let mut points = Vec::new();
