@@ -53,6 +53,21 @@ fn a_bad_override_names_its_key() {
         ],
     );
     assert_error(&out, 2, "vic", "dt");
+    // A value of the right type that the solver cannot use: named with its section.
+    for bad in ["0", "-1e-2", "nan"] {
+        let set = format!("solver.third_derivatives_below={bad}");
+        let out = run(
+            VIC,
+            &[
+                "plan",
+                "--config",
+                "config/two_link_reach.toml",
+                "--set",
+                &set,
+            ],
+        );
+        assert_error(&out, 2, "vic", "[solver] third_derivatives_below");
+    }
     let out = run(BOARD, &["--set", "nosuchkey"]);
     assert_error(&out, 2, "vic-board", "--set nosuchkey");
 }

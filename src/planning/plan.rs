@@ -77,6 +77,9 @@ pub fn solve_sooc(
     let options = SoocOptions {
         max_iterations: solver.options.max_iterations,
         indefinite: solver.indefinite,
+        third_derivatives_below: solver
+            .third_derivatives_below
+            .unwrap_or(SoocOptions::default().third_derivatives_below),
         ..SoocOptions::default()
     };
     let sizing = MomentDynamics::new(&setup.dynamics);

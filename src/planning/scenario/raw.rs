@@ -264,6 +264,9 @@ pub(super) struct RawSolver {
     pub noise_continuation: Vec<f64>,
     /// SOOC: what to do with an indefinite Newton model.
     pub indefinite: Indefinite,
+    /// SOOC: the relative gain per step below which the Newton model adds the flow's third
+    /// derivatives (absent: always).
+    pub third_derivatives_below: Option<f64>,
 }
 
 impl Default for RawSolver {
@@ -281,6 +284,7 @@ impl Default for RawSolver {
             damp_short_steps: d.damp_short_steps,
             noise_continuation: vec![1.0],
             indefinite: Indefinite::default(),
+            third_derivatives_below: None,
         }
     }
 }

@@ -20,6 +20,10 @@ pub struct SolverSection {
     /// SOOC: what a backward pass does with a stage whose Newton model is indefinite (default
     /// `regularize`: raise μ for every stage; `saddle_free`: convexify that stage alone).
     pub indefinite: Indefinite,
+    /// SOOC: the Newton model leaves the flow's third derivatives out while an accepted step
+    /// gains more than this fraction of the expected cost (`None`, the default: always in; see
+    /// [`crate::core::solver::sooc_newton::SoocOptions::third_derivatives_below`]).
+    pub third_derivatives_below: Option<f64>,
 }
 
 impl Default for SolverSection {
@@ -30,6 +34,7 @@ impl Default for SolverSection {
             options: raw.options(),
             noise_continuation: raw.noise_continuation,
             indefinite: raw.indefinite,
+            third_derivatives_below: raw.third_derivatives_below,
         }
     }
 }
@@ -67,11 +72,22 @@ impl RawSolver {
         check.non_negative(self.tolerance, "solver", "tolerance")?;
         check.non_negative(self.mu_init, "solver", "mu_init")?;
         check.positive(self.mu_max, "solver", "mu_max")?;
+        // `inf`: always the exact model (the default).
+        if let Some(below) = self.third_derivatives_below
+            && (below.is_nan() || below <= 0.0)
+        {
+            return Err(check.invalid(
+                "solver",
+                "third_derivatives_below",
+                format!("must be a positive number or inf, got {below}"),
+            ));
+        }
         Ok(SolverSection {
             method: self.method,
             options: self.options(),
             noise_continuation: self.noise_continuation,
             indefinite: self.indefinite,
+            third_derivatives_below: self.third_derivatives_below,
         })
     }
 }

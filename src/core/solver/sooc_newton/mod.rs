@@ -79,6 +79,12 @@ pub struct SoocOptions {
     /// divergent arm: 220 iterations do not reach the tolerances that 52 exact ones do). What a
     /// few warm-started iterations per re-solve need (the `replan` strategy), not a plan.
     pub flow_third_derivatives: bool,
+    /// With `flow_third_derivatives`: the Newton model leaves them out while the last accepted
+    /// step gained more than this fraction of `J`, and adds them for good once a step gains
+    /// less (default ∞: always). Far from the optimum the model without them steps as well at
+    /// a fifth of the cost; near it only the exact Hessian converges fast, and only a pass with
+    /// it tests the predicted decrease (so `Converged` still means the exact model's).
+    pub third_derivatives_below: f64,
     /// What a backward pass does with a stage whose Newton `Q_uu` is not positive definite
     /// (default [`Indefinite::Regularize`]).
     pub indefinite: Indefinite,
@@ -93,6 +99,7 @@ impl Default for SoocOptions {
             mu_min: 1e-6,
             mu_max: 1e10,
             flow_third_derivatives: true,
+            third_derivatives_below: f64::INFINITY,
             indefinite: Indefinite::Regularize,
         }
     }
@@ -130,6 +137,9 @@ pub struct SoocSolution {
     /// Stage `Q_uu` convexified over the solve, summed over the backward passes
     /// ([`Indefinite::SaddleFree`]; always 0 with [`Indefinite::Regularize`]).
     pub convexified: usize,
+    /// Accepted steps taken while the model left the flow's third derivatives out
+    /// ([`SoocOptions::third_derivatives_below`]; 0 by default).
+    pub without_third: usize,
 }
 
 /// Errors of a solve: the problem does not fit the workspace, or cannot be started.
@@ -316,10 +326,13 @@ impl SoocSolver {
             needs_expansion: true,
             has_second_order: false,
             gauss_newton_run: 0,
+            third: self.options.flow_third_derivatives
+                && self.options.third_derivatives_below == f64::INFINITY,
         };
         let mut history = Vec::new();
         let mut iterations = 0;
         let mut convexified = 0;
+        let mut without_third = 0;
         let (stop, optimality) = loop {
             // The Newton model costs the flow's third derivatives. While it keeps failing (far
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
@@ -330,7 +343,8 @@ impl SoocSolver {
             self.newton_model = newton;
             // Only the Newton model itself (no stage convexified) predicts what a Newton step
             // gains; the Gauss–Newton model's prediction says nothing about optimality.
-            let exact = step.filter(|s| newton && s.convexified == 0);
+            let full = model.third || !self.options.flow_third_derivatives;
+            let exact = step.filter(|s| newton && s.convexified == 0 && full);
             let pg = self.projected_gradient_tested(
                 problem.bounds,
                 &scale,
@@ -361,8 +375,16 @@ impl SoocSolver {
                 Some((c, alpha)) => {
                     std::mem::swap(&mut self.z, &mut self.cand_z);
                     std::mem::swap(&mut self.u, &mut self.cand_u);
+                    // Close enough to the optimum for the exact Hessian (for good).
+                    let gain = (cost - c) / c.abs().max(1e-300);
+                    if self.options.flow_third_derivatives
+                        && gain < self.options.third_derivatives_below
+                    {
+                        model.third = true;
+                    }
                     cost = c;
                     iterations += 1;
+                    without_third += usize::from(!full);
                     history.push(c);
                     self.notify(iterations, c, damping.mu, alpha);
                     model.needs_expansion = true;
@@ -376,6 +398,14 @@ impl SoocSolver {
                     // rather than inflate μ.
                     if optimality.predicted_decrease < ROUND_OFF || !damping.increase(&self.options)
                     {
+                        if !full {
+                            // The model without the third derivatives found no descent at any
+                            // μ: the exact one, from a fresh μ.
+                            model.third = true;
+                            model.has_second_order = false;
+                            damping = Damping { mu: 0.0, step: 1.0 };
+                            continue;
+                        }
                         break (SoocStop::RegularizationLimit, optimality);
                     }
                 }
@@ -392,6 +422,7 @@ impl SoocSolver {
             solve_time: start.elapsed(),
             history,
             convexified,
+            without_third,
         })
     }
 
@@ -449,7 +480,7 @@ impl SoocSolver {
         }
         let try_newton = model.gauss_newton_run.is_multiple_of(NEWTON_RETRY);
         if try_newton && !model.has_second_order {
-            self.expand_second_order(problem);
+            self.expand_second_order(problem, model.third);
             model.has_second_order = true;
         }
         try_newton
@@ -502,9 +533,8 @@ impl SoocSolver {
 
     /// The second-order pieces of the moment step at every knot (in parallel), for the Newton
     /// model.
-    fn expand_second_order(&mut self, problem: &SoocProblem) {
+    fn expand_second_order(&mut self, problem: &SoocProblem, third: bool) {
         let (z, u, lam) = (&self.z, &self.u, &self.lam);
-        let third = self.options.flow_third_derivatives;
         self.expansions
             .par_iter_mut()
             .enumerate()
@@ -588,4 +618,6 @@ struct ModelState {
     has_second_order: bool,
     /// Iterations in a row that fell back to Gauss–Newton.
     gauss_newton_run: usize,
+    /// The Newton model includes the flow's third derivatives (the exact Hessian).
+    third: bool,
 }
