@@ -21,15 +21,17 @@ use crate::core::policy::{Feedback, Policy};
 use crate::core::replan::{Executor, ReplanOptions, ReplanStats, Replanner};
 use crate::core::scalar::{MAX_NU, MAX_NX};
 mod background;
+mod compute;
 mod live;
 mod lockstep;
+pub use compute::{ComputeTiming, ReplanTiming};
 pub use live::{LiveError, run_live};
 pub use lockstep::lockstep;
 
 use crate::rt::realtime::LatencyHistogram;
 use crate::rt::transport::{
-    CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, Percentiles,
-    StateMsg, monotonic_ns,
+    CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, StateMsg,
+    monotonic_ns,
 };
 use nalgebra::DVector;
 use std::collections::VecDeque;
@@ -190,34 +192,6 @@ pub struct Central {
     replan_time: LatencyHistogram,
     /// Where the re-solves run when not inline ([`Central::replan_in_background`]).
     background: Option<background::Background>,
-}
-
-/// How long the central controller's periods took to compute, over all its trials.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ComputeTiming {
-    /// Compute time per period [µs] (real clock, also in lockstep).
-    pub compute_us: Percentiles,
-    /// The budget a period's work must fit in [µs] (one planner period by default).
-    pub budget_us: f64,
-    /// Periods whose work took longer than the budget: they sent the previous slice again.
-    pub overruns: u64,
-    /// For the `replan` strategy: the time of each re-solve and what the re-solves did.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub replan: Option<ReplanTiming>,
-}
-
-/// The re-solves of the `replan` strategy, over all trials.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ReplanTiming {
-    /// Time of one re-solve [µs] (real clock): one per planner period.
-    pub solve_us: Percentiles,
-    pub stats: ReplanStats,
-    /// In the background ([`Central::replan_in_background`]): re-solves adopted after the knot
-    /// they were made for, and replanning knots skipped because a re-solve was still running.
-    #[serde(default)]
-    pub late: u64,
-    #[serde(default)]
-    pub skipped: u64,
 }
 
 impl Central {
