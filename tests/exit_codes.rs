@@ -42,31 +42,31 @@ fn a_missing_scenario_file_is_named_by_every_binary() {
 
 #[test]
 fn a_bad_override_names_its_key() {
-    let out = run(
-        VIC,
-        &[
+    // A value of the wrong type, and values of the right type that the solver cannot use:
+    // each named with its key.
+    for (set, key) in [
+        ("task.dt=abc", "dt"),
+        (
+            "solver.third_derivatives_below=0",
+            "[solver] third_derivatives_below",
+        ),
+        (
+            "solver.third_derivatives_below=-1e-2",
+            "[solver] third_derivatives_below",
+        ),
+        (
+            "solver.third_derivatives_below=nan",
+            "[solver] third_derivatives_below",
+        ),
+    ] {
+        let args = [
             "plan",
             "--config",
             "config/two_link_reach.toml",
             "--set",
-            "task.dt=abc",
-        ],
-    );
-    assert_error(&out, 2, "vic", "dt");
-    // A value of the right type that the solver cannot use: named with its section.
-    for bad in ["0", "-1e-2", "nan"] {
-        let set = format!("solver.third_derivatives_below={bad}");
-        let out = run(
-            VIC,
-            &[
-                "plan",
-                "--config",
-                "config/two_link_reach.toml",
-                "--set",
-                &set,
-            ],
-        );
-        assert_error(&out, 2, "vic", "[solver] third_derivatives_below");
+            set,
+        ];
+        assert_error(&run(VIC, &args), 2, "vic", key);
     }
     let out = run(BOARD, &["--set", "nosuchkey"]);
     assert_error(&out, 2, "vic-board", "--set nosuchkey");

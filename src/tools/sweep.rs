@@ -180,8 +180,9 @@ pub struct LiveTiming {
     pub off_knot_states: usize,
     /// Central periods whose work overran the period (the previous slice went out again).
     pub central_overruns: u64,
-    /// Trials in which the board fell back to safe hold, or that stalled.
+    /// Trials in which the board fell back to safe hold (a slice came too late).
     pub safe_hold_trials: usize,
+    /// Trials that ended before their final state arrived.
     pub stalled_trials: usize,
 }
 
