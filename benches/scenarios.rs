@@ -123,7 +123,7 @@ fn main() {
         (
             "single_joint_delay deterministic",
             "single_joint_delay.toml",
-            &["noise.kind=none", "noise.sigma=0"],
+            &["noise.kind=none"],
         ),
     ];
     for (name, f, o) in extra {

@@ -1,6 +1,7 @@
 //! Costs: the discrete running cost `ℓ_k(x, u)` (already multiplied by Δ) and the final cost
 //! `g(x)`, with their derivatives.
 
+use crate::core::dense::zero;
 use crate::core::model::Exogenous;
 use nalgebra::{DMatrix, DVector};
 
@@ -90,10 +91,10 @@ impl Cost for TrackingCost {
     fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
         let r = self.target(k);
         let n = self.dof;
-        d.lx.fill(0.0);
-        d.lxx.fill(0.0);
-        d.luu.fill(0.0);
-        d.lux.fill(0.0);
+        zero(&mut d.lx);
+        zero(&mut d.lxx);
+        zero(&mut d.luu);
+        zero(&mut d.lux);
         for i in 0..n {
             d.lx[i] = 2.0 * self.dt * self.w_p * (x[i] - r.q_d[i]);
             d.lx[n + i] = 2.0 * self.dt * self.w_v * (x[n + i] - r.qd_d[i]);
@@ -109,8 +110,8 @@ impl Cost for TrackingCost {
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
         let r = self.reference.last().expect("reference is not empty");
         let n = self.dof;
-        d.lx.fill(0.0);
-        d.lxx.fill(0.0);
+        zero(&mut d.lx);
+        zero(&mut d.lxx);
         for i in 0..n {
             d.lx[i] = 2.0 * self.w_p * (x[i] - r.q_d[i]);
             d.lx[n + i] = 2.0 * self.w_v * x[n + i];

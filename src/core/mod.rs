@@ -7,6 +7,7 @@
 
 pub mod cost;
 pub mod delay;
+pub mod dense;
 pub mod dynamics;
 pub mod model;
 pub mod policy;

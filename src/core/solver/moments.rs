@@ -8,6 +8,7 @@
 //! cost it is exact, and at an ILQG optimum it equals the backward pass's `s_0`.
 
 use crate::core::cost::CostDerivatives;
+use crate::core::dense::zero;
 use crate::core::dynamics::{Linearization, NoiseKind};
 use nalgebra::DMatrix;
 
@@ -68,7 +69,7 @@ pub fn expected_cost(
     mut visit: impl FnMut(usize, &DMatrix<f64>),
 ) -> f64 {
     let horizon = lin.len();
-    ws.sigma.fill(0.0);
+    zero(&mut ws.sigma);
     let mut total = nominal_cost;
     for k in 0..horizon {
         visit(k, &ws.sigma);

@@ -8,6 +8,7 @@
 //! The pattern is read off the dense matrix at every knot (exact zeros only), so any model benefits
 //! without declaring its structure, and a product skips only terms that are exactly zero.
 
+use crate::core::dense::zero;
 use nalgebra::DMatrix;
 
 /// A matrix stored by its nonzeros, column by column (compressed sparse column).
@@ -16,6 +17,7 @@ pub struct SparseColumns {
     nrows: usize,
     /// Entries of column `j` are `start[j]..start[j + 1]`.
     start: Vec<usize>,
+    /// Room for every entry; the first `start[ncols]` are the nonzeros.
     row: Vec<usize>,
     val: Vec<f64>,
 }
@@ -26,8 +28,8 @@ impl SparseColumns {
         SparseColumns {
             nrows,
             start: vec![0; ncols + 1],
-            row: Vec::with_capacity(nrows * ncols),
-            val: Vec::with_capacity(nrows * ncols),
+            row: vec![0; nrows * ncols],
+            val: vec![0.0; nrows * ncols],
         }
     }
 
@@ -38,27 +40,27 @@ impl SparseColumns {
 
     /// Number of stored (nonzero) entries.
     pub fn nnz(&self) -> usize {
-        self.row.len()
+        self.start[self.ncols()]
     }
 
-    /// Refills from the nonzeros of `m` (same size as at construction).
+    /// Refills from the nonzeros of `m` (same size as at construction). Branch-free: every
+    /// entry is written, and the write position advances past the nonzero ones only (a branch
+    /// per entry mispredicts on the mixed patterns of the delayed plant).
     pub fn assign(&mut self, m: &DMatrix<f64>) {
         debug_assert_eq!((m.nrows(), m.ncols()), (self.nrows, self.ncols()));
-        self.row.clear();
-        self.val.clear();
         let data = m.as_slice();
         let n = self.nrows;
+        let mut len = 0;
         for j in 0..m.ncols() {
-            self.start[j] = self.row.len();
+            self.start[j] = len;
             for (i, &v) in data[j * n..(j + 1) * n].iter().enumerate() {
-                if v != 0.0 {
-                    self.row.push(i);
-                    self.val.push(v);
-                }
+                self.row[len] = i;
+                self.val[len] = v;
+                len += usize::from(v != 0.0);
             }
         }
         let ncols = self.ncols();
-        self.start[ncols] = self.row.len();
+        self.start[ncols] = len;
     }
 
     fn column(&self, j: usize) -> (&[usize], &[f64]) {
@@ -77,7 +79,7 @@ impl SparseColumns {
 
     /// `out = S M` for a dense `S` (p × nrows); `out` is p × ncols.
     pub fn right_mul(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        out.fill(0.0);
+        zero(out);
         self.right_mul_add(s, out);
     }
 

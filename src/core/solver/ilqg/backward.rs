@@ -2,6 +2,7 @@
 //! per knot from the last, the Q-function, the box-limited policy and the value update.
 
 use super::*;
+use crate::core::dense::{copy, transpose, zero};
 
 /// Scratch matrices of the backward pass.
 pub(super) struct Backward {
@@ -69,7 +70,7 @@ impl Ilqg {
         let traj = &self.nominal;
         let term = &traj.derivs[horizon];
         copy(&term.lxx, &mut bw.s_mat);
-        bw.s_vec.copy_from(&term.lx);
+        copy(&term.lx, &mut bw.s_vec);
         let mut pass = BackwardPass {
             s0: problem.cost.terminal(traj.x[horizon].as_slice()),
             dv1: 0.0,
@@ -138,9 +139,9 @@ impl Backward {
         let mut q0 = problem
             .cost
             .running(k, traj.x[k].as_slice(), traj.u[k].as_slice());
-        self.qx.copy_from(&d.lx);
+        copy(&d.lx, &mut self.qx);
         sp.a.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qx.as_mut_slice());
-        self.qu.copy_from(&d.lu);
+        copy(&d.lu, &mut self.qu);
         sp.b.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qu.as_mut_slice());
         sp.a.right_mul(&self.s_mat, &mut self.sa);
         sp.b.right_mul(&self.s_mat, &mut self.sb);
@@ -234,7 +235,7 @@ impl Backward {
             (qp.x, qp.free, qp.factor)
         };
         l.as_mut_slice().copy_from_slice(&x[..nu]);
-        gain.as_mut_slice().fill(0.0);
+        zero(gain);
         if let Some(factor) = factor {
             let mut idx = [0usize; MAX_QP];
             let mut nfree = 0;
@@ -265,7 +266,7 @@ impl Backward {
         let lqu = l.dot(&self.qu);
         let lquul = l.dot(&self.t_m);
         self.t_m += &self.qu; // Q_uu l + Q_u
-        self.s_vec.copy_from(&self.qx);
+        copy(&self.qx, &mut self.s_vec);
         self.s_vec.gemv_tr(1.0, gain, &self.t_m, 1.0);
         self.s_vec.gemv_tr(1.0, &self.qux, l, 1.0);
         copy(&self.qux, &mut self.t_mn);
@@ -316,23 +317,4 @@ fn newton_step(
     }
     factor.solve(&mut x[..idx.len()]);
     Some((x, factor))
-}
-
-/// `dst = src` for matrices of one size, as one `memcpy` (nalgebra's `copy_from` goes element by
-/// element through a generic iterator, which showed in profiles of the 42-dimensional delay
-/// problem).
-fn copy(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
-    dst.as_mut_slice().copy_from_slice(src.as_slice());
-}
-
-/// `dst = srcᵀ` on the column-major storage (see [`copy`]).
-fn transpose(src: &DMatrix<f64>, dst: &mut DMatrix<f64>) {
-    let (r, c) = (src.nrows(), src.ncols());
-    debug_assert_eq!((dst.nrows(), dst.ncols()), (c, r));
-    let (sd, dd) = (src.as_slice(), dst.as_mut_slice());
-    for j in 0..c {
-        for (i, &v) in sd[j * r..(j + 1) * r].iter().enumerate() {
-            dd[i * c + j] = v;
-        }
-    }
 }

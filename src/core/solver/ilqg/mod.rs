@@ -11,6 +11,7 @@ use super::boxqp::{MAX_QP, QpStatus, SmallCholesky, solve_box_qp};
 use super::sparse::SparseLinearization;
 use super::{Bounds, Problem};
 use crate::core::cost::CostDerivatives;
+use crate::core::dense::zero;
 use crate::core::dynamics::{Linearization, NoiseKind};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -343,7 +344,7 @@ impl Ilqg {
         shift_knots(&mut self.gains, s);
         shift_knots(&mut self.nominal.x, s);
         for l in &mut self.ff {
-            l.fill(0.0);
+            zero(l);
         }
         self.solved = false;
         if self.roll_candidate(problem, 0.0) {
@@ -379,10 +380,10 @@ impl Ilqg {
     fn iterate(&mut self, problem: &Problem, start: Instant) -> Solution {
         let stochastic = self.options.stochastic && self.dims.2 > 0;
         for g in &mut self.gains {
-            g.fill(0.0);
+            zero(g);
         }
         for l in &mut self.ff {
-            l.fill(0.0);
+            zero(l);
         }
         linearize(problem, &mut self.nominal);
         let mut reg = Regularization::new(&self.options);

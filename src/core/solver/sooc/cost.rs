@@ -2,6 +2,7 @@
 
 use super::vech_pairs;
 use crate::core::cost::{Cost, CostDerivatives, TrackingCost};
+use crate::core::dense::zero;
 use nalgebra::DMatrix;
 
 /// The expected cost of the open-loop plant in moment form: `ℓ(m, u) + ½ tr(ℓ_xx P)` per step and
@@ -69,9 +70,9 @@ impl Cost for MomentCost<'_> {
         let n = self.n;
         let mut inner = CostDerivatives::new(n, u.len());
         self.inner.running_derivatives(k, &z[..n], u, &mut inner);
-        d.lx.fill(0.0);
-        d.lxx.fill(0.0);
-        d.lux.fill(0.0);
+        zero(&mut d.lx);
+        zero(&mut d.lxx);
+        zero(&mut d.lux);
         d.lx.rows_mut(0, n).copy_from(&inner.lx);
         d.lx.rows_mut(n, z.len() - n)
             .copy_from_slice(&self.running_weights[k]);
@@ -85,8 +86,8 @@ impl Cost for MomentCost<'_> {
         let n = self.n;
         let mut inner = CostDerivatives::new(n, d.lu.len());
         self.inner.terminal_derivatives(&z[..n], &mut inner);
-        d.lx.fill(0.0);
-        d.lxx.fill(0.0);
+        zero(&mut d.lx);
+        zero(&mut d.lxx);
         d.lx.rows_mut(0, n).copy_from(&inner.lx);
         d.lx.rows_mut(n, z.len() - n)
             .copy_from_slice(&self.terminal_weights);

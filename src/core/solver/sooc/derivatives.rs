@@ -3,6 +3,7 @@
 //! costate-contracted second derivatives that the Newton model adds (`second_order`).
 
 use super::{MomentDynamics, MomentExpansion, costate_matrix, lift, unpack};
+use crate::core::dense::zero;
 use crate::core::dynamics::{DiscreteDynamics, Dynamics, NoiseKind};
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
 use nalgebra::DMatrix;
@@ -19,8 +20,8 @@ impl MomentDynamics<'_> {
         let (n, m) = (base.nx(), base.nu());
         base.linearize(k, &z[..n], u, &mut e.base);
         unpack(n, &z[n..], &mut e.p);
-        e.a.fill(0.0);
-        e.b.fill(0.0);
+        zero(&mut e.a);
+        zero(&mut e.b);
         e.a.view_mut((0, 0), (n, n)).copy_from(&e.base.a);
         e.b.view_mut((0, 0), (n, m)).copy_from(&e.base.b);
         covariance_transition(e);
@@ -62,7 +63,7 @@ impl MomentDynamics<'_> {
         if third {
             flow_third_contracted(at, s);
         } else {
-            s.h3.fill(0.0);
+            zero(&mut s.h3);
         }
         if s.curved_model && base.nw() > 0 {
             noise_gain_second_order(at, s);
@@ -183,7 +184,7 @@ fn covariance_sensitivity(at: At, s: &mut MomentExpansion) {
     s.curved_noise = false;
     for j in 0..n + m {
         s.t1.gemm(1.0, &s.da[j], &s.atl, 0.0);
-        s.next.fill(0.0);
+        crate::core::dense::zero(&mut s.next);
         if noisy {
             let v = if j < n { &mut xd[j] } else { &mut ud[j - n] };
             v.eps = 1.0;
@@ -254,7 +255,7 @@ fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
     let nv = n + m;
     let (mut x3, mut u3) = lift::<Dual<Dual<Dual64>>>(x, u);
     let mut out = [Dual::from_re(Dual::from_re(Dual64::from(0.0))); MAX_NX];
-    s.h3.fill(0.0);
+    zero(&mut s.h3);
     let mut d = [0.0; MAX_NX];
     for a in 0..nv {
         for b in a..nv {

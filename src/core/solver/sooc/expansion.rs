@@ -2,6 +2,7 @@
 //! next knot: the curvature term that turns the Gauss–Newton model into Newton's.
 
 use super::{MomentDynamics, costate_matrix, vech_len};
+use crate::core::dense::zero;
 use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
 use crate::core::model::Noise;
 use crate::core::scalar::{MAX_NU, MAX_NX};
@@ -298,8 +299,8 @@ impl MomentExpansion {
     fn scatter(&self, hzz: &mut DMatrix<f64>, huz: &mut DMatrix<f64>, huu: &mut DMatrix<f64>) {
         let (n, m) = (self.n, self.m);
         let np = vech_len(n);
-        hzz.fill(0.0);
-        huz.fill(0.0);
+        zero(hzz);
+        zero(huz);
         for i in 0..n {
             for j in 0..n {
                 hzz[(i, j)] = self.hvv[(i, j)];

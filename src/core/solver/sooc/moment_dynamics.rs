@@ -2,6 +2,7 @@
 //! `P⁺ = A P Aᵀ + Σ_i (c_i c_iᵀ + Cx_i P Cx_iᵀ)` of the module documentation).
 
 use super::{MomentExpansion, lift, pack, unpack, vech_len};
+use crate::core::dense::zero;
 use crate::core::dynamics::{DiscreteDynamics, Dynamics, Linearization, NoiseKind};
 use nalgebra::DMatrix;
 use num_dual::Dual64;
@@ -127,7 +128,7 @@ impl Dynamics for MomentDynamics<'_> {
         self.base.step(k, &z[..n], u, &mut next[..n]);
         state_linearization(self.base, k, &z[..n], u, &mut s.lin);
         unpack(n, &z[n..], &mut s.p);
-        s.next.fill(0.0);
+        zero(&mut s.next);
         add_sandwich(&mut s.next, 1.0, &s.lin.a, &s.p, &s.lin.a, &mut s.t1);
         if s.lin.noise != NoiseKind::None {
             for i in 0..s.lin.c.ncols() {

@@ -3,6 +3,7 @@
 //! QP (Tassa, Mansard & Todorov 2014), the gains and the value update.
 
 use super::SoocSolver;
+use crate::core::dense::zero;
 use crate::core::solver::Bounds;
 use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, solve_box_qp};
 use nalgebra::{DMatrix, DVector, SMatrix};
@@ -185,9 +186,9 @@ impl SoocSolver {
                 &mut bw.huu,
             );
         } else {
-            bw.hzz.fill(0.0);
-            bw.huz.fill(0.0);
-            bw.huu.fill(0.0);
+            zero(&mut bw.hzz);
+            zero(&mut bw.huz);
+            zero(&mut bw.huu);
         }
         bw.va.gemm(1.0, &bw.v, &e.a, 0.0);
         bw.vb.gemm(1.0, &bw.v, &e.b, 0.0);
@@ -323,7 +324,7 @@ fn convexify(quu: &mut DMatrix<f64>, curvature: &[f64], reg: &[f64]) {
 /// rows 0; `None` if the free block has no factor.
 fn feedback_gains(qp: &QpSolution, quz: &DMatrix<f64>, gain: &mut DMatrix<f64>) -> Option<()> {
     let (m, nz) = gain.shape();
-    gain.fill(0.0);
+    zero(gain);
     let mut free = [0usize; MAX_QP];
     let mut nf = 0;
     for j in 0..m {

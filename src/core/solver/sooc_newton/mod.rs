@@ -27,6 +27,7 @@ use super::Bounds;
 use super::boxqp::MAX_QP;
 use super::sooc::{MomentCost, MomentDynamics, MomentExpansion};
 use crate::core::cost::{Cost, CostDerivatives};
+use crate::core::dense::zero;
 use crate::core::dynamics::Dynamics;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -392,9 +393,9 @@ impl SoocSolver {
             problem.bounds.clamp(u.as_mut_slice());
         }
         for g in &mut self.gains {
-            g.fill(0.0);
+            zero(g);
         }
-        self.z[0].fill(0.0);
+        zero(&mut self.z[0]);
         self.z[0]
             .rows_mut(0, problem.x0.len())
             .copy_from_slice(problem.x0);

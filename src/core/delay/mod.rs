@@ -14,11 +14,14 @@
 //! the paper's Eq. 13. For `d = 0` the wrapper is the plain model.
 
 use crate::core::cost::{Cost, CostDerivatives};
+use crate::core::dense::zero;
 use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
-use crate::core::solver::ilqg::IlqgError;
-use crate::core::solver::{Ilqg, IlqgOptions, Problem};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use std::sync::Mutex;
+
+mod planner;
+
+pub use planner::{DelayedPlanner, DelayedSolution, undelayed_guess};
 
 /// A discrete model whose commands act `steps` steps after they are issued.
 pub struct Delayed<D: Dynamics> {
@@ -97,7 +100,7 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
         let mut guard = self.scratch.lock().expect("scratch lock");
         let g = &mut guard.1;
         self.base.noise_gain(k, &x[..n], self.acting(x, u), g);
-        out.fill(0.0);
+        zero(out);
         out.view_mut((0, 0), (n, g.ncols())).copy_from(g);
     }
 
@@ -118,8 +121,8 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
             Err(_) => own.insert(Linearization::new(n, m, self.base.nw())),
         };
         self.base.linearize(k, &x[..n], self.acting(x, u), base);
-        lin.a.fill(0.0);
-        lin.b.fill(0.0);
+        zero(&mut lin.a);
+        zero(&mut lin.b);
         lin.noise = base.noise;
         lin.a.view_mut((0, 0), (n, n)).copy_from(&base.a);
         if self.steps == 0 {
@@ -136,13 +139,13 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
         if base.noise == NoiseKind::None {
             return;
         }
-        lin.c.fill(0.0);
+        zero(&mut lin.c);
         lin.c
             .view_mut((0, 0), (n, base.c.ncols()))
             .copy_from(&base.c);
         for i in 0..base.cx.len() {
-            lin.cx[i].fill(0.0);
-            lin.cu[i].fill(0.0);
+            zero(&mut lin.cx[i]);
+            zero(&mut lin.cu[i]);
             lin.cx[i].view_mut((0, 0), (n, n)).copy_from(&base.cx[i]);
             if self.steps == 0 {
                 lin.cu[i].copy_from(&base.cu[i]);
@@ -205,74 +208,4 @@ impl<T: Cost + ?Sized> Cost for Offset<'_, T> {
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
         self.inner.terminal_derivatives(x, d);
     }
-}
-
-/// A first guess for the delayed problem from the undelayed plant, exact without noise.
-///
-/// With `d` steps of delay the first `d` commands that act are the ones already in flight
-/// (`pending`): the plant runs open loop to `x_d`, and a command issued at `k` acts at `k + d`.
-/// For a cost that adds a control term to a state term (Eq. 14 does), the deterministic delayed
-/// problem is therefore the undelayed problem from `x_d` over knots `d..N`, whose command `j` is
-/// issued at `j`; the last `d` issued commands act after the horizon and only pay their control
-/// cost. Solving that 2-state problem instead of the `n + m d`-state one is much cheaper, and
-/// ILQG on the delayed problem then starts at its optimum (it only needs the backward pass for
-/// the delayed gains of Eq. 13). The last `d` commands minimise their control cost. `plain` is
-/// the undelayed problem (plant, cost, start state, horizon, limits), `pending` the command in
-/// flight in every slot, `u_init` a guess for the undelayed plant (its knots `d..N` are used).
-pub fn undelayed_guess(
-    plain: &Problem,
-    pending: &[f64],
-    delay: usize,
-    options: &IlqgOptions,
-    u_init: &[DVector<f64>],
-) -> Result<Vec<DVector<f64>>, IlqgError> {
-    let (base, cost, bounds) = (plain.dynamics, plain.cost, &plain.bounds);
-    let steps = plain.horizon;
-    if delay == 0 {
-        return Ok(plain_solve(plain, options, u_init)?.u);
-    }
-    let mut x = plain.x0.clone();
-    let mut next = x.clone();
-    for k in 0..delay.min(steps) {
-        base.step(k, &x, pending, &mut next);
-        std::mem::swap(&mut x, &mut next);
-    }
-    if delay >= steps {
-        return Ok(vec![DVector::from_column_slice(pending); steps]);
-    }
-    let (dynamics, tail_cost) = (Offset::new(base, delay), Offset::new(cost, delay));
-    let problem = Problem {
-        dynamics: &dynamics,
-        cost: &tail_cost,
-        x0: x,
-        horizon: steps - delay,
-        bounds: bounds.clone(),
-    };
-    let sol = plain_solve(&problem, options, &u_init[delay..])?;
-    let x_end = sol.x[sol.x.len() - 1].as_slice();
-    let mut u = sol.u;
-    let last = u[u.len() - 1].clone();
-    u.resize(steps, last);
-    // The last `delay` commands act after the horizon: only their control cost counts. One
-    // Newton step on it (exact for a quadratic control cost), clamped into the limits.
-    let mut d = CostDerivatives::new(base.nx(), base.nu());
-    for (k, uk) in u.iter_mut().enumerate().skip(steps - delay) {
-        cost.running_derivatives(k, x_end, uk.as_slice(), &mut d);
-        if let Some(step) = d.luu.clone().cholesky().map(|c| c.solve(&d.lu)) {
-            *uk -= step;
-            bounds.clamp(uk.as_mut_slice());
-        }
-    }
-    Ok(u)
-}
-
-/// Deterministic ILQG on `problem` (the noise-free plan is what [`undelayed_guess`] needs).
-fn plain_solve(
-    problem: &Problem,
-    options: &IlqgOptions,
-    u_init: &[DVector<f64>],
-) -> Result<crate::core::solver::Solution, IlqgError> {
-    let mut solver = Ilqg::new(problem, options.clone());
-    solver.options.stochastic = false;
-    solver.try_solve(problem, u_init)
 }

@@ -1,0 +1,271 @@
+//! Plans for the delayed plant (paper Eq. 13) through the undelayed one, cold and warm.
+//!
+//! With `d` steps of delay the first `d` commands that act are the ones already in flight: the
+//! plant runs open loop to `x_d`, and a command issued at `k` acts at `k + d`. For a cost that
+//! adds a control term to a state term (Eq. 14 does), the deterministic delayed problem is
+//! therefore the undelayed problem from `x_d` over knots `d..N`, whose command `j` is issued at
+//! `j`; the last `d` issued commands act after the horizon and only pay their control cost.
+//! Solving that `n`-state problem instead of the `n + m d`-state one is much cheaper, and ILQG on
+//! the delayed problem then starts at its optimum: without noise it only needs one backward pass,
+//! for the delayed gains of Eq. 13. A replan after the plan advanced `s` knots is the same
+//! construction from the new augmented state, with the undelayed problem warm-started from its
+//! previous solution shifted by `s` (the receding horizon of the central controller).
+
+use super::Offset;
+use crate::core::cost::{Cost, CostDerivatives};
+use crate::core::dynamics::Dynamics;
+use crate::core::solver::ilqg::IlqgError;
+use crate::core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
+use nalgebra::DVector;
+use std::time::Instant;
+
+/// A first guess for the delayed problem from the undelayed plant, exact without noise (see the
+/// module's documentation). `plain` is the undelayed problem (plant, cost, start state, horizon,
+/// limits), `pending` the command in flight in every slot, `u_init` a guess for the undelayed
+/// plant (its knots `d..N` are used). The last `d` commands minimise their control cost.
+pub fn undelayed_guess(
+    plain: &Problem,
+    pending: &[f64],
+    delay: usize,
+    options: &IlqgOptions,
+    u_init: &[DVector<f64>],
+) -> Result<Vec<DVector<f64>>, IlqgError> {
+    let steps = plain.horizon;
+    if delay == 0 {
+        return Ok(plain_solver(plain, options).try_solve(plain, u_init)?.u);
+    }
+    if delay >= steps {
+        return Ok(vec![DVector::from_column_slice(pending); steps]);
+    }
+    let in_flight = std::iter::repeat_n(pending, delay);
+    let x_d = state_after(plain.dynamics, &plain.x0, in_flight);
+    let (dynamics, cost) = (
+        Offset::new(plain.dynamics, delay),
+        Offset::new(plain.cost, delay),
+    );
+    let tail = tail_problem(&dynamics, &cost, x_d, steps - delay, &plain.bounds);
+    let sol = plain_solver(&tail, options).try_solve(&tail, &u_init[delay..])?;
+    let mut u = vec![DVector::zeros(plain.dynamics.nu()); steps];
+    let mut d = CostDerivatives::new(plain.dynamics.nx(), plain.dynamics.nu());
+    complete_guess(plain, &sol, &mut d, &mut u);
+    Ok(u)
+}
+
+/// Cold and warm plans for a delayed plant: the undelayed tail problem, then ILQG on the
+/// augmented plant from its solution. Both workspaces are kept, so a replan reuses them.
+pub struct DelayedPlanner {
+    delay: usize,
+    /// ILQG on the undelayed plant over knots `d..N` (deterministic).
+    tail: Ilqg,
+    /// ILQG on the augmented plant.
+    full: Ilqg,
+    guess: Vec<DVector<f64>>,
+    derivs: CostDerivatives,
+}
+
+/// A delayed plan and what it took.
+#[derive(Debug, Clone)]
+pub struct DelayedSolution {
+    /// ILQG's solution on the augmented plant; its `solve_time` covers the whole plan.
+    pub solution: Solution,
+    /// Iterations on the undelayed tail problem.
+    pub guess_iterations: usize,
+}
+
+/// How the undelayed tail problem starts.
+enum Start<'a> {
+    Cold(&'a [DVector<f64>]),
+    Shifted(usize),
+}
+
+impl DelayedPlanner {
+    /// A planner for `delayed` (an augmented plant of `plain`'s model, see
+    /// [`super::Delayed`]) with 0 < d < N steps of delay. `options` are the augmented solve's;
+    /// the tail problem is solved deterministically with the same limits.
+    pub fn new(
+        plain: &Problem,
+        delayed: &Problem,
+        options: &IlqgOptions,
+    ) -> Result<Self, IlqgError> {
+        let delay = delay_of(plain, delayed)?;
+        let (dynamics, cost) = (
+            Offset::new(plain.dynamics, delay),
+            Offset::new(plain.cost, delay),
+        );
+        let tail = tail_problem(
+            &dynamics,
+            &cost,
+            plain.x0.clone(),
+            plain.horizon - delay,
+            &plain.bounds,
+        );
+        Ok(DelayedPlanner {
+            delay,
+            tail: plain_solver(&tail, options),
+            full: Ilqg::new(delayed, options.clone()),
+            guess: vec![DVector::zeros(plain.dynamics.nu()); plain.horizon],
+            derivs: CostDerivatives::new(plain.dynamics.nx(), plain.dynamics.nu()),
+        })
+    }
+
+    /// Delay in steps `d`.
+    pub fn delay(&self) -> usize {
+        self.delay
+    }
+
+    /// Plans from `delayed.x0` (the plant's state and the commands in flight), the undelayed
+    /// plant started from `u_init` (its knots `d..N`).
+    pub fn solve(
+        &mut self,
+        plain: &Problem,
+        delayed: &Problem,
+        u_init: &[DVector<f64>],
+    ) -> Result<DelayedSolution, IlqgError> {
+        if u_init.len() != plain.horizon {
+            return Err(IlqgError::InitialGuessLength {
+                got: u_init.len(),
+                want: plain.horizon,
+            });
+        }
+        self.plan(plain, delayed, Start::Cold(&u_init[self.delay..]))
+    }
+
+    /// Replans after the plan advanced `shift` knots: `plain` and `delayed` are the problems from
+    /// there (their reference read `shift` knots later, `delayed.x0` the state and the commands
+    /// in flight now). The undelayed tail problem restarts from its previous solution shifted
+    /// ([`Ilqg::resolve_shifted`]).
+    pub fn resolve_shifted(
+        &mut self,
+        plain: &Problem,
+        delayed: &Problem,
+        shift: usize,
+    ) -> Result<DelayedSolution, IlqgError> {
+        self.plan(plain, delayed, Start::Shifted(shift))
+    }
+
+    fn plan(
+        &mut self,
+        plain: &Problem,
+        delayed: &Problem,
+        start: Start,
+    ) -> Result<DelayedSolution, IlqgError> {
+        let started = Instant::now();
+        let d = delay_of(plain, delayed)?;
+        if d != self.delay || plain.horizon != self.guess.len() {
+            return Err(IlqgError::SizeMismatch {
+                got: dims(delayed),
+                want: (
+                    plain.dynamics.nx() + plain.dynamics.nu() * self.delay,
+                    plain.dynamics.nu(),
+                    plain.dynamics.nw(),
+                    self.guess.len(),
+                ),
+            });
+        }
+        let (n, m) = (plain.dynamics.nx(), plain.dynamics.nu());
+        let in_flight = delayed.x0[n..].chunks_exact(m);
+        let x_d = state_after(plain.dynamics, &delayed.x0[..n], in_flight);
+        let (dynamics, cost) = (Offset::new(plain.dynamics, d), Offset::new(plain.cost, d));
+        let tail = tail_problem(&dynamics, &cost, x_d, plain.horizon - d, &plain.bounds);
+        let sol = match start {
+            Start::Cold(u) => self.tail.try_solve(&tail, u)?,
+            Start::Shifted(s) => self.tail.resolve_shifted(&tail, s)?,
+        };
+        complete_guess(plain, &sol, &mut self.derivs, &mut self.guess);
+        let mut solution = self.full.try_solve(delayed, &self.guess)?;
+        solution.solve_time = started.elapsed();
+        Ok(DelayedSolution {
+            solution,
+            guess_iterations: sol.iterations,
+        })
+    }
+}
+
+/// `d` from the two problems' dimensions, when `delayed` is `plain`'s model with `d` commands in
+/// flight (0 < d < N) and the same horizon.
+fn delay_of(plain: &Problem, delayed: &Problem) -> Result<usize, IlqgError> {
+    let (n, m) = (plain.dynamics.nx(), plain.dynamics.nu());
+    let extra = delayed.dynamics.nx().saturating_sub(n);
+    let d = extra / m.max(1);
+    let fits = delayed.dynamics.nu() == m
+        && extra == d * m
+        && delayed.x0.len() == n + d * m
+        && plain.x0.len() == n
+        && d > 0
+        && d < plain.horizon
+        && delayed.horizon == plain.horizon;
+    if fits {
+        Ok(d)
+    } else {
+        Err(IlqgError::SizeMismatch {
+            got: dims(delayed),
+            want: dims(plain),
+        })
+    }
+}
+
+fn dims(p: &Problem) -> (usize, usize, usize, usize) {
+    (p.dynamics.nx(), p.dynamics.nu(), p.dynamics.nw(), p.horizon)
+}
+
+/// The state the commands in flight lead to: `x0` stepped open loop under each of them in turn.
+fn state_after<'a>(
+    base: &dyn Dynamics,
+    x0: &[f64],
+    in_flight: impl Iterator<Item = &'a [f64]>,
+) -> Vec<f64> {
+    let mut x = x0.to_vec();
+    let mut next = x.clone();
+    for (k, u) in in_flight.enumerate() {
+        base.step(k, &x, u, &mut next);
+        std::mem::swap(&mut x, &mut next);
+    }
+    x
+}
+
+/// The undelayed problem over knots `d..N` from `x_d`.
+fn tail_problem<'a>(
+    dynamics: &'a dyn Dynamics,
+    cost: &'a dyn Cost,
+    x_d: Vec<f64>,
+    horizon: usize,
+    bounds: &Bounds,
+) -> Problem<'a> {
+    Problem {
+        dynamics,
+        cost,
+        x0: x_d,
+        horizon,
+        bounds: bounds.clone(),
+    }
+}
+
+/// Deterministic ILQG for the tail problem (the noise-free plan is the guess).
+fn plain_solver(problem: &Problem, options: &IlqgOptions) -> Ilqg {
+    let mut solver = Ilqg::new(problem, options.clone());
+    solver.options.stochastic = false;
+    solver
+}
+
+/// The delayed problem's commands from the tail's solution: the tail's `N − d` commands, then
+/// the last `d`, which act after the horizon and only pay their control cost: one Newton step on
+/// it (exact for a quadratic control cost), clamped into the limits.
+fn complete_guess(
+    plain: &Problem,
+    tail: &Solution,
+    d: &mut CostDerivatives,
+    u: &mut [DVector<f64>],
+) {
+    let x_end = tail.x[tail.x.len() - 1].as_slice();
+    let last = &tail.u[tail.u.len() - 1];
+    for (k, uk) in u.iter_mut().enumerate() {
+        uk.copy_from(tail.u.get(k).unwrap_or(last));
+        if k >= tail.u.len() {
+            plain.cost.running_derivatives(k, x_end, uk.as_slice(), d);
+            if let Some(step) = d.luu.clone().cholesky().map(|c| c.solve(&d.lu)) {
+                *uk -= step;
+                plain.bounds.clamp(uk.as_mut_slice());
+            }
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! The delayed plant planned through the undelayed one ([`DelayedPlanner`]): cold, it is the
+//! undelayed guess followed by ILQG on the augmented plant, to the last bit; warm, after the plan
+//! advanced, it reaches the optimum that ILQG on the augmented plant finds from scratch, with
+//! fewer iterations on the tail problem than a cold plan; wrong problems are errors.
+
+use nalgebra::DVector;
+use std::path::Path;
+use vic::core::cost::TrackingCost;
+use vic::core::delay::{Delayed, DelayedPlanner, Offset};
+use vic::core::dynamics::DiscreteDynamics;
+use vic::core::solver::{Ilqg, IlqgError, Problem};
+use vic::planning::plan::{self, DelayedCost, Setup};
+use vic::planning::scenario::Scenario;
+
+fn load(overrides: &[&str]) -> (Scenario, Setup) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/single_joint_delay.toml");
+    let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let s = Scenario::load(&path, &o).expect("scenario loads");
+    let setup = plan::setup(&s).expect("scenario sets up");
+    (s, setup)
+}
+
+/// The plant, its cost, the augmented plant and its cost, read some knots late.
+type At<'a> = (
+    Offset<'a, DiscreteDynamics>,
+    Offset<'a, TrackingCost>,
+    Offset<'a, Delayed<DiscreteDynamics>>,
+    Offset<'a, DelayedCost<'a>>,
+);
+
+/// The undelayed and the augmented problem, both read `offset` knots late, from `x0` (the
+/// augmented state: the plant's state and the commands in flight).
+fn problems<'a>(
+    s: &Scenario,
+    setup: &Setup,
+    offsets: &'a At<'a>,
+    x0: &[f64],
+) -> (Problem<'a>, Problem<'a>) {
+    let n = setup.x0.len();
+    let plain = Problem {
+        dynamics: &offsets.0,
+        cost: &offsets.1,
+        x0: x0[..n].to_vec(),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    let augmented = Problem {
+        dynamics: &offsets.2,
+        cost: &offsets.3,
+        x0: x0.to_vec(),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    (plain, augmented)
+}
+
+#[test]
+fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
+    let (s, setup) = load(&["noise.kind=none"]);
+    let d = s.task.delay_steps();
+    let n = setup.x0.len();
+    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let cost = DelayedCost::new(&setup.cost, n);
+    let at = |k| {
+        (
+            Offset::new(&setup.dynamics, k),
+            Offset::new(&setup.cost, k),
+            Offset::new(&delayed, k),
+            Offset::new(&cost, k),
+        )
+    };
+    let (start, later) = (at(0), at(2));
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let (plain, augmented) = problems(&s, &setup, &start, &x0);
+    let options = &s.solver.options;
+
+    // Cold: bit for bit the undelayed guess followed by ILQG on the augmented plant.
+    let mut planner = DelayedPlanner::new(&plain, &augmented, options).expect("sizes fit");
+    assert_eq!(planner.delay(), d);
+    let cold = planner
+        .solve(&plain, &augmented, &setup.u_init)
+        .expect("plans");
+    let guess = vic::core::delay::undelayed_guess(
+        &plain,
+        setup.u_init[0].as_slice(),
+        d,
+        options,
+        &setup.u_init,
+    )
+    .expect("guess");
+    let mut full = Ilqg::new(&augmented, options.clone());
+    let by_hand = full.try_solve(&augmented, &guess).expect("solves");
+    assert_eq!(cold.solution.u, by_hand.u);
+    assert_eq!(cold.solution.cost.to_bits(), by_hand.cost.to_bits());
+    assert!(cold.solution.stop.converged());
+
+    // Warm, two knots on (one 50 Hz period), from the state the plan predicts there.
+    let x2 = cold.solution.x[2].as_slice().to_vec();
+    let (plain2, augmented2) = problems(&s, &setup, &later, &x2);
+    let warm = planner
+        .resolve_shifted(&plain2, &augmented2, 2)
+        .expect("replans");
+    let mut fresh = DelayedPlanner::new(&plain2, &augmented2, options).expect("sizes fit");
+    let recold = fresh
+        .solve(&plain2, &augmented2, &setup.u_init)
+        .expect("plans");
+    // The independent reference: ILQG on the augmented plant alone, from the scenario's guess
+    // read d knots on (what the commands issued now act on).
+    let naive: Vec<DVector<f64>> = (0..s.task.steps)
+        .map(|k| setup.u_init[(k + d).min(s.task.steps - 1)].clone())
+        .collect();
+    let mut alone = Ilqg::new(&augmented2, options.clone());
+    let reference = alone.try_solve(&augmented2, &naive).expect("solves");
+    println!(
+        "warm: {} tail it, {} it, cost {:.12e}; cold: {} tail it, cost {:.12e}; augmented alone: {} it, cost {:.12e}",
+        warm.guess_iterations,
+        warm.solution.iterations,
+        warm.solution.cost,
+        recold.guess_iterations,
+        recold.solution.cost,
+        reference.iterations,
+        reference.cost
+    );
+    assert!(warm.solution.stop.converged() && reference.stop.converged());
+    let rel = |a: f64, b: f64| (a - b).abs() / b;
+    assert!(rel(warm.solution.cost, recold.solution.cost) < 1e-6);
+    assert!(rel(warm.solution.cost, reference.cost) < 1e-5);
+    assert!(warm.solution.cost <= reference.cost * (1.0 + 1e-9));
+    assert!(
+        warm.guess_iterations < recold.guess_iterations,
+        "warm {} vs cold {} tail iterations",
+        warm.guess_iterations,
+        recold.guess_iterations
+    );
+}
+
+#[test]
+fn wrong_problems_and_a_replan_before_a_plan_are_errors() {
+    let (s, setup) = load(&["noise.kind=none"]);
+    let d = s.task.delay_steps();
+    let n = setup.x0.len();
+    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let cost = DelayedCost::new(&setup.cost, n);
+    let start = (
+        Offset::new(&setup.dynamics, 0),
+        Offset::new(&setup.cost, 0),
+        Offset::new(&delayed, 0),
+        Offset::new(&cost, 0),
+    );
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let (plain, augmented) = problems(&s, &setup, &start, &x0);
+    // The plain problem twice: no commands in flight is not a delayed plant.
+    assert!(matches!(
+        DelayedPlanner::new(&plain, &plain, &s.solver.options),
+        Err(IlqgError::SizeMismatch { .. })
+    ));
+    let mut planner = DelayedPlanner::new(&plain, &augmented, &s.solver.options).expect("fits");
+    assert!(matches!(
+        planner.resolve_shifted(&plain, &augmented, 2),
+        Err(IlqgError::NoPreviousSolution)
+    ));
+    assert!(matches!(
+        planner.solve(&plain, &augmented, &setup.u_init[1..]),
+        Err(IlqgError::InitialGuessLength { .. })
+    ));
+    // An augmented state that is too short.
+    let short = Problem {
+        dynamics: augmented.dynamics,
+        cost: augmented.cost,
+        x0: x0[..x0.len() - 1].to_vec(),
+        horizon: augmented.horizon,
+        bounds: augmented.bounds.clone(),
+    };
+    assert!(matches!(
+        planner.solve(&plain, &short, &setup.u_init),
+        Err(IlqgError::SizeMismatch { .. })
+    ));
+}
