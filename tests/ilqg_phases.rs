@@ -11,6 +11,7 @@
 
 use nalgebra::DVector;
 use std::path::Path;
+use vic::core::cost::{Cost, CostDerivatives};
 use vic::core::delay::Delayed;
 use vic::core::solver::{Ilqg, Problem};
 use vic::planning::plan::{self, DelayedCost};
@@ -101,4 +102,66 @@ fn delayed_single_joint_matches_the_unsplit_solver() {
         solve("single_joint_delay.toml", &["noise.kind=none"], Some(5)),
         (0.5594018472020555, 0.5594018472020555, 31),
     );
+}
+
+/// The same cost without the claim that it is never negative: the line search then rolls every
+/// candidate out to the end.
+struct Unclaimed<'a>(&'a dyn Cost);
+
+impl Cost for Unclaimed<'_> {
+    fn running(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
+        self.0.running(k, x, u)
+    }
+    fn terminal(&self, x: &[f64]) -> f64 {
+        self.0.terminal(x)
+    }
+    fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
+        self.0.running_derivatives(k, x, u, d)
+    }
+    fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
+        self.0.terminal_derivatives(x, d)
+    }
+}
+
+/// Cutting a candidate's rollout short once its cost passes the nominal's (a nonnegative cost)
+/// rejects exactly the steps a full rollout rejects: the same iterations, the same plan to the
+/// bit, on problems whose early line searches reject long steps.
+#[test]
+fn rollouts_cut_short_take_the_same_steps() {
+    for (file, overrides) in [
+        ("two_link_reach.toml", &["actuator.torque_limit=0.25"][..]),
+        (
+            "single_joint_delay.toml",
+            &["noise.kind=none", "task.delay_ms=0"][..],
+        ),
+    ] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("config")
+            .join(file);
+        let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+        let s = Scenario::load(&path, &o).expect("scenario loads");
+        let setup = plan::setup(&s).expect("scenario sets up");
+        assert!(setup.cost.nonnegative());
+        let unclaimed = Unclaimed(&setup.cost);
+        let solve = |cost: &dyn Cost| {
+            let problem = Problem {
+                dynamics: &setup.dynamics,
+                cost,
+                x0: setup.x0.clone(),
+                horizon: s.task.steps,
+                bounds: setup.bounds.clone(),
+            };
+            Ilqg::new(&problem, s.solver.options.clone()).solve(&problem, &setup.u_init)
+        };
+        let (cut, full) = (solve(&setup.cost), solve(&unclaimed));
+        println!(
+            "{file}: {} iterations, history {:?}",
+            cut.iterations,
+            &cut.history[..cut.history.len().min(4)]
+        );
+        assert!(cut.iterations > 5, "{file}: too easy to tell");
+        assert_eq!(cut.iterations, full.iterations, "{file}");
+        assert_eq!(cut.history, full.history, "{file}");
+        assert_eq!(cut.u, full.u, "{file}");
+    }
 }

@@ -38,6 +38,12 @@ pub trait Cost: Send + Sync {
     fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives);
     /// Derivatives of the final cost (overwrites `lx` and `lxx`).
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives);
+    /// Whether every running and final cost is ≥ 0 wherever it is evaluated: then a partial sum
+    /// along a rollout bounds its total from below, and the line search may stop rolling out a
+    /// step once it costs more than the nominal (default: not known).
+    fn nonnegative(&self) -> bool {
+        false
+    }
 }
 
 /// Paper Eq. 14: `∫ (uᵀ W u + w_p |q − q_d|² + w_v |q' − q_d'|²) dt + w_p |q(T) − q_d(T)|² +
@@ -107,6 +113,11 @@ impl Cost for TrackingCost {
         }
     }
 
+    fn nonnegative(&self) -> bool {
+        // A weighted sum of squares.
+        self.w_p >= 0.0 && self.w_v >= 0.0 && self.control_weights.iter().all(|w| *w >= 0.0)
+    }
+
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
         let r = self.reference.last().expect("reference is not empty");
         let n = self.dof;
@@ -118,5 +129,31 @@ impl Cost for TrackingCost {
             d.lxx[(i, i)] = 2.0 * self.w_p;
             d.lxx[(n + i, n + i)] = 2.0 * self.w_v;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cost(w_p: f64, w_u: f64) -> TrackingCost {
+        TrackingCost {
+            dof: 1,
+            nx: 2,
+            control_weights: vec![w_u],
+            w_p,
+            w_v: 1.0,
+            dt: 0.01,
+            reference: vec![Exogenous::default()],
+        }
+    }
+
+    #[test]
+    fn a_negative_weight_makes_no_claim_of_a_nonnegative_cost() {
+        assert!(cost(1.0, 1.0).nonnegative());
+        assert!(cost(0.0, 0.0).nonnegative());
+        assert!(!cost(-1.0, 1.0).nonnegative());
+        assert!(!cost(1.0, -1e-9).nonnegative());
+        assert!(!cost(f64::NAN, 1.0).nonnegative());
     }
 }

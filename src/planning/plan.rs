@@ -377,4 +377,7 @@ impl crate::core::cost::Cost for DelayedCost<'_> {
     fn terminal_derivatives(&self, x: &[f64], d: &mut crate::core::cost::CostDerivatives) {
         self.inner.terminal_derivatives(x, d);
     }
+    fn nonnegative(&self) -> bool {
+        self.inner.nonnegative()
+    }
 }

@@ -208,4 +208,7 @@ impl<T: Cost + ?Sized> Cost for Offset<'_, T> {
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
         self.inner.terminal_derivatives(x, d);
     }
+    fn nonnegative(&self) -> bool {
+        self.inner.nonnegative()
+    }
 }

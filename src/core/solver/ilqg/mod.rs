@@ -316,7 +316,7 @@ impl Ilqg {
             problem.bounds.clamp(self.nominal.u[k].as_mut_slice());
         }
         self.nominal.x[0].copy_from_slice(&problem.x0);
-        if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0) {
+        if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0, f64::INFINITY) {
             return Err(IlqgError::DivergingInitialGuess { step, horizon });
         }
         Ok(self.iterate(problem, start))
@@ -347,12 +347,12 @@ impl Ilqg {
             zero(l);
         }
         self.solved = false;
-        if self.roll_candidate(problem, 0.0) {
+        if self.roll_candidate(problem, 0.0, f64::INFINITY) {
             std::mem::swap(&mut self.nominal, &mut self.candidate);
         } else {
             // The old gains do not hold the plant from here: replay the shifted controls.
             self.nominal.x[0].copy_from_slice(&problem.x0);
-            if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0) {
+            if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0, f64::INFINITY) {
                 return Err(IlqgError::DivergingInitialGuess { step, horizon });
             }
         }

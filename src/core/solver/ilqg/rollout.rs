@@ -7,13 +7,16 @@ pub(super) type Policy<'a> = (&'a Trajectory, &'a [DVector<f64>], &'a [DMatrix<f
 
 /// Rolls `traj` forward from `traj.x[0]`. With a policy `(nominal, l, L)` the controls are
 /// `clamp(ū + α l + L (x − x̄))`; without, `traj.u` is used as it is. On divergence (a non-finite
-/// state or cost) returns the step at which it happened.
+/// state or cost) returns the step at which it happened; also once the running costs so far
+/// exceed `limit` (pass `∞` for a full rollout; a finite limit only for a cost that is never
+/// negative, whose total can then only be larger).
 pub(super) fn rollout(
     problem: &Problem,
     traj: &mut Trajectory,
     policy: Option<Policy>,
     bounds: Option<&Bounds>,
     alpha: f64,
+    limit: f64,
 ) -> Result<(), usize> {
     let mut cost = 0.0;
     for k in 0..problem.horizon {
@@ -44,7 +47,7 @@ pub(super) fn rollout(
         cost += problem
             .cost
             .running(k, head[k].as_slice(), traj.u[k].as_slice());
-        if !tail[0].iter().all(|v| v.is_finite()) {
+        if cost > limit || !tail[0].iter().all(|v| v.is_finite()) {
             return Err(k + 1);
         }
     }

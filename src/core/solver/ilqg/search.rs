@@ -5,8 +5,9 @@ use super::*;
 
 impl Ilqg {
     /// Rolls the candidate out from `x0` under the nominal plan, its feedforward scaled by
-    /// `alpha` and its gains (clamped to the bounds); false if the rollout diverged.
-    pub(super) fn roll_candidate(&mut self, problem: &Problem, alpha: f64) -> bool {
+    /// `alpha` and its gains (clamped to the bounds); false if the rollout diverged or its cost
+    /// passed `limit` (see [`rollout`]).
+    pub(super) fn roll_candidate(&mut self, problem: &Problem, alpha: f64, limit: f64) -> bool {
         self.candidate.x[0].copy_from_slice(&problem.x0);
         let policy = Some((&self.nominal, &self.ff[..], &self.gains[..]));
         rollout(
@@ -15,6 +16,7 @@ impl Ilqg {
             policy,
             Some(&problem.bounds),
             alpha,
+            limit,
         )
         .is_ok()
     }
@@ -67,7 +69,10 @@ impl Ilqg {
 
     /// Backtracking line search on the merit: rolls the policy `ū + α l + L (x − x̄)` out into
     /// `candidate` for decreasing α and accepts the first that improves the merit by a positive
-    /// fraction of the predicted improvement `−α (dv1 + α dv2)` (Armijo-like).
+    /// fraction of the predicted improvement `−α (dv1 + α dv2)` (Armijo-like). When the merit is
+    /// the cost and the cost is never negative, a candidate's rollout stops as soon as its cost
+    /// passes the nominal's: it would be rejected anyway, so the steps taken are the same, and
+    /// the long steps the early iterations reject cost a fraction of a rollout.
     pub(super) fn line_search(
         &mut self,
         problem: &Problem,
@@ -75,8 +80,13 @@ impl Ilqg {
         merit_now: f64,
         stochastic: bool,
     ) -> Option<Step> {
+        let limit = if !stochastic && problem.cost.nonnegative() {
+            merit_now
+        } else {
+            f64::INFINITY
+        };
         for alpha in ALPHAS {
-            if !self.roll_candidate(problem, alpha) {
+            if !self.roll_candidate(problem, alpha, limit) {
                 continue;
             }
             let merit_new = self.merit(problem, stochastic, true);
