@@ -12,12 +12,14 @@ use vic::core::solver::{Ilqg, IlqgError, Problem};
 use vic::planning::plan::{self, DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
 
-fn load(overrides: &[&str]) -> (Scenario, Setup) {
+/// The single joint with its 200 ms delay, its plan setup and its augmented plant.
+fn load(overrides: &[&str]) -> (Scenario, Setup, Delayed<DiscreteDynamics>) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/single_joint_delay.toml");
     let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
     let s = Scenario::load(&path, &o).expect("scenario loads");
     let setup = plan::setup(&s).expect("scenario sets up");
-    (s, setup)
+    let delayed = Delayed::new(setup.dynamics.clone(), s.task.delay_steps());
+    (s, setup, delayed)
 }
 
 /// The plant, its cost, the augmented plant and its cost, read some knots late.
@@ -27,6 +29,21 @@ type At<'a> = (
     Offset<'a, Delayed<DiscreteDynamics>>,
     Offset<'a, DelayedCost<'a>>,
 );
+
+/// The problems' parts read `k` knots late.
+fn at<'a>(
+    setup: &'a Setup,
+    delayed: &'a Delayed<DiscreteDynamics>,
+    cost: &'a DelayedCost<'a>,
+    k: usize,
+) -> At<'a> {
+    (
+        Offset::new(&setup.dynamics, k),
+        Offset::new(&setup.cost, k),
+        Offset::new(delayed, k),
+        Offset::new(cost, k),
+    )
+}
 
 /// The undelayed and the augmented problem, both read `offset` knots late, from `x0` (the
 /// augmented state: the plant's state and the commands in flight).
@@ -56,20 +73,13 @@ fn problems<'a>(
 
 #[test]
 fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
-    let (s, setup) = load(&["noise.kind=none"]);
-    let d = s.task.delay_steps();
-    let n = setup.x0.len();
-    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let (s, setup, delayed) = load(&["noise.kind=none"]);
+    let (d, n) = (s.task.delay_steps(), setup.x0.len());
     let cost = DelayedCost::new(&setup.cost, n);
-    let at = |k| {
-        (
-            Offset::new(&setup.dynamics, k),
-            Offset::new(&setup.cost, k),
-            Offset::new(&delayed, k),
-            Offset::new(&cost, k),
-        )
-    };
-    let (start, later) = (at(0), at(2));
+    let (start, later) = (
+        at(&setup, &delayed, &cost, 0),
+        at(&setup, &delayed, &cost, 2),
+    );
     let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
     let (plain, augmented) = problems(&s, &setup, &start, &x0);
     let options = &s.solver.options;
@@ -136,17 +146,9 @@ fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
 
 #[test]
 fn wrong_problems_and_a_replan_before_a_plan_are_errors() {
-    let (s, setup) = load(&["noise.kind=none"]);
-    let d = s.task.delay_steps();
-    let n = setup.x0.len();
-    let delayed = Delayed::new(setup.dynamics.clone(), d);
-    let cost = DelayedCost::new(&setup.cost, n);
-    let start = (
-        Offset::new(&setup.dynamics, 0),
-        Offset::new(&setup.cost, 0),
-        Offset::new(&delayed, 0),
-        Offset::new(&cost, 0),
-    );
+    let (s, setup, delayed) = load(&["noise.kind=none"]);
+    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+    let start = at(&setup, &delayed, &cost, 0);
     let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
     let (plain, augmented) = problems(&s, &setup, &start, &x0);
     // The plain problem twice: no commands in flight is not a delayed plant.

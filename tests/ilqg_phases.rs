@@ -14,17 +14,23 @@ use std::path::Path;
 use vic::core::cost::{Cost, CostDerivatives};
 use vic::core::delay::Delayed;
 use vic::core::solver::{Ilqg, Problem};
-use vic::planning::plan::{self, DelayedCost};
+use vic::planning::plan::{self, DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
 
-/// (cost, expected cost, accepted iterations) of a solve.
-fn solve(file: &str, overrides: &[&str], delay: Option<usize>) -> (f64, f64, usize) {
+/// A scenario of `config/` with overrides, and its plan setup.
+fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("config")
         .join(file);
     let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
     let s = Scenario::load(&path, &o).expect("scenario loads");
     let setup = plan::setup(&s).expect("scenario sets up");
+    (s, setup)
+}
+
+/// (cost, expected cost, accepted iterations) of a solve.
+fn solve(file: &str, overrides: &[&str], delay: Option<usize>) -> (f64, f64, usize) {
+    let (s, setup) = load(file, overrides);
     let steps = s.task.steps;
     match delay {
         None => {
@@ -135,12 +141,7 @@ fn rollouts_cut_short_take_the_same_steps() {
             &["noise.kind=none", "task.delay_ms=0"][..],
         ),
     ] {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("config")
-            .join(file);
-        let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-        let s = Scenario::load(&path, &o).expect("scenario loads");
-        let setup = plan::setup(&s).expect("scenario sets up");
+        let (s, setup) = load(file, overrides);
         assert!(setup.cost.nonnegative());
         let unclaimed = Unclaimed(&setup.cost);
         let solve = |cost: &dyn Cost| {
