@@ -114,8 +114,11 @@ impl Cost for TrackingCost {
     }
 
     fn nonnegative(&self) -> bool {
-        // A weighted sum of squares.
-        self.w_p >= 0.0 && self.w_v >= 0.0 && self.control_weights.iter().all(|w| *w >= 0.0)
+        // A weighted sum of squares, the running part times Δ.
+        self.dt >= 0.0
+            && self.w_p >= 0.0
+            && self.w_v >= 0.0
+            && self.control_weights.iter().all(|w| *w >= 0.0)
     }
 
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
@@ -149,11 +152,16 @@ mod tests {
     }
 
     #[test]
-    fn a_negative_weight_makes_no_claim_of_a_nonnegative_cost() {
+    fn a_negative_weight_or_step_makes_no_claim_of_a_nonnegative_cost() {
         assert!(cost(1.0, 1.0).nonnegative());
         assert!(cost(0.0, 0.0).nonnegative());
         assert!(!cost(-1.0, 1.0).nonnegative());
         assert!(!cost(1.0, -1e-9).nonnegative());
         assert!(!cost(f64::NAN, 1.0).nonnegative());
+        let backwards = TrackingCost {
+            dt: -0.01,
+            ..cost(1.0, 1.0)
+        };
+        assert!(!backwards.nonnegative());
     }
 }
