@@ -1,7 +1,8 @@
 //! The delayed plant planned through the undelayed one ([`DelayedPlanner`]): cold, it is the
-//! undelayed guess followed by ILQG on the augmented plant, to the last bit; warm, after the plan
-//! advanced, it reaches the optimum that ILQG on the augmented plant finds from scratch, with
-//! fewer iterations on the tail problem than a cold plan; wrong problems are errors.
+//! undelayed guess followed by ILQG on the augmented plant (the same commands, and gains from the
+//! prediction that agree with the augmented backward pass); warm, after the plan advanced, it
+//! reaches the optimum that ILQG on the augmented plant finds from scratch, with fewer iterations
+//! on the tail problem than a cold plan; wrong problems are errors.
 
 use nalgebra::DVector;
 use std::path::Path;
@@ -84,7 +85,10 @@ fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
     let (plain, augmented) = problems(&s, &setup, &start, &x0);
     let options = &s.solver.options;
 
-    // Cold: bit for bit the undelayed guess followed by ILQG on the augmented plant.
+    // Cold: the undelayed guess followed by ILQG on the augmented plant, which starts at its
+    // optimum (no step), so the commands are the guess's to the bit; the planner's gains come
+    // from the undelayed gains and the prediction's Jacobian, the reference's from the
+    // 42-dimensional backward pass.
     let mut planner = DelayedPlanner::new(&plain, &augmented, options).expect("sizes fit");
     assert_eq!(planner.delay(), d);
     let cold = planner
@@ -100,8 +104,22 @@ fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
     .expect("guess");
     let mut full = Ilqg::new(&augmented, options.clone());
     let by_hand = full.try_solve(&augmented, &guess).expect("solves");
+    assert_eq!(by_hand.iterations, 0, "{:?}", by_hand.stop);
     assert_eq!(cold.solution.u, by_hand.u);
-    assert_eq!(cold.solution.cost.to_bits(), by_hand.cost.to_bits());
+    assert!((cold.solution.cost - by_hand.cost).abs() <= 1e-12 * by_hand.cost);
+    for (a, b) in cold.solution.x.iter().zip(&by_hand.x) {
+        assert!((a - b).amax() <= 1e-12 * b.amax().max(1.0));
+    }
+    let scale = by_hand.gains.iter().map(|g| g.amax()).fold(0.0, f64::max);
+    let worst = (cold.solution.gains.iter().zip(&by_hand.gains))
+        .map(|(a, b)| (a - b).amax())
+        .fold(0.0, f64::max);
+    println!("gains: largest {scale:.6e}, largest difference {worst:.3e}");
+    assert!(scale > 1.0, "the reference has feedback to compare");
+    assert!(worst <= 1e-8 * scale, "{worst:e} against {scale:e}");
+    // The commands issued in the last d knots act after the horizon: no feedback on them.
+    let last = &by_hand.gains[s.task.steps - d..];
+    assert!(last.iter().all(|g| g.amax() == 0.0));
     assert!(cold.solution.stop.converged());
 
     // Warm, two knots on (one 50 Hz period), from the state the plan predicts there.

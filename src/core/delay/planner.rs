@@ -10,13 +10,26 @@
 //! for the delayed gains of Eq. 13. A replan after the plan advanced `s` knots is the same
 //! construction from the new augmented state, with the undelayed problem warm-started from its
 //! previous solution shifted by `s` (the receding horizon of the central controller).
+//!
+//! Without noise even that one pass is not needed. A command issued at `k` acts at `k + d`, so
+//! the best one depends on the augmented state `z_k = (x_k, u_1 … u_d)` (the commands in flight,
+//! `u_i` acting at `k + i − 1`) only through the state it will act on, `x_{k+d} = φ_k(z_k)`:
+//! the delayed policy is the undelayed one applied to the *predicted* state. Linearised along
+//! the plan, the gain of Eq. 13 is therefore `L̃_k = L_{k+d} ∂φ_k/∂z_k`, the undelayed gain of
+//! the knot where the command acts times the prediction's Jacobian,
+//! `∂x_{k+d}/∂x_k = A_{k+d−1} ⋯ A_k` and `∂x_{k+d}/∂u_i = A_{k+d−1} ⋯ A_{k+i} B_{k+i−1}`: the
+//! shift register of commands in flight enters through products of the plant's `n × n` and
+//! `n × m` blocks, never through the `(n + m d)`-dimensional value function. The commands
+//! issued in the last `d` knots act after the horizon: their gain is zero. This is exactly the
+//! backward pass of the augmented plant at μ = 0 (the linearised problems are the same LQ
+//! problem; `tests/delayed_planner.rs` compares the two), at a fraction of its cost.
 
 use super::Offset;
 use crate::core::cost::{Cost, CostDerivatives};
-use crate::core::dynamics::Dynamics;
+use crate::core::dynamics::{Dynamics, Linearization};
 use crate::core::solver::ilqg::IlqgError;
 use crate::core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 use std::time::Instant;
 
 /// A first guess for the delayed problem from the undelayed plant, exact without noise (see the
@@ -57,10 +70,15 @@ pub struct DelayedPlanner {
     delay: usize,
     /// ILQG on the undelayed plant over knots `d..N` (deterministic).
     tail: Ilqg,
-    /// ILQG on the augmented plant.
-    full: Ilqg,
+    /// ILQG on the augmented plant (made on the first plan that needs it: a stochastic one, or
+    /// one whose undelayed gains do not exist without regularisation).
+    full: Option<Ilqg>,
+    /// The augmented solve's options.
+    options: IlqgOptions,
     guess: Vec<DVector<f64>>,
     derivs: CostDerivatives,
+    /// The plant linearised at every knot of the plan (for the prediction's Jacobians).
+    lin: Vec<Linearization>,
 }
 
 /// A delayed plan and what it took.
@@ -99,12 +117,21 @@ impl DelayedPlanner {
             plain.horizon - delay,
             &plain.bounds,
         );
+        let (n, m, w) = (
+            plain.dynamics.nx(),
+            plain.dynamics.nu(),
+            plain.dynamics.nw(),
+        );
         Ok(DelayedPlanner {
             delay,
             tail: plain_solver(&tail, options),
-            full: Ilqg::new(delayed, options.clone()),
-            guess: vec![DVector::zeros(plain.dynamics.nu()); plain.horizon],
-            derivs: CostDerivatives::new(plain.dynamics.nx(), plain.dynamics.nu()),
+            full: None,
+            options: options.clone(),
+            guess: vec![DVector::zeros(m); plain.horizon],
+            derivs: CostDerivatives::new(n, m),
+            lin: (0..plain.horizon)
+                .map(|_| Linearization::new(n, m, w))
+                .collect(),
         })
     }
 
@@ -172,11 +199,88 @@ impl DelayedPlanner {
             Start::Shifted(s) => self.tail.resolve_shifted(&tail, s)?,
         };
         complete_guess(plain, &sol, &mut self.derivs, &mut self.guess);
-        let mut solution = self.full.try_solve(delayed, &self.guess)?;
+        let deterministic = !self.options.stochastic || delayed.dynamics.nw() == 0;
+        let predicted = if deterministic {
+            self.predicted_policy(plain, delayed, &tail, &sol)
+        } else {
+            None
+        };
+        let mut solution = match predicted {
+            Some(solution) => solution,
+            None => {
+                let options = &self.options;
+                let full = self
+                    .full
+                    .get_or_insert_with(|| Ilqg::new(delayed, options.clone()));
+                full.try_solve(delayed, &self.guess)?
+            }
+        };
         solution.solve_time = started.elapsed();
         Ok(DelayedSolution {
             solution,
             guess_iterations: sol.iterations,
+        })
+    }
+
+    /// The deterministic delayed plan from the tail's solution (see the module's documentation):
+    /// the guess rolled out on the augmented plant, and the gains `L̃_k = L_{k+d} ∂φ_k/∂z_k`.
+    /// `None` when the rollout leaves the finite numbers or the tail's gains need
+    /// regularisation; the augmented solve then decides.
+    fn predicted_policy(
+        &mut self,
+        plain: &Problem,
+        delayed: &Problem,
+        tail: &Problem,
+        tail_solution: &Solution,
+    ) -> Option<Solution> {
+        let (d, horizon) = (self.delay, self.guess.len());
+        let (n, m) = (plain.dynamics.nx(), plain.dynamics.nu());
+        let total = n + m * d;
+        let mut x = Vec::with_capacity(horizon + 1);
+        x.push(DVector::from_column_slice(&delayed.x0));
+        let mut cost = 0.0;
+        for (k, u) in self.guess.iter().enumerate() {
+            let (xk, u) = (x[k].as_slice(), u.as_slice());
+            let mut next = DVector::zeros(total);
+            delayed.dynamics.step(k, xk, u, next.as_mut_slice());
+            cost += delayed.cost.running(k, xk, u);
+            // The plant's block at the command that acts on it (the front of the register).
+            plain
+                .dynamics
+                .linearize(k, &xk[..n], &xk[n..n + m], &mut self.lin[k]);
+            x.push(next);
+        }
+        cost += delayed.cost.terminal(x[horizon].as_slice());
+        if !cost.is_finite() || x.iter().any(|v| v.iter().any(|e| !e.is_finite())) {
+            return None;
+        }
+        let tail_gains = self.tail.unregularized_gains(tail)?;
+        let mut gains = vec![DMatrix::zeros(m, total); horizon];
+        let mut jac = DMatrix::zeros(n, total);
+        let (mut p, mut scratch) = (DMatrix::identity(n, n), DMatrix::zeros(n, n));
+        for (k, gain) in gains.iter_mut().enumerate().take(horizon - d) {
+            // ∂x_{k+d}/∂z_k from the last command in flight back to x_k: P = A_{k+d−1} ⋯ A_j.
+            p.fill_with_identity();
+            for i in (1..=d).rev() {
+                let lin = &self.lin[k + i - 1];
+                let mut block = jac.columns_mut(n + (i - 1) * m, m);
+                block.gemm(1.0, &p, &lin.b, 0.0);
+                scratch.gemm(1.0, &p, &lin.a, 0.0);
+                std::mem::swap(&mut p, &mut scratch);
+            }
+            jac.columns_mut(0, n).copy_from(&p);
+            gain.gemm(1.0, &tail_gains[k], &jac, 0.0);
+        }
+        Some(Solution {
+            x,
+            u: self.guess.clone(),
+            gains,
+            cost,
+            expected_cost: cost,
+            iterations: 0,
+            stop: tail_solution.stop,
+            solve_time: Default::default(),
+            history: Vec::new(),
         })
     }
 }

@@ -258,6 +258,8 @@ pub struct Ilqg {
     dims: (usize, usize, usize, usize),
     /// Whether `nominal` holds the result of a previous solve (for warm starts).
     solved: bool,
+    /// The regularisation and noise switch of the last backward pass of the last solve.
+    last_pass: (f64, bool),
 }
 
 impl Ilqg {
@@ -282,6 +284,7 @@ impl Ilqg {
             noise_scratch: DMatrix::zeros(nx, nw),
             dims: (nx, nu, nw, h),
             solved: false,
+            last_pass: (0.0, false),
         }
     }
 
@@ -441,6 +444,7 @@ impl Ilqg {
             }
         }
         self.solved = true;
+        self.last_pass = (reg.mu, stochastic);
         Solution {
             x: self.nominal.x.clone(),
             u: self.nominal.u.clone(),
@@ -461,6 +465,24 @@ impl Ilqg {
     /// The current gains (valid after [`Ilqg::solve`]).
     pub fn gains(&self) -> &[DMatrix<f64>] {
         &self.gains
+    }
+
+    /// The gains of one backward pass at the last solution's nominal without regularisation
+    /// (μ = 0) and without the noise terms: the LQR gains of the problem linearised there, which
+    /// the last pass of a solve (at the μ then in force) only approximates. Replaces the
+    /// workspace's gains, which a later [`Ilqg::resolve_shifted`] rolls out with. `None` before
+    /// any solve, or when some `Q_uu` is not positive definite without regularisation.
+    pub fn unregularized_gains(&mut self, problem: &Problem) -> Option<&[DMatrix<f64>]> {
+        if !self.solved || self.check_size(problem).is_err() {
+            return None;
+        }
+        if self.backward_pass(problem, 0.0, false).is_some() {
+            return Some(&self.gains);
+        }
+        // Put back the gains of the solve's own last pass, for the warm starts that use them.
+        let (mu, stochastic) = self.last_pass;
+        self.backward_pass(problem, mu, stochastic);
+        None
     }
 }
 
