@@ -6,7 +6,7 @@ use crate::core::cost::TrackingCost;
 use crate::core::delay::Delayed;
 use crate::core::dynamics::Dynamics;
 use crate::core::model::Noise;
-use crate::core::solver::ilqg::Progress;
+use crate::core::solver::ilqg::{OnIteration, Progress};
 use crate::core::solver::sooc::{MomentCost, MomentDynamics, unpack};
 use crate::core::solver::sooc_newton::{
     Optimality, SoocOptions, SoocProblem, SoocSolver, SoocStop,
@@ -160,10 +160,14 @@ fn solver_for(
     progress: &Option<ProgressFn>,
 ) -> Ilqg {
     let mut solver = Ilqg::new(problem, options.clone());
-    if let Some(p) = progress.clone() {
-        solver.on_iteration = Some(Box::new(move |it: &Progress| p(phase, it)));
-    }
+    solver.on_iteration = phase_progress(progress, phase);
     solver
+}
+
+/// The progress callback of one phase of a solve.
+fn phase_progress(progress: &Option<ProgressFn>, phase: &'static str) -> Option<OnIteration> {
+    let p = progress.clone()?;
+    Some(Box::new(move |it: &Progress| p(phase, it)))
 }
 
 /// Plans a scenario with the given method (ILQG uses the scenario's feedback delay), reporting
@@ -326,12 +330,16 @@ pub fn solve_in_phases(
             .try_solve(problem, u_init)
             .map_err(failed("ilqg"));
     }
+    // One workspace for both phases (a solve starts from nothing but its initial controls):
+    // for the 42-state delayed plant a workspace is tens of megabytes.
     let mut solver = solver_for(problem, options, "deterministic", progress);
     solver.options.stochastic = false;
     let first = solver
         .try_solve(problem, u_init)
         .map_err(failed("deterministic"))?;
-    let mut solver = solver_for(problem, options, "stochastic", progress);
+    let stochastic = phase_progress(progress, "stochastic");
+    solver.options.stochastic = options.stochastic;
+    solver.on_iteration = stochastic;
     let mut second = solver
         .try_solve(problem, &first.u)
         .map_err(failed("stochastic"))?;
