@@ -287,20 +287,28 @@ pub fn run(
     Ok(counts.merged(&stats))
 }
 
-/// What the board side's callbacks do with a message of type `T` from the link: count it
-/// (`count`), translate its stamps into the board's clock and `publish` it into the namespace.
-/// Without a clock estimate yet the message is held back (counted by the clock), not an error.
-fn into_board<T: clock::Stamped + Copy + 'static>(
-    into: &Arc<ToBoardLink>,
-    clock: &Option<Arc<clock::Prober>>,
-    count: fn(&LinkCounts) -> &AtomicU64,
-    publish: fn(&ToBoardLink, &T) -> bool,
-) -> impl Fn(T, &LinkCounts) -> bool + Send + Sync + 'static {
-    let (into, clock) = (into.clone(), clock.clone());
-    move |mut m, n| {
-        add(count(n));
-        let stamped = clock.as_ref().is_none_or(|c| c.translate(&mut m));
-        !stamped || publish(&into, &m)
+/// Where the board side's callbacks put what comes from the link: the namespace (as a central
+/// process and a tool), with the stamps translated into the board's clock when there is one.
+struct IntoBoard {
+    ports: Arc<ToBoardLink>,
+    clock: Option<Arc<clock::Prober>>,
+}
+
+impl IntoBoard {
+    /// What the callbacks do with a message of type `T`: count it (`count`), translate its stamps
+    /// and `publish` it into the namespace (false: the publish failed). Without a clock estimate
+    /// yet the message is held back (counted by the clock), not an error.
+    fn forward<T: clock::Stamped + Copy + 'static>(
+        &self,
+        count: fn(&LinkCounts) -> &AtomicU64,
+        publish: fn(&ToBoardLink, &T) -> Result<(), TransportError>,
+    ) -> impl Fn(T, &LinkCounts) -> bool + Send + Sync + 'static {
+        let (ports, clock) = (self.ports.clone(), self.clock.clone());
+        move |mut m, n| {
+            add(count(n));
+            let stamped = clock.as_ref().is_none_or(|c| c.translate(&mut m));
+            !stamped || publish(&ports, &m).is_ok()
+        }
     }
 }
 
@@ -391,7 +399,7 @@ fn board_side(
 ) -> Result<(), BridgeError> {
     // The planner's role (its subscribers feed the link; its name refuses a second planner).
     let central = CentralPorts::open(&o.namespace)?;
-    let into = Arc::new(ToBoardLink::open(&o.namespace)?);
+    let ports = Arc::new(ToBoardLink::open(&o.namespace)?);
     let state = link.publisher::<StateMsg>()?;
     let telemetry = link.publisher::<Telemetry>()?;
     let events = link.declare_publisher(event_key(link.name))?;
@@ -400,25 +408,14 @@ fn board_side(
         Stamps::Translate => Some(Arc::new(clock::Prober::start(link.session, link.name)?)),
         Stamps::Keep => None,
     };
+    let into = IntoBoard {
+        ports,
+        clock: clock.clone(),
+    };
     let _subs = (
-        link.subscribe(into_board(
-            &into,
-            &clock,
-            |n| &n.command,
-            |t, c| t.publish_command(c).is_ok(),
-        ))?,
-        link.subscribe(into_board(
-            &into,
-            &clock,
-            |n| &n.control,
-            |t, c| t.publish_control(c).is_ok(),
-        ))?,
-        link.subscribe(into_board(
-            &into,
-            &clock,
-            |n| &n.disturbance,
-            |t, d| t.publish_disturbance(d).is_ok(),
-        ))?,
+        link.subscribe(into.forward(|n| &n.command, ToBoardLink::publish_command))?,
+        link.subscribe(into.forward(|n| &n.control, ToBoardLink::publish_control))?,
+        link.subscribe(into.forward(|n| &n.disturbance, ToBoardLink::publish_disturbance))?,
     );
     looper.run(
         &relay,

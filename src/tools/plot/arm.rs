@@ -166,12 +166,7 @@ impl<'a> ArmFigure<'a> {
                 colour.stroke_width(2),
             )?;
             if angles {
-                let reference: Vec<(f64, f64)> = col
-                    .time
-                    .iter()
-                    .zip(&col.reference_q)
-                    .map(|(&t, q)| (t, q.get(j).map_or(f64::NAN, |q| q * RAD_TO_DEG)))
-                    .collect();
+                let reference = joint_degrees(&col.time, &col.reference_q, j);
                 dashed(chart, &view, &reference, BLACK.stroke_width(1))?;
             }
             if c == 0 {

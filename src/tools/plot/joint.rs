@@ -44,12 +44,7 @@ impl<'a> JointFigure<'a> {
         for j in 0..col.dof {
             let colour = joint_colour(j);
             for trial in data {
-                let points: Vec<(f64, f64)> = col
-                    .time
-                    .iter()
-                    .zip(trial)
-                    .map(|(&t, knot)| (t, knot.get(j).map_or(f64::NAN, |v| v * RAD_TO_DEG)))
-                    .collect();
+                let points = joint_degrees(&col.time, trial, j);
                 lines(
                     chart,
                     &view,
@@ -59,12 +54,7 @@ impl<'a> JointFigure<'a> {
                 drawn.extend(points);
             }
             if angles {
-                let reference: Vec<(f64, f64)> = col
-                    .time
-                    .iter()
-                    .zip(&col.reference_q)
-                    .map(|(&t, q)| (t, q.get(j).map_or(f64::NAN, |q| q * RAD_TO_DEG)))
-                    .collect();
+                let reference = joint_degrees(&col.time, &col.reference_q, j);
                 dashed(chart, &view, &reference, BLACK.stroke_width(2))?;
             }
         }

@@ -381,6 +381,15 @@ pub(super) fn thin(colour: &RGBColor) -> ShapeStyle {
     colour.stroke_width(1)
 }
 
+/// Joint `j` of per-knot values in degrees against the knot times: one trial's angles or
+/// velocities, or the reference angles (NaN at a knot without joint `j`, a gap in the line).
+pub(super) fn joint_degrees(time: &[f64], knots: &[Vec<f64>], j: usize) -> Vec<(f64, f64)> {
+    time.iter()
+        .zip(knots)
+        .map(|(&t, knot)| (t, knot.get(j).map_or(f64::NAN, |v| v * RAD_TO_DEG)))
+        .collect()
+}
+
 /// The span of all knot times (0..1 s when there is none).
 pub(super) fn time_range(columns: &[ColumnPlot]) -> (f64, f64) {
     let b = Bounds::of(
