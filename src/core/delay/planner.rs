@@ -64,8 +64,9 @@ pub fn undelayed_guess(
     Ok(u)
 }
 
-/// Cold and warm plans for a delayed plant: the undelayed tail problem, then ILQG on the
-/// augmented plant from its solution. Both workspaces are kept, so a replan reuses them.
+/// Cold and warm plans for a delayed plant: the undelayed tail problem, then the delayed gains
+/// from the prediction (without noise) or ILQG on the augmented plant from the tail's solution
+/// (with noise). The workspaces are kept, so a replan reuses them.
 pub struct DelayedPlanner {
     delay: usize,
     /// ILQG on the undelayed plant over knots `d..N` (deterministic).
@@ -84,7 +85,9 @@ pub struct DelayedPlanner {
 /// A delayed plan and what it took.
 #[derive(Debug, Clone)]
 pub struct DelayedSolution {
-    /// ILQG's solution on the augmented plant; its `solve_time` covers the whole plan.
+    /// The plan on the augmented plant (without noise: `iterations` 0 and the tail's stop
+    /// reason, since the tail's optimum is the delayed one); its `solve_time` covers the whole
+    /// plan.
     pub solution: Solution,
     /// Iterations on the undelayed tail problem.
     pub guess_iterations: usize,
