@@ -78,7 +78,8 @@ pub struct DelayedPlanner {
     options: IlqgOptions,
     guess: Vec<DVector<f64>>,
     derivs: CostDerivatives,
-    /// The plant linearised at every knot of the plan (for the prediction's Jacobians).
+    /// The plant linearised at the first `d` knots of the plan, under the commands in flight
+    /// (for the prediction's Jacobians; the later knots are the tail solve's).
     lin: Vec<Linearization>,
 }
 
@@ -132,9 +133,7 @@ impl DelayedPlanner {
             options: options.clone(),
             guess: vec![DVector::zeros(m); plain.horizon],
             derivs: CostDerivatives::new(n, m),
-            lin: (0..plain.horizon)
-                .map(|_| Linearization::new(n, m, w))
-                .collect(),
+            lin: (0..delay).map(|_| Linearization::new(n, m, w)).collect(),
         })
     }
 
@@ -247,17 +246,28 @@ impl DelayedPlanner {
             let mut next = DVector::zeros(total);
             delayed.dynamics.step(k, xk, u, next.as_mut_slice());
             cost += delayed.cost.running(k, xk, u);
-            // The plant's block at the command that acts on it (the front of the register).
-            plain
-                .dynamics
-                .linearize(k, &xk[..n], &xk[n..n + m], &mut self.lin[k]);
+            if k < d {
+                // The plant under a command in flight (the front of the register); from knot d
+                // on, the plant runs the tail's nominal, which the tail solve linearised.
+                plain
+                    .dynamics
+                    .linearize(k, &xk[..n], &xk[n..n + m], &mut self.lin[k]);
+            }
             x.push(next);
         }
         cost += delayed.cost.terminal(x[horizon].as_slice());
         if !cost.is_finite() || x.iter().any(|v| v.iter().any(|e| !e.is_finite())) {
             return None;
         }
-        let tail_gains = self.tail.unregularized_gains(tail)?;
+        self.tail.unregularized_gains(tail)?;
+        let (tail_gains, tail_lin) = (self.tail.gains(), self.tail.linearizations());
+        let lin_at = |j: usize| {
+            if j < d {
+                &self.lin[j]
+            } else {
+                &tail_lin[j - d]
+            }
+        };
         let mut gains = vec![DMatrix::zeros(m, total); horizon];
         let mut jac = DMatrix::zeros(n, total);
         let (mut p, mut scratch) = (DMatrix::identity(n, n), DMatrix::zeros(n, n));
@@ -265,7 +275,7 @@ impl DelayedPlanner {
             // ∂x_{k+d}/∂z_k from the last command in flight back to x_k: P = A_{k+d−1} ⋯ A_j.
             p.fill_with_identity();
             for i in (1..=d).rev() {
-                let lin = &self.lin[k + i - 1];
+                let lin = lin_at(k + i - 1);
                 let mut block = jac.columns_mut(n + (i - 1) * m, m);
                 block.gemm(1.0, &p, &lin.b, 0.0);
                 scratch.gemm(1.0, &p, &lin.a, 0.0);

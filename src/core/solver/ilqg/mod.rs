@@ -467,6 +467,12 @@ impl Ilqg {
         &self.gains
     }
 
+    /// The dynamics linearised at every knot of the last solution's nominal (valid after a
+    /// solve: the nominal is linearised after every accepted step).
+    pub fn linearizations(&self) -> &[Linearization] {
+        &self.nominal.lin
+    }
+
     /// The gains of one backward pass at the last solution's nominal without regularisation
     /// (μ = 0) and without the noise terms: the LQR gains of the problem linearised there, which
     /// the last pass of a solve (at the μ then in force) only approximates. Replaces the
