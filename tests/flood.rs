@@ -7,16 +7,22 @@
 //!   iceoryx2 (overwritten in the board's 8-slot receive buffer, counted by the board from the
 //!   sequence gaps of the sender's session, once it has seen that session), and the two add up
 //!   to exactly N;
-//! - the 1 kHz loop keeps its rate: ticks run / time elapsed over the whole flood, from the
-//!   board's own counters, ≥ 990 Hz, and few late ticks;
+//! - the flood does not slow the 1 kHz loop: the flood runs in windows of 1 s that alternate
+//!   with quiet windows of 1 s, and the board's tick rate (its own counters and clock, between
+//!   two telemetries inside a window) in a flood window is within [`MAX_COST_HZ`] of the quiet
+//!   window after it (the median over the pairs), its late ticks likewise;
 //! - the watchdog still trips 50 ms after the last valid command: junk never feeds it.
 //!
-//! N = 1 000 000, spread over at least 5 s: long enough that one preemption of the board by this
-//! shared machine (a few ms, a few ticks lost) cannot take the rate below 990 Hz, while a loop
-//! that falls behind under the flood still does. Spreading it costs the board nothing: it takes
-//! at most its receive buffer (8 per publisher) a tick, full at any rate above 8 000 msg/s (a
-//! burst of 1000 goes out at ~2 M msg/s), so the load per tick is that of an unpaced flood. The floods of this file run one at a time, so
-//! that they do not measure each other.
+//! N = 1 000 000 over 8 flood windows. The floods are compared with quiet windows of the same
+//! minutes, not with a fixed rate, because this shared virtual machine has spells in which a
+//! board wakes late whatever it does: one CI run measured 942 Hz for both floods, another
+//! 982–983 Hz, and a board with no flood at all a wake-up p99 of 650 µs in such minutes. The
+//! issue's 990 Hz is a measured figure (docs/BENCHMARKS.md). A loop that falls behind under the
+//! flood still fails: it loses ticks in the flood windows only. Spreading the flood costs the
+//! board nothing: it takes at most its receive buffer (8 per publisher) a tick, full at any rate
+//! above 8 000 msg/s (a burst of 1000 goes out at ~2 M msg/s), so the load per tick is that of an
+//! unpaced flood. The floods of this file run one at a time, so that they do not measure each
+//! other.
 
 mod common;
 
@@ -29,15 +35,13 @@ use vic::rt::transport::{
 
 const JUNK_SESSION: u32 = 0xBAD;
 const FLOOD_KINDS: u64 = 5;
-/// Shortest window over which a tick rate is measured: a preemption of 10 ms costs 0.2 % of it.
-const RATE_WINDOW: Duration = Duration::from_secs(5);
-/// The tick rate a flood must leave the 1 kHz loop in CI [Hz]. The hardening issue's target is
-/// 990 Hz, and on a quiet machine both floods keep 997–1000 Hz (docs/BENCHMARKS.md); but this
-/// shared virtual machine has spells in which the board wakes late whatever it does (one CI run
-/// measured 982–983 Hz for both floods, and a board with no flood at all had a wake-up p99 of
-/// 650 µs in the same minutes), so the CI bound leaves room for one such spell. The figure is
-/// printed for the record.
-const MIN_RATE_HZ: f64 = 950.0;
+/// Flood windows per flood; each is followed by a quiet window as long.
+const WINDOWS: u64 = 8;
+/// Length of one window: ~8 telemetries (one every 100 ticks) fall inside it.
+const WINDOW: Duration = Duration::from_secs(1);
+/// How much slower a flood window may tick than the quiet window after it (the median over the
+/// pairs) [Hz]: 2 % of the ticks, about two 10 ms preemptions in a window.
+const MAX_COST_HZ: f64 = 20.0;
 
 /// One flood at a time: two floods (and their senders) on this 2-core machine at once would
 /// take each other's board's CPU.
@@ -47,13 +51,119 @@ fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Publishing `i` of `n` messages is due at `i/n` of `duration`: waits (asleep, not spinning, to
-/// leave the board its core) when ahead.
-fn pace(t0: Instant, duration: Duration, i: u64, n: u64) {
-    let due = duration.mul_f64(i as f64 / n as f64);
-    if let Some(ahead) = due.checked_sub(t0.elapsed()) {
-        std::thread::sleep(ahead);
+/// The board's tick rate [Hz] and fraction of late ticks in one window, from the first and the
+/// last of its telemetries published inside it.
+#[derive(Clone, Copy, Debug)]
+struct WindowRate {
+    rate: f64,
+    late_fraction: f64,
+}
+
+/// The telemetries seen inside a window that began at `start_ns`.
+struct Window {
+    start_ns: u64,
+    first: Option<Telemetry>,
+    last: Option<Telemetry>,
+}
+
+impl Window {
+    fn begin() -> Window {
+        Window {
+            start_ns: monotonic_ns(),
+            first: None,
+            last: None,
+        }
     }
+
+    fn observe(&mut self, t: Option<Telemetry>) {
+        if let Some(t) = t
+            && t.header.time_ns > self.start_ns
+        {
+            self.first.get_or_insert(t);
+            self.last = Some(t);
+        }
+    }
+
+    fn rate(&self) -> WindowRate {
+        let (Some(a), Some(b)) = (self.first, self.last) else {
+            panic!("no telemetry inside a window of {WINDOW:?}");
+        };
+        let ticks = b.tick - a.tick;
+        assert!(ticks > 0, "one telemetry inside a window of {WINDOW:?}");
+        WindowRate {
+            rate: ticks as f64 / ((b.header.time_ns - a.header.time_ns) as f64 * 1e-9),
+            late_fraction: (b.late_ticks - a.late_ticks) as f64 / ticks as f64,
+        }
+    }
+}
+
+/// Tick rates of the flood windows and of the quiet windows between them.
+#[derive(Default, Debug)]
+struct Windows {
+    flood: Vec<WindowRate>,
+    quiet: Vec<WindowRate>,
+}
+
+/// Waits until `deadline`: asleep (leaving the board its core), in steps of at most 1 ms with
+/// the valid sender going on when `running`.
+fn wait_until(trial: &mut LiveTrial, deadline: Instant, running: bool) {
+    while let Some(ahead) = deadline.checked_duration_since(Instant::now()) {
+        if !running {
+            std::thread::sleep(ahead);
+            break;
+        }
+        trial.keep_running();
+        std::thread::sleep(ahead.min(Duration::from_millis(1)));
+    }
+    if running {
+        trial.keep_running();
+    }
+}
+
+/// Sends messages `1..n` by `send` in [`WINDOWS`] flood windows of [`WINDOW`], each followed by
+/// a quiet window as long, paced within a window in bursts of `burst` sent at full speed. The
+/// valid sender goes on throughout when `running`. `seen` gets each telemetry read in a flood
+/// window.
+fn alternate(
+    trial: &mut LiveTrial,
+    n: u64,
+    burst: u64,
+    running: bool,
+    mut send: impl FnMut(&mut LiveTrial, u64),
+    mut seen: impl FnMut(&Telemetry),
+) -> Windows {
+    let mut windows = Windows::default();
+    let per_window = (n - 1).div_ceil(WINDOWS);
+    for w in 0..WINDOWS {
+        let (first, end) = (1 + w * per_window, (1 + (w + 1) * per_window).min(n));
+        let mut window = Window::begin();
+        let t0 = Instant::now();
+        for i in first..end {
+            send(trial, i);
+            if (i + 1 - first).is_multiple_of(burst) || i + 1 == end {
+                let due = WINDOW.mul_f64((i + 1 - first) as f64 / (end - first) as f64);
+                wait_until(trial, t0 + due, running);
+                let t = trial.ep.latest_telemetry();
+                if let Some(t) = &t {
+                    seen(t);
+                }
+                window.observe(t);
+            }
+        }
+        wait_until(trial, t0 + WINDOW, running);
+        window.observe(trial.ep.latest_telemetry());
+        windows.flood.push(window.rate());
+
+        let mut window = Window::begin();
+        let t0 = Instant::now();
+        while t0.elapsed() < WINDOW {
+            let next = (Instant::now() + Duration::from_millis(5)).min(t0 + WINDOW);
+            wait_until(trial, next, running);
+            window.observe(trial.ep.latest_telemetry());
+        }
+        windows.quiet.push(window.rate());
+    }
+    windows
 }
 
 /// What the board counted between two telemetries: messages rejected (and by reason) and
@@ -100,7 +210,7 @@ fn junk(base: &CommandSlice, i: u64) -> CommandSlice {
     c
 }
 
-fn flood(n: u64, min_duration: Duration) {
+fn flood(n: u64) {
     // A valid trial: reset, then hold slices at 50 Hz for 0.4 s.
     let mut trial = LiveTrial::start("flood");
     let mut last = None;
@@ -114,10 +224,10 @@ fn flood(n: u64, min_duration: Duration) {
     assert_eq!(Mode::from_u32(before.mode), Mode::Running, "{before:?}");
     assert_eq!((before.rejected_messages, before.dropped_messages), (0, 0));
 
-    // The flood, as fast as this process can publish, but spread over at least `min_duration`
-    // (the watchdog must expire while it runs, and the rate is measured over it) in bursts of
-    // 1000. Telemetry seen during the flood, more than 150 ms after the last valid command, must
-    // show the safe hold.
+    // The flood, as fast as this process can publish, in bursts of 1000, in flood windows
+    // that alternate with quiet ones (the first window begins it: the watchdog must expire
+    // while junk comes in). Telemetry seen during the flood, more than 150 ms after the last
+    // valid command, must show the safe hold.
     // The board counts what iceoryx2 overwrote from the sequence gaps of a session, so it must
     // have seen the session once: the first message goes alone (a session's first numbers are
     // arbitrary, e.g. `session_seq()`, so losses before its first received message cannot be
@@ -126,17 +236,18 @@ fn flood(n: u64, min_duration: Duration) {
     std::thread::sleep(Duration::from_millis(5));
     let t0 = Instant::now();
     let mut held_during = None;
-    for i in 1..n {
-        trial.ep.publish_command(&junk(&last, i)).unwrap();
-        if i % 1000 == 999 {
-            pace(t0, min_duration, i + 1, n);
-            if let Some(t) = trial.ep.latest_telemetry()
-                && t.header.time_ns > last_valid_ns + 150_000_000
-            {
+    let windows = alternate(
+        &mut trial,
+        n,
+        1000,
+        false,
+        |trial, i| trial.ep.publish_command(&junk(&last, i)).unwrap(),
+        |t| {
+            if t.header.time_ns > last_valid_ns + 150_000_000 {
                 held_during = Some(Mode::from_u32(t.mode));
             }
-        }
-    }
+        },
+    );
     let sent_in = t0.elapsed();
     let flood_end_ns = monotonic_ns();
     // Telemetry from after the board took the last message (it drains every tick).
@@ -152,10 +263,11 @@ fn flood(n: u64, min_duration: Duration) {
         late,
     } = Delta::between(&before, &after);
     eprintln!(
-        "flood of {n} in {sent_in:?} ({:.0} msg/s): rejected {rejected} {by_reason:?}, \
-         dropped by iceoryx2 {dropped}; {ticks} ticks in {seconds:.3} s = {rate:.1} Hz, \
-         {late} late, watchdog trips {} → {}, mode {}",
-        n as f64 / sent_in.as_secs_f64(),
+        "flood of {n} in {WINDOWS} windows of {WINDOW:?} ({:.0} msg/s), quiet windows \
+         between ({sent_in:?} in all): rejected {rejected} {by_reason:?}, dropped by iceoryx2 \
+         {dropped}; {ticks} ticks in {seconds:.3} s = {rate:.1} Hz, {late} late, watchdog \
+         trips {} → {}, mode {}",
+        n as f64 / (WINDOWS as f64 * WINDOW.as_secs_f64()),
         before.watchdog_trips,
         after.watchdog_trips,
         Mode::from_u32(after.mode).name()
@@ -168,8 +280,8 @@ fn flood(n: u64, min_duration: Duration) {
     );
     assert_eq!(by_reason.iter().map(|(_, v)| v).sum::<u64>(), rejected);
     assert!(rejected > 0 && by_reason.len() >= 3, "{by_reason:?}");
-    // The loop kept its rate over the whole flood (a window of at least RATE_WINDOW).
-    assert_rate_kept(seconds, rate, late, ticks);
+    // The flood did not slow the loop.
+    assert_rate_kept(&windows);
     // Junk never fed the watchdog: it tripped after the last valid command.
     assert!(
         after.watchdog_trips > before.watchdog_trips,
@@ -186,7 +298,7 @@ fn flood(n: u64, min_duration: Duration) {
 #[test]
 fn a_flood_of_1m_invalid_commands_is_counted_and_does_not_feed_the_watchdog() {
     let _one = one_at_a_time();
-    flood(1_000_000, RATE_WINDOW);
+    flood(1_000_000);
 }
 
 const JUNK_CONTROLS: u32 = 0xC0DE;
@@ -242,7 +354,7 @@ fn junk_disturbance(i: u64) -> Disturbance {
 /// trial running: every one counted (rejected by reason or dropped), none applied (the trial,
 /// its reset, the disturbance state and the mode are those of the valid sender), the loop keeps
 /// its rate.
-fn flood_controls_and_disturbances(n: u64, min_duration: Duration) {
+fn flood_controls_and_disturbances(n: u64) {
     let mut trial = LiveTrial::start("floodcd");
     let tool = ToolPorts::open(&trial.ns).unwrap();
     let q0 = trial.q0.clone();
@@ -260,20 +372,17 @@ fn flood_controls_and_disturbances(n: u64, min_duration: Duration) {
     tool.publish_disturbance(&junk_disturbance(0)).unwrap();
     std::thread::sleep(Duration::from_millis(5));
     let t0 = Instant::now();
-    for i in 1..n {
-        trial.ep.publish_control(&junk_control(&q0, i)).unwrap();
-        tool.publish_disturbance(&junk_disturbance(i)).unwrap();
-        if i % 500 == 499 {
-            // Paced as `pace` does, in steps of at most 1 ms so that the valid sender keeps
-            // its 20 ms.
-            let due = min_duration.mul_f64((i + 1) as f64 / n as f64);
-            while let Some(ahead) = due.checked_sub(t0.elapsed()) {
-                trial.keep_running();
-                std::thread::sleep(ahead.min(Duration::from_millis(1)));
-            }
-            trial.keep_running();
-        }
-    }
+    let windows = alternate(
+        &mut trial,
+        n,
+        500,
+        true,
+        |trial, i| {
+            trial.ep.publish_control(&junk_control(&q0, i)).unwrap();
+            tool.publish_disturbance(&junk_disturbance(i)).unwrap();
+        },
+        |_| {},
+    );
     let sent_in = t0.elapsed();
     let flood_end_ns = monotonic_ns();
     let after = trial.telemetry_after(flood_end_ns + 150_000_000, true);
@@ -289,7 +398,8 @@ fn flood_controls_and_disturbances(n: u64, min_duration: Duration) {
         late,
     } = Delta::between(&before, &after);
     eprintln!(
-        "flood of {n} controls + {n} disturbances in {sent_in:?}: rejected {rejected} \
+        "flood of {n} controls + {n} disturbances in {WINDOWS} windows of {WINDOW:?}, quiet \
+         windows between ({sent_in:?} in all): rejected {rejected} \
          {by_reason:?}, dropped by iceoryx2 {dropped}; {ticks} ticks in {seconds:.3} s = \
          {rate:.1} Hz, {late} late, mode {}",
         Mode::from_u32(after.mode).name()
@@ -312,32 +422,57 @@ fn flood_controls_and_disturbances(n: u64, min_duration: Duration) {
     );
     assert_eq!(Mode::from_u32(after.mode), Mode::Running, "{after:?}");
     assert_eq!(after.watchdog_trips, before.watchdog_trips);
-    // The loop kept its rate (measured as for the command flood).
-    assert_rate_kept(seconds, rate, late, ticks);
+    // The flood did not slow the loop (measured as for the command flood).
+    assert_rate_kept(&windows);
 }
 
 #[test]
 fn a_flood_of_invalid_controls_and_disturbances_is_counted_and_never_applied() {
     let _one = one_at_a_time();
-    flood_controls_and_disturbances(50_000, RATE_WINDOW);
+    flood_controls_and_disturbances(50_000);
 }
 
-/// The loop kept its rate over the whole flood: a window of at least [`RATE_WINDOW`], at least
-/// [`MIN_RATE_HZ`], and at most the matching fraction of its ticks late (plus a few for the machine's
-/// preemptions).
-fn assert_rate_kept(seconds: f64, rate: f64, late: u64, ticks: u64) {
-    // Late ticks: the rate's shortfall in ticks, as a fraction (5 % at 950 Hz).
-    let late_fraction = 1.0 - MIN_RATE_HZ / 1000.0;
-    assert!(
-        seconds >= RATE_WINDOW.as_secs_f64(),
-        "a window of {seconds:.3} s"
+/// The median of `v`.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// The flood did not slow the loop: over the pairs of a flood window and the quiet window after
+/// it, the median of the differences of their tick rates is at most [`MAX_COST_HZ`], and that of
+/// their fractions of late ticks at most as much (per 1000). Paired windows a second apart see
+/// the same spells of the machine, and the median lets no one spell decide.
+fn assert_rate_kept(w: &Windows) {
+    let rates = |v: &[WindowRate]| v.iter().map(|r| r.rate).collect::<Vec<_>>();
+    let cost = |f: fn(&WindowRate) -> f64| {
+        median(
+            w.quiet
+                .iter()
+                .zip(&w.flood)
+                .map(|(q, fl)| f(q) - f(fl))
+                .collect(),
+        )
+    };
+    let (rate_cost, late_cost) = (cost(|r| r.rate), cost(|r| -r.late_fraction));
+    eprintln!(
+        "tick rate: flood windows {:.1?} Hz, quiet windows {:.1?} Hz; median cost of a flood \
+         window {rate_cost:.1} Hz and {:.4} more of its ticks late",
+        rates(&w.flood),
+        rates(&w.quiet),
+        late_cost
     );
     assert!(
-        rate >= MIN_RATE_HZ,
-        "tick rate {rate:.1} Hz during the flood"
+        rate_cost <= MAX_COST_HZ,
+        "a flood window ticks {rate_cost:.1} Hz slower than the quiet window after it (median)"
     );
     assert!(
-        (late as f64) < late_fraction * ticks as f64 + 5.0,
-        "{late} late ticks of {ticks}"
+        late_cost <= MAX_COST_HZ / 1000.0,
+        "a flood window has {late_cost:.4} more of its ticks late than the quiet window after it \
+         (median)"
     );
 }
