@@ -267,10 +267,7 @@ impl SoocSolver {
             third: self.options.flow_third_derivatives
                 && self.options.third_derivatives_below == f64::INFINITY,
         };
-        let mut history = Vec::new();
-        let mut iterations = 0;
-        let mut convexified = 0;
-        let mut without_third = 0;
+        let mut tally = Tally::default();
         let (stop, optimality) = loop {
             // The Newton model costs the flow's third derivatives. While it keeps failing (far
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
@@ -295,7 +292,7 @@ impl SoocSolver {
             } else {
                 model.gauss_newton_run += 1;
             }
-            convexified += step.map_or(0, |s| s.convexified);
+            tally.convexified += step.map_or(0, |s| s.convexified);
             let Some(Backstep { dv1, dv2, .. }) = step else {
                 break (
                     SoocStop::RegularizationLimit,
@@ -306,47 +303,17 @@ impl SoocSolver {
             if optimality.met() {
                 break (SoocStop::Converged, optimality);
             }
-            if iterations >= self.options.max_iterations {
+            if tally.iterations >= self.options.max_iterations {
                 break (SoocStop::MaxIterations, optimality);
             }
-            match self.line_search(problem, cost, dv1, dv2) {
-                Some((c, alpha)) => {
-                    std::mem::swap(&mut self.z, &mut self.cand_z);
-                    std::mem::swap(&mut self.u, &mut self.cand_u);
-                    // Close enough to the optimum for the exact Hessian (for good).
-                    let gain = (cost - c) / c.abs().max(1e-300);
-                    if self.options.flow_third_derivatives
-                        && gain < self.options.third_derivatives_below
-                    {
-                        model.third = true;
-                    }
-                    cost = c;
-                    iterations += 1;
-                    without_third += usize::from(!full);
-                    history.push(c);
-                    self.notify(iterations, c, damping.mu, alpha);
-                    model.needs_expansion = true;
-                    // A full step: trust the model more.
-                    if alpha >= 0.5 {
-                        damping.decrease(&self.options);
-                    }
-                }
-                None => {
-                    // Nothing left to gain above round-off, yet the gradient test fails: stop
-                    // rather than inflate μ.
-                    if optimality.predicted_decrease < ROUND_OFF || !damping.increase(&self.options)
-                    {
-                        if !full {
-                            // The model without the third derivatives found no descent at any
-                            // μ: the exact one, from a fresh μ.
-                            model.third = true;
-                            model.has_second_order = false;
-                            damping = Damping { mu: 0.0, step: 1.0 };
-                            continue;
-                        }
-                        break (SoocStop::RegularizationLimit, optimality);
-                    }
-                }
+            let phase = Phase {
+                full,
+                predicted: (dv1, dv2),
+                predicted_decrease: optimality.predicted_decrease,
+            };
+            let moved = (&mut damping, &mut model, &mut tally);
+            if let Some(stop) = self.advance(problem, &mut cost, phase, moved) {
+                break (stop, optimality);
             }
         };
         self.solved = true;
@@ -354,14 +321,65 @@ impl SoocSolver {
             u: self.u.clone(),
             z: self.z.clone(),
             expected_cost: cost,
-            iterations,
+            iterations: tally.iterations,
             stop,
             optimality,
             solve_time: start.elapsed(),
-            history,
-            convexified,
-            without_third,
+            history: tally.history,
+            convexified: tally.convexified,
+            without_third: tally.without_third,
         })
+    }
+
+    /// The line search of one iteration: on success the candidate becomes the iterate (`cost`
+    /// its cost) and a full step lowers μ; on failure μ grows, or the exact model replaces the
+    /// Gauss–Newton one from a fresh μ. `Some` when the solve must stop.
+    fn advance(
+        &mut self,
+        problem: &SoocProblem,
+        cost: &mut f64,
+        phase: Phase,
+        (damping, model, tally): (&mut Damping, &mut ModelState, &mut Tally),
+    ) -> Option<SoocStop> {
+        let (dv1, dv2) = phase.predicted;
+        match self.line_search(problem, *cost, dv1, dv2) {
+            Some((c, alpha)) => {
+                std::mem::swap(&mut self.z, &mut self.cand_z);
+                std::mem::swap(&mut self.u, &mut self.cand_u);
+                // Close enough to the optimum for the exact Hessian (for good).
+                let gain = (*cost - c) / c.abs().max(1e-300);
+                if self.options.flow_third_derivatives
+                    && gain < self.options.third_derivatives_below
+                {
+                    model.third = true;
+                }
+                *cost = c;
+                tally.iterations += 1;
+                tally.without_third += usize::from(!phase.full);
+                tally.history.push(c);
+                self.notify(tally.iterations, c, damping.mu, alpha);
+                model.needs_expansion = true;
+                // A full step: trust the model more.
+                if alpha >= 0.5 {
+                    damping.decrease(&self.options);
+                }
+                None
+            }
+            // Nothing left to gain above round-off, yet the gradient test fails: stop rather
+            // than inflate μ.
+            None if phase.predicted_decrease < ROUND_OFF || !damping.increase(&self.options) => {
+                if phase.full {
+                    return Some(SoocStop::RegularizationLimit);
+                }
+                // The model without the third derivatives found no descent at any μ: the exact
+                // one, from a fresh μ.
+                model.third = true;
+                model.has_second_order = false;
+                *damping = Damping { mu: 0.0, step: 1.0 };
+                None
+            }
+            None => None,
+        }
     }
 
     /// The diagonal of the exact `∇²J` (`∂²J/∂u_{k,j}²`, each control moved alone) at the
@@ -558,4 +576,27 @@ struct ModelState {
     gauss_newton_run: usize,
     /// The Newton model includes the flow's third derivatives (the exact Hessian).
     third: bool,
+}
+
+/// What the accepted steps of a solve add up to.
+#[derive(Default)]
+struct Tally {
+    iterations: usize,
+    /// Cost after each accepted step.
+    history: Vec<f64>,
+    /// Stages convexified, over all backward passes.
+    convexified: usize,
+    /// Accepted steps taken without the flow's third derivatives.
+    without_third: usize,
+}
+
+/// What the line search of one iteration needs from its backward pass.
+#[derive(Clone, Copy)]
+struct Phase {
+    /// The model has the flow's third derivatives (or does without them by option).
+    full: bool,
+    /// The model's first- and second-order predicted changes of `J` for a full step.
+    predicted: (f64, f64),
+    /// The model's predicted decrease relative to `J` (infinite without the exact model).
+    predicted_decrease: f64,
 }
