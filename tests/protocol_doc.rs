@@ -181,7 +181,7 @@ fn enumerations_match_the_document() {
         ])
     );
     let kinds: Vec<_> = (0..8u32)
-        .filter_map(|v| DisturbanceKind::from_u32(v).map(|k| (v as u64, format!("{k:?}"))))
+        .filter_map(|v| DisturbanceKind::from_wire(v).map(|k| (v as u64, format!("{k:?}"))))
         .collect();
     let doc: Vec<_> = values("DisturbanceKind").into_iter().collect();
     assert_eq!(

@@ -10,35 +10,17 @@
 use super::commands::CommandBuffer;
 use super::plant::SimulatedPlant;
 use super::{BoardConfig, Counters};
+use crate::rt::transport::wire_enum::wire_enum;
 use crate::rt::transport::{Knot, Mode};
 
-/// Why the plant guard latched a fault.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum FaultReason {
-    None = 0,
-    JointLimit = 1,
-    VelocityLimit = 2,
-    /// The state stopped being finite: the plant is frozen rather than held.
-    NotFinite = 3,
-}
-
-impl FaultReason {
-    pub fn from_u32(v: u32) -> FaultReason {
-        match v {
-            0 => FaultReason::None,
-            1 => FaultReason::JointLimit,
-            2 => FaultReason::VelocityLimit,
-            _ => FaultReason::NotFinite,
-        }
-    }
-    pub fn name(self) -> &'static str {
-        match self {
-            FaultReason::None => "none",
-            FaultReason::JointLimit => "joint-limit",
-            FaultReason::VelocityLimit => "velocity-limit",
-            FaultReason::NotFinite => "not-finite",
-        }
+wire_enum! {
+    /// Why the plant guard latched a fault.
+    pub enum FaultReason: u32 else NotFinite {
+        None = 0 => "none",
+        JointLimit = 1 => "joint-limit",
+        VelocityLimit = 2 => "velocity-limit",
+        /// The state stopped being finite: the plant is frozen rather than held.
+        NotFinite = 3 => "not-finite",
     }
 }
 

@@ -192,7 +192,7 @@ impl Checks<'_> {
         if d.header.version != PROTOCOL_VERSION {
             return Err(Rejection::Version);
         }
-        let kind = DisturbanceKind::from_u32(d.kind).ok_or(Rejection::UnknownKind)?;
+        let kind = DisturbanceKind::from_wire(d.kind).ok_or(Rejection::UnknownKind)?;
         if !(d.torque.iter().all(|v| v.is_finite()) && d.value.is_finite()) {
             return Err(Rejection::NotFinite);
         }

@@ -207,36 +207,18 @@ header_channel! {
     }
 }
 
-fn control_kind_name(kind: u32) -> &'static str {
-    match kind {
-        k if k == ControlKind::Reset as u32 => "reset",
-        k if k == ControlKind::Stop as u32 => "stop",
-        _ => "unknown",
-    }
-}
-
 header_channel! {
     /// Control requests (reset, stop).
     const CONTROL = ("/control", "vic.Control", "A control request to the board");
     /// Encodes a control request.
     fn control_json(c: &Control) {
         kind: Int = c.kind, "0 reset, 1 stop";
-        kind_name: Str = control_kind_name(c.kind), "reset, stop or unknown";
+        kind_name: Str = ControlKind::from_wire(c.kind).map_or("unknown", ControlKind::name), "reset, stop or unknown";
         trial: Int = c.trial, "trial";
         seed: Int = c.seed, "noise seed";
         start_ns: Int = c.start_ns, "trial start [ns, CLOCK_MONOTONIC]";
         q0: Nums = c.q0, "initial joint angles [rad]";
         qd0: Nums = c.qd0, "initial joint velocities [rad/s]";
-    }
-}
-
-fn disturbance_kind_name(kind: u32) -> &'static str {
-    match DisturbanceKind::from_u32(kind) {
-        Some(DisturbanceKind::Pulse) => "pulse",
-        Some(DisturbanceKind::Load) => "load",
-        Some(DisturbanceKind::Field) => "field",
-        Some(DisturbanceKind::Noise) => "noise",
-        None => "unknown",
     }
 }
 
@@ -246,7 +228,7 @@ header_channel! {
     /// Encodes a disturbance.
     fn disturbance_json(d: &Disturbance) {
         kind: Int = d.kind, "0 pulse, 1 load, 2 field, 3 noise";
-        kind_name: Str = disturbance_kind_name(d.kind), "pulse, load, field, noise or unknown";
+        kind_name: Str = DisturbanceKind::from_wire(d.kind).map_or("unknown", DisturbanceKind::name), "pulse, load, field, noise or unknown";
         torque: Nums = d.torque, "joint torque [N m] (pulse, load)";
         duration: Num = seconds(d.duration_ns), "pulse duration [s]";
         value: Num = d.value, "field beta [N/m] or noise factor";

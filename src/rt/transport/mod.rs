@@ -3,6 +3,8 @@
 //!
 //! - [`protocol`]: the wire types, each led by one [`Header`] (version, sequence number, publish
 //!   time), and the reasons the board rejects a message;
+//! - [`wire_enum`]: the macro that declares an enum sent as an integer (modes, kinds, reasons)
+//!   with its wire values and names once;
 //! - [`clock`]: the monotonic time base every process of the machine shares;
 //! - [`namespace`]: names, files and dead nodes of a namespace (iceoryx2's `global.prefix`, so
 //!   instances and parallel tests never see each other);
@@ -29,6 +31,7 @@ pub mod recycled;
 pub mod relay;
 pub mod service;
 pub mod session;
+pub mod wire_enum;
 
 pub use clock::{monotonic_ns, process_session, session_seq};
 pub use error::TransportError;

@@ -7,6 +7,7 @@
 //! newer or broken sender is a rejection, not undefined behaviour. `docs/PROTOCOL.md` describes
 //! the wire format for clients in other languages (a test keeps it in step with these types).
 
+use crate::rt::transport::wire_enum::wire_enum;
 use iceoryx2::prelude::*;
 
 /// Version of the message layout; a message with another version is rejected.
@@ -72,40 +73,19 @@ impl Header {
     }
 }
 
-/// What the board is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum Mode {
-    /// No trial: the plant holds its posture under the hold law (a push moves it, it springs
-    /// back); after a reset, frozen at the reset state until the trial start.
-    Idle = 0,
-    /// Following a valid command.
-    Running = 1,
-    /// No valid command covers the present: holding the position with the safe stiffness.
-    SafeHold = 2,
-    /// The plant guard tripped (a joint or speed limit, or a state that is not finite): latched
-    /// in a safe hold (or frozen) until an explicit reset.
-    Fault = 3,
-}
-
-impl Mode {
-    /// From the wire value (unknown values read as `Fault`).
-    pub fn from_u32(v: u32) -> Mode {
-        match v {
-            0 => Mode::Idle,
-            1 => Mode::Running,
-            2 => Mode::SafeHold,
-            _ => Mode::Fault,
-        }
-    }
-    /// Lower-case name for reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Mode::Idle => "idle",
-            Mode::Running => "running",
-            Mode::SafeHold => "safe-hold",
-            Mode::Fault => "fault",
-        }
+wire_enum! {
+    /// What the board is doing.
+    pub enum Mode: u32 else Fault {
+        /// No trial: the plant holds its posture under the hold law (a push moves it, it springs
+        /// back); after a reset, frozen at the reset state until the trial start.
+        Idle = 0 => "idle",
+        /// Following a valid command.
+        Running = 1 => "running",
+        /// No valid command covers the present: holding the position with the safe stiffness.
+        SafeHold = 2 => "safe-hold",
+        /// The plant guard tripped (a joint or speed limit, or a state that is not finite):
+        /// latched in a safe hold (or frozen) until an explicit reset.
+        Fault = 3 => "fault",
     }
 }
 
@@ -175,14 +155,14 @@ impl Knot {
     }
 }
 
-/// How the board reads the knots between their times.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum Interpolation {
-    /// Zero-order hold: knot `i` holds over `[t_i, t_{i+1})` (the plan's discretisation).
-    Hold = 0,
-    /// Linear between knots.
-    Linear = 1,
+wire_enum! {
+    /// How the board reads the knots between their times.
+    pub enum Interpolation: u32 {
+        /// Zero-order hold: knot `i` holds over `[t_i, t_{i+1})` (the plan's discretisation).
+        Hold = 0 => "hold",
+        /// Linear between knots.
+        Linear = 1 => "linear",
+    }
 }
 
 /// A slice of commands covering `[start, start + count · knot_dt)` of a trial's plant time.
@@ -236,29 +216,17 @@ impl CommandSlice {
     }
 }
 
-/// Kinds of disturbance.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum DisturbanceKind {
-    /// `torque` for `duration_ns`.
-    Pulse = 0,
-    /// A steady `torque` until changed (zero removes it).
-    Load = 1,
-    /// Field on (`value` = β of a divergent field [N/m]) or off (`value` = 0).
-    Field = 2,
-    /// Noise level: the plant noise is multiplied by `value` (1: as configured, 0: none).
-    Noise = 3,
-}
-
-impl DisturbanceKind {
-    pub fn from_u32(v: u32) -> Option<Self> {
-        Some(match v {
-            0 => DisturbanceKind::Pulse,
-            1 => DisturbanceKind::Load,
-            2 => DisturbanceKind::Field,
-            3 => DisturbanceKind::Noise,
-            _ => return None,
-        })
+wire_enum! {
+    /// Kinds of disturbance.
+    pub enum DisturbanceKind: u32 {
+        /// `torque` for `duration_ns`.
+        Pulse = 0 => "pulse",
+        /// A steady `torque` until changed (zero removes it).
+        Load = 1 => "load",
+        /// Field on (`value` = β of a divergent field [N/m]) or off (`value` = 0).
+        Field = 2 => "field",
+        /// Noise level: the plant noise is multiplied by `value` (1: as configured, 0: none).
+        Noise = 3 => "noise",
     }
 }
 
@@ -279,15 +247,15 @@ pub struct Disturbance {
     pub value: f64,
 }
 
-/// Control requests.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum ControlKind {
-    /// Put the plant at `q0`, `qd0`, reseed the noise from `(seed, trial)`, wait for the trial to
-    /// start at the board tick on or after `start_ns` (monotonic).
-    Reset = 0,
-    /// Stop the trial: idle, the plant ramped into the hold at its posture.
-    Stop = 1,
+wire_enum! {
+    /// Control requests.
+    pub enum ControlKind: u32 {
+        /// Put the plant at `q0`, `qd0`, reseed the noise from `(seed, trial)`, wait for the trial
+        /// to start at the board tick on or after `start_ns` (monotonic).
+        Reset = 0 => "reset",
+        /// Stop the trial: idle, the plant ramped into the hold at its posture.
+        Stop = 1 => "stop",
+    }
 }
 
 /// A control request to the board.
@@ -320,94 +288,47 @@ pub struct Percentiles {
     pub count: u64,
 }
 
-/// Why the board rejected a message. The board counts them by reason; [`Telemetry`] carries the
-/// counts, indexed by `reason as usize`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(usize)]
-pub enum Rejection {
-    /// Another protocol version.
-    Version = 0,
-    /// Another number of joints.
-    Joints = 1,
-    /// Knot count, knot interval, slice duration or interpolation out of range.
-    Shape = 2,
-    /// A number that is NaN or infinite.
-    NotFinite = 3,
-    /// Stiffness below 0 or above the actuator's maximum.
-    StiffnessOutOfBounds = 4,
-    /// Feedforward torque beyond the actuator's limit.
-    TorqueOutOfBounds = 5,
-    /// The damping that the actuator's law gives this stiffness is negative (unstable joint).
-    DampingUnstable = 6,
-    /// A command for another trial, or with no trial reset.
-    WrongTrial = 7,
-    /// A sequence number that repeats or goes backwards within its session, or a new session
-    /// whose time stamp is earlier than the last message accepted.
-    OutOfOrder = 8,
-    /// A time stamp later than the board's clock beyond the tolerance.
-    FutureTimestamp = 9,
-    /// A disturbance beyond the configured limits.
-    DisturbanceOutOfBounds = 10,
-    /// An unknown disturbance or control kind.
-    UnknownKind = 11,
-    /// More messages in one tick than the board takes.
-    Overflow = 12,
-    /// A command while the plant guard's fault is latched (only a reset clears it).
-    Faulted = 13,
-    /// An equilibrium `q_d` outside the joint range or `q_d'` beyond the speed limit.
-    EquilibriumOutOfBounds = 14,
-    /// A time stamp older than [`MAX_MESSAGE_AGE_NS`] by the board's clock.
-    Stale = 15,
-    /// A slice that ends more than [`MAX_REACH_NS`] after the board's present trial time, or a
-    /// reset whose start is more than that after the board's clock.
-    TooFarAhead = 16,
-}
-
-impl Rejection {
-    /// Number of reasons: one past the last variant (a new reason goes last, and [`Self::ALL`]
-    /// fails to compile until it lists it).
-    pub const COUNT: usize = Rejection::TooFarAhead as usize + 1;
-    /// Every reason, in wire order (`ALL[r as usize] == r`).
-    pub const ALL: [Rejection; Rejection::COUNT] = [
-        Rejection::Version,
-        Rejection::Joints,
-        Rejection::Shape,
-        Rejection::NotFinite,
-        Rejection::StiffnessOutOfBounds,
-        Rejection::TorqueOutOfBounds,
-        Rejection::DampingUnstable,
-        Rejection::WrongTrial,
-        Rejection::OutOfOrder,
-        Rejection::FutureTimestamp,
-        Rejection::DisturbanceOutOfBounds,
-        Rejection::UnknownKind,
-        Rejection::Overflow,
-        Rejection::Faulted,
-        Rejection::EquilibriumOutOfBounds,
-        Rejection::Stale,
-        Rejection::TooFarAhead,
-    ];
-    /// Name for reports and JSON.
-    pub fn name(self) -> &'static str {
-        match self {
-            Rejection::Version => "version",
-            Rejection::Joints => "joints",
-            Rejection::Shape => "shape",
-            Rejection::NotFinite => "not-finite",
-            Rejection::StiffnessOutOfBounds => "stiffness-out-of-bounds",
-            Rejection::TorqueOutOfBounds => "torque-out-of-bounds",
-            Rejection::DampingUnstable => "damping-unstable",
-            Rejection::WrongTrial => "wrong-trial",
-            Rejection::OutOfOrder => "out-of-order",
-            Rejection::FutureTimestamp => "future-timestamp",
-            Rejection::DisturbanceOutOfBounds => "disturbance-out-of-bounds",
-            Rejection::UnknownKind => "unknown-kind",
-            Rejection::Overflow => "overflow",
-            Rejection::Faulted => "faulted",
-            Rejection::EquilibriumOutOfBounds => "equilibrium-out-of-bounds",
-            Rejection::Stale => "stale",
-            Rejection::TooFarAhead => "too-far-ahead",
-        }
+wire_enum! {
+    /// Why the board rejected a message. The board counts them by reason; [`Telemetry`] carries
+    /// the counts, indexed by `reason as usize` (the values run from 0 without a gap, so
+    /// `ALL[r as usize] == r`; a new reason goes last).
+    pub enum Rejection: usize {
+        /// Another protocol version.
+        Version = 0 => "version",
+        /// Another number of joints.
+        Joints = 1 => "joints",
+        /// Knot count, knot interval, slice duration or interpolation out of range.
+        Shape = 2 => "shape",
+        /// A number that is NaN or infinite.
+        NotFinite = 3 => "not-finite",
+        /// Stiffness below 0 or above the actuator's maximum.
+        StiffnessOutOfBounds = 4 => "stiffness-out-of-bounds",
+        /// Feedforward torque beyond the actuator's limit.
+        TorqueOutOfBounds = 5 => "torque-out-of-bounds",
+        /// The damping that the actuator's law gives this stiffness is negative (unstable joint).
+        DampingUnstable = 6 => "damping-unstable",
+        /// A command for another trial, or with no trial reset.
+        WrongTrial = 7 => "wrong-trial",
+        /// A sequence number that repeats or goes backwards within its session, or a new session
+        /// whose time stamp is earlier than the last message accepted.
+        OutOfOrder = 8 => "out-of-order",
+        /// A time stamp later than the board's clock beyond the tolerance.
+        FutureTimestamp = 9 => "future-timestamp",
+        /// A disturbance beyond the configured limits.
+        DisturbanceOutOfBounds = 10 => "disturbance-out-of-bounds",
+        /// An unknown disturbance or control kind.
+        UnknownKind = 11 => "unknown-kind",
+        /// More messages in one tick than the board takes.
+        Overflow = 12 => "overflow",
+        /// A command while the plant guard's fault is latched (only a reset clears it).
+        Faulted = 13 => "faulted",
+        /// An equilibrium `q_d` outside the joint range or `q_d'` beyond the speed limit.
+        EquilibriumOutOfBounds = 14 => "equilibrium-out-of-bounds",
+        /// A time stamp older than [`MAX_MESSAGE_AGE_NS`] by the board's clock.
+        Stale = 15 => "stale",
+        /// A slice that ends more than [`MAX_REACH_NS`] after the board's present trial time, or a
+        /// reset whose start is more than that after the board's clock.
+        TooFarAhead = 16 => "too-far-ahead",
     }
 }
 
