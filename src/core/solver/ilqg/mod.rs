@@ -423,14 +423,7 @@ impl Ilqg {
                     linearize(problem, &mut self.nominal);
                     iterations += 1;
                     history.push(step.after);
-                    if let Some(cb) = self.on_iteration.as_mut() {
-                        cb(&Progress {
-                            iteration: iterations,
-                            merit: step.after,
-                            mu: reg.mu,
-                            alpha: step.alpha,
-                        });
-                    }
+                    self.notify(iterations, step.after, reg.mu, step.alpha);
                     self.update_regularization(&mut reg, step.alpha);
                     // One more backward pass so that the gains and s_0 belong to this nominal.
                     finish_after_backward = self.step_converged(&step, reg.mu, trusted_mu);
@@ -459,6 +452,18 @@ impl Ilqg {
             stop,
             solve_time: start.elapsed(),
             history,
+        }
+    }
+
+    /// Tells the observer, if any, of an accepted step.
+    fn notify(&mut self, iteration: usize, merit: f64, mu: f64, alpha: f64) {
+        if let Some(cb) = self.on_iteration.as_mut() {
+            cb(&Progress {
+                iteration,
+                merit,
+                mu,
+                alpha,
+            });
         }
     }
 
