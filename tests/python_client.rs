@@ -4,8 +4,8 @@
 //!
 //! - `doc`: the ctypes layouts (every offset, size and type), type names, enumerations,
 //!   constants and service settings equal the document's tables;
-//! - `live`, with a board recording to MCAP in a namespace of its own: states at ~1 kHz with
-//!   increasing ticks; field, noise, reset, pulse and load acknowledged in the state; with no
+//! - `live`, with a board recording to MCAP in a namespace of its own: states with increasing
+//!   ticks on the 1 kHz schedule (every period a tick or a counted miss); field, noise, reset, pulse and load acknowledged in the state; with no
 //!   central process the reset arm stays put in the safe hold, a pulse moves it and it springs
 //!   back, every torque the hold law of the previous state; the telemetry agrees; an oversized
 //!   pulse is counted as rejected, not acknowledged;

@@ -6,7 +6,7 @@ tests/python_client.rs; no pytest needed).
       equal the document's tables.
   test_client.py live NAMESPACE OUT.npz
       against a running board (started by the caller with field and noise as configured): states
-      at ~1 kHz with increasing ticks, reset / field / noise / pulse / load acknowledged in the
+      with increasing ticks on the 1 kHz schedule (every period a tick or a counted miss), reset / field / noise / pulse / load acknowledged in the
       state, the pulse moves the joint under the hold law and it springs back, the telemetry
       agrees; the states received are saved to OUT.npz.
   test_client.py compare OUT.npz RECORD.mcap RECORD.csv PLAN.json
@@ -143,6 +143,20 @@ Q0 = [0.43, 2.12]
 PULSE = [2.0, -1.0]
 PULSE_S = 0.05
 HOLD_K, ALPHA = 100.0, 0.1  # board.hold_stiffness default; the scenario's damping K_D = α K
+PERIOD_NS = 1_000_000  # `vic board --rate-hz` default: 1 kHz
+
+
+def schedule_error(t0, t1):
+    """How far the board's schedule between two telemetries is from its nominal period [periods].
+
+    A wake-up later than a whole period skips the missed deadlines and counts them
+    (`missed_periods`), so ticks + missed periods = elapsed periods, up to the lateness and work
+    of the two ticks that time-stamped the telemetries. The executed tick rate alone is not a
+    property of the board: a loaded machine (the project's CI measured 942–948 ticks/s in slow
+    minutes) skips periods whatever the code does."""
+    periods = (int(t1.header.time_ns) - int(t0.header.time_ns)) / PERIOD_NS
+    counted = (t1.tick - t0.tick) + (t1.missed_periods - t0.missed_periods)
+    return counted - periods, periods
 
 
 def live_checks(ns, out):
@@ -151,24 +165,36 @@ def live_checks(ns, out):
     seen = {}
 
     def stream():
-        # ~1 kHz with increasing ticks, time stamps on the shared monotonic clock.
+        # 1 kHz with increasing ticks, time stamps on the shared monotonic clock.
+        deadline = time.monotonic() + 2
+        while (t0 := b.telemetry()) is None and time.monotonic() < deadline:
+            time.sleep(0.01)
         s = b.collect(1.2)
+        t1 = b.telemetry()
         kept.append(s)
         ticks = s["tick"].astype(np.int64)
-        assert len(s) > 900, f"{len(s)} states in 1.2 s"
+        assert len(s) > 0.5 * 1.2e9 / PERIOD_NS, f"{len(s)} states in 1.2 s"
         assert np.all(np.diff(ticks) > 0), "ticks not increasing"
         span = ticks[-1] - ticks[0] + 1
         assert len(s) >= 0.9 * span, f"{len(s)} states of {span} ticks received"
         assert np.array_equal(s["header"]["seq"], s["tick"]), "header.seq is the tick"
         dt = (int(s["header"]["time_ns"][-1]) - int(s["header"]["time_ns"][0])) * 1e-9
         rate = (ticks[-1] - ticks[0]) / dt
-        assert 950 <= rate <= 1050, f"{rate:.1f} ticks/s"
+        # The nominal schedule is kept: every period between two telemetries ~1.2 s apart is
+        # either a tick or a counted miss (3 % + 2 periods for the two time-stamping ticks; a
+        # period of 1.1 ms, or a loop that did not sleep, is off by ≥ 9 %).
+        assert t0 is not None and t1.header.seq > t0.header.seq, "no telemetry during the stream"
+        err, periods = schedule_error(t0, t1)
+        assert abs(err) <= 0.03 * periods + 2, f"ticks + missed off by {err:.1f} of {periods:.0f}"
+        # Executed ticks never outrun the clock; a loaded machine may make them slower.
+        assert rate <= 1.03e9 / PERIOD_NS, f"{rate:.1f} ticks/s"
         age = time.monotonic_ns() - int(b.latest["header"]["time_ns"])
         assert 0 <= age < 200e6, f"newest state is {age / 1e6:.1f} ms old (clock?)"
         assert all(v == vc.PROTOCOL_VERSION for v in s["header"]["version"])
         assert set(s["joints"].tolist()) == {2}
         seen["rate"] = rate
-        print(f"     {len(s)} states, {rate:.1f} ticks/s, lost {b.lost}")
+        missed = t1.missed_periods - t0.missed_periods
+        print(f"     {len(s)} states, {rate:.1f} ticks/s, {missed} periods missed, lost {b.lost}")
 
     def quiet_plant():
         # Field and noise off (each acknowledged), so the hold below is exact.
@@ -253,7 +279,17 @@ def live_checks(ns, out):
         assert tel.disturbance_seq == b._seq and tel.rejected_messages == 0
         assert sum(tel.rejected_by_reason) == 0 and tel.fault_reason == vc.FaultReason.NONE
         assert list(tel.stiffness) == [HOLD_K, HOLD_K]
-        assert 900 < tel.tick_rate_hz < 1100, tel.tick_rate_hz
+        # tick_rate_hz is the ticks per second between this telemetry and the one before.
+        prev, deadline = tel, time.monotonic() + 2
+        while (tel := b.telemetry()).header.seq != prev.header.seq + 1:
+            if tel.header.seq > prev.header.seq:
+                prev = tel  # one went by unseen (a stalled client): pair the next two
+            assert time.monotonic() < deadline, "no two consecutive telemetries in 2 s"
+            time.sleep(0.005)
+        dt = (int(tel.header.time_ns) - int(prev.header.time_ns)) * 1e-9
+        # (The schedule itself is checked over 1.2 s in `stream`: over these 100 ms a stall of a
+        # few ms in a slow minute, on one of the two time-stamping ticks, is a few per cent.)
+        assert abs(tel.tick_rate_hz * dt - (tel.tick - prev.tick)) < 1e-6, (tel.tick_rate_hz, dt)
 
     def a_rejected_request_is_counted_not_acknowledged():
         try:
