@@ -49,8 +49,12 @@ const WINDOWS: u64 = 8;
 /// Length of one window: ~8 telemetries (one every 100 ticks) fall inside it.
 const WINDOW: Duration = Duration::from_secs(1);
 /// How much slower a flood window may tick than the quiet window after it (the median over the
-/// pairs) [Hz]: 2 % of the ticks, about two 10 ms preemptions in a window.
-const MAX_COST_HZ: f64 = 20.0;
+/// pairs) [Hz]: 5 % of the ticks. In a slow spell of the project's CI machine (quiet windows
+/// 829–1000 Hz) the median cost was 32 Hz: the flood's sender, busy on the other vCPU, costs the
+/// board's vCPU time on this hypervisor whatever the board does. A loop that does the flood's
+/// work in its ticks costs more: a `SCHED_FIFO` thread taking 3 ms of every 30 ms of the board's
+/// CPU in the flood windows measured 118 and 66 Hz.
+const MAX_COST_HZ: f64 = 50.0;
 
 /// One flood at a time: two floods (and their senders) on this 2-core machine at once would
 /// take each other's board's CPU.
