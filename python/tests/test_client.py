@@ -6,9 +6,10 @@ tests/python_client.rs; no pytest needed).
       equal the document's tables.
   test_client.py live NAMESPACE OUT.npz
       against a running board (started by the caller with field and noise as configured): states
-      with increasing ticks on the 1 kHz schedule (every period a tick or a counted miss), reset / field / noise / pulse / load acknowledged in the
-      state, the pulse moves the joint under the hold law and it springs back, the telemetry
-      agrees; the states received are saved to OUT.npz.
+      with increasing ticks on the 1 kHz schedule (every period a tick or a counted miss);
+      reset / field / noise / pulse / load acknowledged in the state; the pulse moves the joint
+      under the hold law and it springs back; the telemetry agrees; the states received are
+      saved to OUT.npz.
   test_client.py compare OUT.npz RECORD.mcap RECORD.csv PLAN.json
       after the board stopped: every state received equals the board's own record of that tick
       (its MCAP file through load_mcap, and the CSV `vic convert` made of it through
@@ -256,7 +257,10 @@ def live_checks(ns, out):
         err = np.abs(cur["tau"] - cur["tau_ext"] - law)[one]
         assert one.sum() > 1000 and err.max() < 1e-9 * HOLD_K, (one.sum(), err.max())
         seen["peak"] = peak
-        print(f"     pulse acknowledged at tick {ack['tick']}, peak {peak} rad, law residual {err.max():.1e}")
+        print(
+            f"     pulse acknowledged at tick {ack['tick']}, peak {peak} rad,"
+            f" law residual {err.max():.1e}"
+        )
 
     def load_is_steady():
         ack = b.inject_load([0.5, 0.0])
