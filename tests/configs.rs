@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 use vic::planning::method::Method;
 use vic::planning::plan::plan;
+use vic::planning::plan_file::{PlanSummary, Stop};
 use vic::planning::scenario::Scenario;
 
 /// The scenarios, as file stems of `config/*.toml`.
@@ -34,9 +35,42 @@ fn check(stem: &str) {
     check_with(stem, &scenario, scenario.solver.method);
 }
 
+/// The plan reports the values of its method's criterion, and `converged` (and the stop reason)
+/// says what they say.
+fn check_criterion(stem: &str, method: Method, s: &PlanSummary) {
+    match method {
+        Method::Ilqg => {
+            let c = s
+                .convergence
+                .unwrap_or_else(|| panic!("{stem}: no ILQG convergence record"));
+            assert_eq!(c.met(), s.converged, "{stem}: {c:?} vs converged");
+            match s.stop {
+                Stop::SmallGradient => assert!(c.gradient_met(), "{stem}: {c:?}"),
+                Stop::SmallImprovement => assert!(c.improvement_met(), "{stem}: {c:?}"),
+                _ => assert!(!c.met(), "{stem}: stopped {} but {c:?}", s.stop),
+            }
+            assert!(
+                s.optimality.is_none(),
+                "{stem}: SOOC figures on an ILQG plan"
+            );
+        }
+        Method::Sooc => {
+            let o = s
+                .optimality
+                .unwrap_or_else(|| panic!("{stem}: no SOOC optimality"));
+            assert_eq!(o.met(), s.converged, "{stem}: {o:?} vs converged");
+            assert!(
+                s.convergence.is_none(),
+                "{stem}: ILQG figures on a SOOC plan"
+            );
+        }
+    }
+}
+
 fn check_with(stem: &str, scenario: &Scenario, method: Method) {
     let file = plan(scenario, method, None).unwrap_or_else(|e| panic!("{stem}: {e}"));
     let s = &file.summary;
+    check_criterion(stem, method, s);
     let steps = scenario.task.steps;
     // The plan file is complete and finite.
     assert_eq!(file.x.len(), steps + 1, "{stem}: states");

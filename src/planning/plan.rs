@@ -142,6 +142,7 @@ pub fn solve_sooc(
         },
         solve_time: start.elapsed(),
         history,
+        convergence: None,
     };
     Ok(SoocResult {
         solution,

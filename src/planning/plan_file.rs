@@ -49,6 +49,10 @@ pub struct PlanSummary {
     /// whether they were met).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optimality: Option<crate::core::solver::sooc_newton::Optimality>,
+    /// ILQG: the stop tests' values and tolerances at the plan (`converged` says whether one of
+    /// them was met; see [`crate::core::solver::Convergence`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub convergence: Option<crate::core::solver::Convergence>,
     /// Total variation of the commands per control channel, `Σ_k |u[k+1] − u[k]|`, in the
     /// channel's unit (`control_names`): how much a plan chatters.
     #[serde(default)]
@@ -258,6 +262,7 @@ pub(crate) fn plan_file(
             open_loop_expected_cost: open_loop.expected_cost,
             open_loop_final_std,
             optimality: None,
+            convergence: sol.convergence,
             total_variation: total_variation(&sol.u),
         },
     }

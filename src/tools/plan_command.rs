@@ -2,6 +2,7 @@
 //! feedback delay, or SOOC for open-loop execution), write the plan file and report its summary.
 
 use crate::planning::plan::{Method, PlanFile, plan};
+use crate::planning::plan_file::PlanSummary;
 use crate::planning::scenario::Scenario;
 use crate::tools::cli::{Classify, print_json};
 use crate::tools::progress::Progress;
@@ -63,6 +64,33 @@ pub fn read_plan(path: &std::path::Path) -> anyhow::Result<PlanFile> {
         .input()
 }
 
+/// The convergence criterion's values against their tolerances (SOOC's optimality, or ILQG's
+/// stop tests), for the readable summary.
+fn criterion_line(s: &PlanSummary) -> Option<String> {
+    if let Some(o) = &s.optimality {
+        return Some(format!(
+            "projected gradient {:.1e} (tolerance {:.0e}), predicted decrease {:.1e} ({:.0e})",
+            o.projected_gradient, o.gradient_tolerance, o.predicted_decrease, o.decrease_tolerance
+        ));
+    }
+    let c = s.convergence.as_ref()?;
+    let mut line = format!(
+        "feedforward step {:.1e} (tolerance {:.0e})",
+        c.feedforward_step, c.gradient_tolerance
+    );
+    if let Some(i) = c.improvement {
+        let how = match c.step_length {
+            Some(a) => format!("of a step of {a}"),
+            None => "predicted".to_string(),
+        };
+        line += &format!(
+            "; improvement {i:.1e} {how} (tolerance {:.0e}) at μ {:.1e} (trusted ≤ {:.1e})",
+            c.tolerance, c.mu, c.trusted_mu
+        );
+    }
+    Some(line)
+}
+
 fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
     let s = &p.summary;
     println!("plan       {} ({})", p.scenario, s.method);
@@ -77,6 +105,9 @@ fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
         s.solve_ms,
         s.stop
     );
+    if let Some(line) = criterion_line(s) {
+        println!("criterion  {line}");
+    }
     println!(
         "cost       {:.6e} nominal, {:.6e} expected (predicted)",
         s.cost, s.expected_cost

@@ -294,6 +294,7 @@ impl DelayedPlanner {
             stop: tail_solution.stop,
             solve_time: Default::default(),
             history: Vec::new(),
+            convergence: tail_solution.convergence,
         })
     }
 }

@@ -9,7 +9,7 @@ pub mod sooc;
 pub mod sooc_newton;
 pub mod sparse;
 
-pub use ilqg::{Ilqg, IlqgError, IlqgOptions, Solution, StopReason};
+pub use ilqg::{Convergence, Ilqg, IlqgError, IlqgOptions, Solution, StopReason};
 
 use crate::core::cost::Cost;
 use crate::core::dynamics::Dynamics;

@@ -18,8 +18,11 @@ use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
 
 mod backward;
+mod convergence;
 mod rollout;
 mod search;
+
+pub use convergence::Convergence;
 
 use backward::Backward;
 use rollout::{linearize, rollout};
@@ -112,6 +115,8 @@ pub struct Solution {
     pub solve_time: Duration,
     /// Merit (expected cost) after each accepted iteration.
     pub history: Vec<f64>,
+    /// The stop tests' values at the plan (`None` for a plan no ILQG iteration produced).
+    pub convergence: Option<Convergence>,
 }
 
 /// A progress callback.
@@ -395,6 +400,16 @@ impl Ilqg {
         let mut expected = self.nominal.cost;
         let mut stop = StopReason::MaxIterations;
         let mut finish_after_backward = false;
+        let mut record = Convergence {
+            feedforward_step: f64::INFINITY,
+            gradient_tolerance: self.options.gradient_tolerance,
+            improvement: None,
+            step_length: None,
+            tolerance: self.options.tolerance,
+            mu: reg.mu,
+            trusted_mu: 0.0,
+            min_step_length: self.options.shrink_below_step,
+        };
 
         for _ in 0..self.options.max_iterations {
             let Some(pass) = self.regularized_backward_pass(problem, &mut reg, stochastic) else {
@@ -402,18 +417,19 @@ impl Ilqg {
                 break;
             };
             expected = pass.s0;
+            record.feedforward_step = self.feedforward_gradient();
             if finish_after_backward {
                 stop = StopReason::SmallImprovement;
                 break;
             }
-            if self.feedforward_gradient() < self.options.gradient_tolerance {
+            if record.gradient_met() {
                 stop = StopReason::SmallGradient;
                 break;
             }
             // The merit of the current nominal under the new gains, for a like-for-like comparison.
             let merit_now = self.merit(problem, stochastic, false);
             let trusted_mu = TRUSTED_MU * self.value_scale();
-            if self.predicted_converged(&pass, reg.mu, trusted_mu, merit_now) {
+            if self.predicted_converged(&pass, reg.mu, trusted_mu, merit_now, &mut record) {
                 stop = StopReason::SmallImprovement;
                 break;
             }
@@ -426,7 +442,8 @@ impl Ilqg {
                     self.notify(iterations, step.after, reg.mu, step.alpha);
                     self.update_regularization(&mut reg, step.alpha);
                     // One more backward pass so that the gains and s_0 belong to this nominal.
-                    finish_after_backward = self.step_converged(&step, reg.mu, trusted_mu);
+                    finish_after_backward =
+                        self.step_converged(&step, reg.mu, trusted_mu, &mut record);
                 }
                 None => {
                     if !reg.increase(&self.options) {
@@ -452,6 +469,7 @@ impl Ilqg {
             stop,
             solve_time: start.elapsed(),
             history,
+            convergence: Some(record),
         }
     }
 
