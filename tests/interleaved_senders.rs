@@ -99,7 +99,18 @@ fn two_interleaved_senders_every_message_is_accepted_rejected_or_counted_as_drop
         "rejected {rejected} + dropped {dropped} of {junk_sent} junk"
     );
     assert_eq!(by_reason.iter().map(|(_, v)| v).sum::<u64>(), rejected);
-    let junk_reasons = ["shape", "wrong-trial", "not-finite", "overflow"];
+    // A junk slice with a NaN knot reaches the order check before the finiteness check
+    // (docs/PROTOCOL.md's order): it is out of order when the board received it after a valid
+    // slice stamped later. The two publishers' queues are drained in no promised order, so that
+    // happens now and then (2 of 41 041 in one CI run). A valid slice rejected for any reason
+    // would break the exact count above instead.
+    let junk_reasons = [
+        "shape",
+        "wrong-trial",
+        "out-of-order",
+        "not-finite",
+        "overflow",
+    ];
     assert!(
         by_reason.iter().all(|(r, _)| junk_reasons.contains(r)),
         "{by_reason:?}"
