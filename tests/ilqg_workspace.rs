@@ -8,7 +8,7 @@ use common::alloc::{Counting, allocations};
 use nalgebra::DVector;
 use std::path::Path;
 use vic::core::delay::{Delayed, Offset};
-use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem};
+use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem, StopReason};
 use vic::planning::plan::{self, DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
 
@@ -120,6 +120,36 @@ fn a_diverging_initial_guess_is_an_error() {
             .stop
             .converged()
     );
+}
+
+/// A solve whose first backward pass never finds a positive definite `Q_uu` (control weights
+/// of −10⁶ against a regularisation limit of 1) stops at the limit without convergence
+/// figures: there are none to report, and infinities would not survive a plan file's JSON.
+#[test]
+fn no_backward_pass_means_no_convergence_figures() {
+    let (s, mut setup) = load("two_link_reach.toml", &[]);
+    for w in &mut setup.cost.control_weights {
+        *w = -1e6;
+    }
+    let bad = problem(&s, &setup);
+    let options = IlqgOptions {
+        mu_max: 1.0,
+        ..IlqgOptions::default()
+    };
+    let sol = Ilqg::new(&bad, options)
+        .try_solve(&bad, &setup.u_init)
+        .expect("starts");
+    assert_eq!(
+        (sol.stop, sol.iterations),
+        (StopReason::RegularizationLimit, 0)
+    );
+    assert_eq!(sol.convergence, None);
+    // With the scenario's weights the same workspace reports finite figures.
+    let (s, setup) = load("two_link_reach.toml", &[]);
+    let plain = problem(&s, &setup);
+    let sol = Ilqg::new(&plain, IlqgOptions::default()).solve(&plain, &setup.u_init);
+    let c = sol.convergence.expect("figures");
+    assert!(c.feedforward_step.is_finite() && c.met(), "{c:?}");
 }
 
 /// The plan advanced `shift` knots: the same horizon from the predicted state, reference read

@@ -115,7 +115,8 @@ pub struct Solution {
     pub solve_time: Duration,
     /// Merit (expected cost) after each accepted iteration.
     pub history: Vec<f64>,
-    /// The stop tests' values at the plan (`None` for a plan no ILQG iteration produced).
+    /// The stop tests' values at the plan (`None` for a plan no ILQG iteration produced, or
+    /// when not even the first backward pass completed).
     pub convergence: Option<Convergence>,
 }
 
@@ -469,7 +470,11 @@ impl Ilqg {
             stop,
             solve_time: start.elapsed(),
             history,
-            convergence: Some(record),
+            // No figures when no backward pass completed (μ passed its limit on the first one):
+            // JSON has no infinity, and a plan file must read back.
+            convergence: (record.feedforward_step.is_finite()
+                && record.improvement.is_none_or(f64::is_finite))
+            .then_some(record),
         }
     }
 
