@@ -1,6 +1,7 @@
 //! What `converged` means for ILQG: the stop tests' values at the returned plan, beside their
 //! tolerances, so that a plan file says how close to its criterion it stopped.
 
+use super::{BackwardPass, IlqgOptions, Step};
 use serde::{Deserialize, Serialize};
 
 /// The values the stop tests of the last iteration compared against their tolerances. A solve
@@ -34,6 +35,52 @@ pub struct Convergence {
 }
 
 impl Convergence {
+    /// The record before any test: no backward pass yet (an infinite feedforward step).
+    pub(super) fn untested(options: &IlqgOptions, mu: f64) -> Self {
+        Convergence {
+            feedforward_step: f64::INFINITY,
+            gradient_tolerance: options.gradient_tolerance,
+            improvement: None,
+            step_length: None,
+            tolerance: options.tolerance,
+            mu,
+            trusted_mu: 0.0,
+            min_step_length: options.shrink_below_step,
+        }
+    }
+
+    /// Nothing left to gain at first order: the predicted improvement of an (almost) undamped
+    /// Newton step is negligible against the merit. Records the test and returns its verdict.
+    pub(super) fn predicted(
+        &mut self,
+        pass: &BackwardPass,
+        mu: f64,
+        trusted_mu: f64,
+        merit: f64,
+    ) -> bool {
+        self.improvement = Some(-(pass.dv1 + pass.dv2) / merit.abs().max(1e-300));
+        self.step_length = None;
+        (self.mu, self.trusted_mu) = (mu, trusted_mu);
+        self.improvement_met()
+    }
+
+    /// A small improvement means convergence only after a long step with little
+    /// regularisation; a short, heavily damped step improves little anywhere. Records the test
+    /// and returns its verdict.
+    pub(super) fn achieved(&mut self, step: &Step, mu: f64, trusted_mu: f64) -> bool {
+        self.improvement = Some((step.before - step.after) / step.after.abs().max(1e-300));
+        self.step_length = Some(step.alpha);
+        (self.mu, self.trusted_mu) = (mu, trusted_mu);
+        self.improvement_met()
+    }
+
+    /// The record for a returned plan: `None` when no backward pass completed (μ passed its
+    /// limit on the first one), since JSON has no infinity and a plan file must read back.
+    pub(super) fn reported(self) -> Option<Self> {
+        (self.feedforward_step.is_finite() && self.improvement.is_none_or(f64::is_finite))
+            .then_some(self)
+    }
+
     /// Whether the gradient test or the improvement test holds.
     pub fn met(&self) -> bool {
         self.gradient_met() || self.improvement_met()

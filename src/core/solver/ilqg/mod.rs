@@ -401,16 +401,7 @@ impl Ilqg {
         let mut expected = self.nominal.cost;
         let mut stop = StopReason::MaxIterations;
         let mut finish_after_backward = false;
-        let mut record = Convergence {
-            feedforward_step: f64::INFINITY,
-            gradient_tolerance: self.options.gradient_tolerance,
-            improvement: None,
-            step_length: None,
-            tolerance: self.options.tolerance,
-            mu: reg.mu,
-            trusted_mu: 0.0,
-            min_step_length: self.options.shrink_below_step,
-        };
+        let mut record = Convergence::untested(&self.options, reg.mu);
 
         for _ in 0..self.options.max_iterations {
             let Some(pass) = self.regularized_backward_pass(problem, &mut reg, stochastic) else {
@@ -430,7 +421,7 @@ impl Ilqg {
             // The merit of the current nominal under the new gains, for a like-for-like comparison.
             let merit_now = self.merit(problem, stochastic, false);
             let trusted_mu = TRUSTED_MU * self.value_scale();
-            if self.predicted_converged(&pass, reg.mu, trusted_mu, merit_now, &mut record) {
+            if record.predicted(&pass, reg.mu, trusted_mu, merit_now) {
                 stop = StopReason::SmallImprovement;
                 break;
             }
@@ -443,8 +434,7 @@ impl Ilqg {
                     self.notify(iterations, step.after, reg.mu, step.alpha);
                     self.update_regularization(&mut reg, step.alpha);
                     // One more backward pass so that the gains and s_0 belong to this nominal.
-                    finish_after_backward =
-                        self.step_converged(&step, reg.mu, trusted_mu, &mut record);
+                    finish_after_backward = record.achieved(&step, reg.mu, trusted_mu);
                 }
                 None => {
                     if !reg.increase(&self.options) {
@@ -456,25 +446,22 @@ impl Ilqg {
         }
         self.solved = true;
         self.last_pass = (reg.mu, stochastic);
+        let expected_cost = if stochastic {
+            expected
+        } else {
+            self.nominal.cost
+        };
         Solution {
             x: self.nominal.x.clone(),
             u: self.nominal.u.clone(),
             gains: self.gains.clone(),
             cost: self.nominal.cost,
-            expected_cost: if stochastic {
-                expected
-            } else {
-                self.nominal.cost
-            },
+            expected_cost,
             iterations,
             stop,
             solve_time: start.elapsed(),
             history,
-            // No figures when no backward pass completed (μ passed its limit on the first one):
-            // JSON has no infinity, and a plan file must read back.
-            convergence: (record.feedforward_step.is_finite()
-                && record.improvement.is_none_or(f64::is_finite))
-            .then_some(record),
+            convergence: record.reported(),
         }
     }
 

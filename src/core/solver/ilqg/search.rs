@@ -35,38 +35,6 @@ impl Ilqg {
             .fold(0.0, f64::max)
     }
 
-    /// Nothing left to gain at first order: the predicted improvement of an (almost) undamped
-    /// Newton step is negligible against the merit. Records the test in `record`.
-    pub(super) fn predicted_converged(
-        &self,
-        pass: &BackwardPass,
-        mu: f64,
-        trusted_mu: f64,
-        merit: f64,
-        record: &mut Convergence,
-    ) -> bool {
-        record.improvement = Some(-(pass.dv1 + pass.dv2) / merit.abs().max(1e-300));
-        record.step_length = None;
-        (record.mu, record.trusted_mu) = (mu, trusted_mu);
-        record.improvement_met()
-    }
-
-    /// A small improvement means convergence only after a long step with little
-    /// regularisation; a short, heavily damped step improves little anywhere. Records the test
-    /// in `record`.
-    pub(super) fn step_converged(
-        &self,
-        step: &Step,
-        mu: f64,
-        trusted_mu: f64,
-        record: &mut Convergence,
-    ) -> bool {
-        record.improvement = Some((step.before - step.after) / step.after.abs().max(1e-300));
-        record.step_length = Some(step.alpha);
-        (record.mu, record.trusted_mu) = (mu, trusted_mu);
-        record.improvement_met()
-    }
-
     /// After an accepted step of length α: a long step means the local model was trusted, so μ
     /// falls (Tassa's schedule); only a short step helping means the quadratic model overshoots
     /// (typically in the stiffness, whose effect is bilinear), and the next Newton step is damped.
