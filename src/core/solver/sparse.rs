@@ -81,9 +81,44 @@ impl SparseColumns {
         let r = self.start[j]..self.start[j + 1];
         (&self.row[r.clone()], &self.val[r])
     }
+}
 
+/// The products of the backward pass with a Jacobian `M` (A, B or a noise Jacobian) taken by its
+/// nonzeros: every term `m_ij · x` with `m_ij = 0` is skipped and the others are added in
+/// ascending row order, so that [`SparseColumns`] and [`SmallDense`] compute the same numbers
+/// bit for bit.
+pub trait ColumnProducts {
     /// `y += α Mᵀ v`.
-    pub fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
+    fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]);
+
+    /// `out = S M` for a dense `S` (p × nrows); `out` is p × ncols.
+    fn right_mul(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        zero(out);
+        self.right_mul_add(s, out);
+    }
+
+    /// `out += S M` for a dense `S` (p × nrows); `out` is p × ncols.
+    fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>);
+
+    /// `out += α Mᵀ X` for a dense `X` (nrows × q); `out` is ncols × q.
+    fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>);
+}
+
+impl<T: ColumnProducts> ColumnProducts for &T {
+    fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
+        (**self).tr_mul_vec_add(alpha, v, y)
+    }
+    fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        (**self).right_mul_add(s, out)
+    }
+    fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        (**self).tr_mul_add(alpha, x, out)
+    }
+}
+
+impl ColumnProducts for SparseColumns {
+    /// `y += α Mᵀ v`.
+    fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
         for (j, yj) in y.iter_mut().enumerate().take(self.ncols()) {
             let (rows, vals) = self.column(j);
             let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * v[i]).sum();
@@ -91,15 +126,9 @@ impl SparseColumns {
         }
     }
 
-    /// `out = S M` for a dense `S` (p × nrows); `out` is p × ncols.
-    pub fn right_mul(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        zero(out);
-        self.right_mul_add(s, out);
-    }
-
     /// `out += S M` for a dense `S` (p × nrows); `out` is p × ncols. Column by column, as
     /// `axpy`s on contiguous columns of `S`, which vectorise.
-    pub fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+    fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         let p = s.nrows();
         debug_assert_eq!(s.ncols(), self.nrows);
         debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
@@ -117,7 +146,7 @@ impl SparseColumns {
     }
 
     /// `out += α Mᵀ X` for a dense `X` (nrows × q); `out` is ncols × q.
-    pub fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+    fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         let n = self.nrows;
         debug_assert_eq!(x.nrows(), n);
         debug_assert_eq!((out.nrows(), out.ncols()), (self.ncols(), x.ncols()));
@@ -131,6 +160,101 @@ impl SparseColumns {
                 let (rows, vals) = self.column(j);
                 let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * xc[i]).sum();
                 *o += alpha * dot;
+            }
+        }
+    }
+}
+
+/// A Jacobian of a small plant (R × C known at compile time, column-major) taken by its nonzeros
+/// as [`SparseColumns`] takes it, term for term and so with the same roundings, but read in
+/// place: no pattern to build at every knot, no index arrays, and loops of fixed length that the
+/// compiler unrolls. For the two-link arm (4 states) the pattern saves little arithmetic and its
+/// bookkeeping cost more than the products.
+#[derive(Debug, Clone, Copy)]
+pub struct SmallDense<'a, const R: usize, const C: usize>(pub &'a [f64]);
+
+impl<'a, const R: usize, const C: usize> SmallDense<'a, R, C> {
+    /// The view of `m` (R × C).
+    pub fn of(m: &'a DMatrix<f64>) -> Self {
+        debug_assert_eq!((m.nrows(), m.ncols()), (R, C));
+        SmallDense(m.as_slice())
+    }
+
+    fn column(&self, j: usize) -> &'a [f64; R] {
+        self.0[j * R..(j + 1) * R]
+            .try_into()
+            .expect("an R-row column")
+    }
+}
+
+/// `Σ_i m_i x_i` over the nonzero `m_i`, in order (the sum [`SparseColumns`] forms).
+fn nonzero_dot<const R: usize>(m: &[f64; R], x: &[f64]) -> f64 {
+    m.iter()
+        .zip(&x[..R])
+        .filter(|(a, _)| **a != 0.0)
+        .map(|(&a, &x)| a * x)
+        .sum()
+}
+
+impl<const R: usize, const C: usize> ColumnProducts for SmallDense<'_, R, C> {
+    fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
+        for (j, yj) in y.iter_mut().enumerate().take(C) {
+            *yj += alpha * nonzero_dot(self.column(j), v);
+        }
+    }
+
+    fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        let p = s.nrows();
+        debug_assert_eq!(s.ncols(), R);
+        debug_assert_eq!((out.nrows(), out.ncols()), (p, C));
+        if p != R {
+            return right_mul_add_rows(self, p, s, out);
+        }
+        let sd = s.as_slice();
+        let od = out.as_mut_slice();
+        for j in 0..C {
+            let col: &mut [f64; R] = (&mut od[j * R..(j + 1) * R]).try_into().expect("R rows");
+            for (i, &a) in self.column(j).iter().enumerate() {
+                if a != 0.0 {
+                    let si: &[f64; R] = sd[i * R..(i + 1) * R].try_into().expect("R rows");
+                    for (o, s) in col.iter_mut().zip(si) {
+                        *o += a * s;
+                    }
+                }
+            }
+        }
+    }
+
+    fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        debug_assert_eq!(x.nrows(), R);
+        debug_assert_eq!((out.nrows(), out.ncols()), (C, x.ncols()));
+        let xd = x.as_slice();
+        let od = out.as_mut_slice();
+        for c in 0..x.ncols() {
+            let xc = &xd[c * R..(c + 1) * R];
+            for (j, o) in od[c * C..(c + 1) * C].iter_mut().enumerate() {
+                *o += alpha * nonzero_dot(self.column(j), xc);
+            }
+        }
+    }
+}
+
+/// [`ColumnProducts::right_mul_add`] of a [`SmallDense`] for an `S` with `p ≠ R` rows.
+fn right_mul_add_rows<const R: usize, const C: usize>(
+    m: &SmallDense<'_, R, C>,
+    p: usize,
+    s: &DMatrix<f64>,
+    out: &mut DMatrix<f64>,
+) {
+    let sd = s.as_slice();
+    let od = out.as_mut_slice();
+    for j in 0..C {
+        let col = &mut od[j * p..(j + 1) * p];
+        for (i, &a) in m.column(j).iter().enumerate() {
+            if a != 0.0 {
+                for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
+                    *o += a * s;
+                }
             }
         }
     }
@@ -211,6 +335,48 @@ mod tests {
                 .zip(want.iter())
                 .all(|(a, b)| (a - b).abs() < 1e-12)
         );
+    }
+
+    /// A small Jacobian read in place gives the pattern's products bit for bit (the backward
+    /// pass's numbers must not depend on which of the two reads a knot), signed zeros included,
+    /// also for an `S` whose row count differs from the Jacobian's.
+    #[test]
+    fn small_dense_matches_the_pattern_bit_for_bit() {
+        fn check<const R: usize, const C: usize>(seed: u64) {
+            let m = pattern(R, C, seed);
+            let mut sp = SparseColumns::new(R, C);
+            sp.assign(&m);
+            let small = SmallDense::<R, C>::of(&m);
+            let bits = |a: &DMatrix<f64>| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            for p in [R, R + 3] {
+                let s = pattern(p, R, seed + 1);
+                let (mut a, mut b) = (pattern(p, C, seed + 2), pattern(p, C, seed + 2));
+                sp.right_mul_add(&s, &mut a);
+                small.right_mul_add(&s, &mut b);
+                assert_eq!(bits(&a), bits(&b), "S M, {R}x{C}, p = {p}");
+                sp.right_mul(&s, &mut a);
+                small.right_mul(&s, &mut b);
+                assert_eq!(bits(&a), bits(&b), "S M (fresh), {R}x{C}, p = {p}");
+            }
+            let x = pattern(R, 3, seed + 3);
+            let (mut a, mut b) = (pattern(C, 3, seed + 4), pattern(C, 3, seed + 4));
+            sp.tr_mul_add(0.7, &x, &mut a);
+            small.tr_mul_add(0.7, &x, &mut b);
+            assert_eq!(bits(&a), bits(&b), "Mᵀ X, {R}x{C}");
+            let v = pattern(R, 1, seed + 5);
+            let (mut y, mut z) = (vec![0.25; C], vec![0.25; C]);
+            sp.tr_mul_vec_add(-1.0, v.as_slice(), &mut y);
+            small.tr_mul_vec_add(-1.0, v.as_slice(), &mut z);
+            let vbits = |a: &[f64]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(vbits(&y), vbits(&z), "Mᵀ v, {R}x{C}");
+        }
+        for seed in 0..20 {
+            check::<2, 1>(seed * 7);
+            check::<2, 2>(seed * 7);
+            check::<4, 2>(seed * 7);
+            check::<4, 4>(seed * 7);
+            check::<8, 4>(seed * 7);
+        }
     }
 
     /// Columns longer than one 64-row block of the nonzero mask, refilled with a sparser and

@@ -3,6 +3,15 @@
 
 use super::*;
 use crate::core::dense::{copy, transpose, zero};
+use crate::core::solver::sparse::{ColumnProducts, SmallDense};
+
+/// Whether the backward pass reads a knot's Jacobians in place, by fixed-size loops
+/// ([`SmallDense`]), rather than by the nonzero pattern of `Trajectory::sparse` (which the
+/// linearisation then need not build): the sizes of the paper's plants (the single joint with
+/// torque or torque and stiffness, the two-link arm with either, the VSA arm).
+pub(super) fn reads_in_place(nx: usize, nu: usize) -> bool {
+    matches!((nx, nu), (2, 1) | (2, 2) | (4, 2) | (4, 4) | (8, 4))
+}
 
 /// Scratch matrices of the backward pass.
 pub(super) struct Backward {
@@ -81,8 +90,7 @@ impl Ilqg {
                 // Only the stochastic merit reads them.
                 copy(&bw.s_mat, &mut self.value_hessians[k]);
             }
-            let q0 = bw.q_function(problem, traj, k, stochastic) + pass.s0;
-            bw.regularize(&traj.sparse[k], &traj.lin[k], mu);
+            let q0 = bw.q_regularized(problem, traj, k, stochastic, mu) + pass.s0;
             if !bw.policy(
                 &problem.bounds,
                 &traj.u[k],
@@ -125,39 +133,91 @@ impl Backward {
         }
     }
 
-    /// The Q-function of knot `k` (DESIGN §4) from the value `(S, s)` of knot `k + 1`, into
-    /// `qx, qu, qxx, quu, qux`; returns its constant term `Δ l + ½ Σ c_iᵀ S c_i` (without `s`).
-    /// The products take A, B, Cx, Cu by their nonzeros (see `sparse`): n·nnz, not n³.
-    fn q_function(
+    /// The Q-function of knot `k` and its regularised control blocks ([`Backward::q_function`],
+    /// [`Backward::regularize`]), with the knot's Jacobians read in place for the small plants
+    /// ([`reads_in_place`]) and by their nonzero pattern otherwise: the same terms in the same
+    /// order either way, so the same numbers.
+    fn q_regularized(
         &mut self,
         problem: &Problem,
         traj: &Trajectory,
         k: usize,
         stochastic: bool,
+        mu: f64,
     ) -> f64 {
-        let (lin, d, sp) = (&traj.lin[k], &traj.derivs[k], &traj.sparse[k]);
+        match (self.qx.len(), self.qu.len()) {
+            (2, 1) => self.q_in_place::<2, 1>(problem, traj, k, stochastic, mu),
+            (2, 2) => self.q_in_place::<2, 2>(problem, traj, k, stochastic, mu),
+            (4, 2) => self.q_in_place::<4, 2>(problem, traj, k, stochastic, mu),
+            (4, 4) => self.q_in_place::<4, 4>(problem, traj, k, stochastic, mu),
+            (8, 4) => self.q_in_place::<8, 4>(problem, traj, k, stochastic, mu),
+            (nx, nu) => {
+                debug_assert!(!reads_in_place(nx, nu));
+                let (lin, sp) = (&traj.lin[k], &traj.sparse[k]);
+                let cx = |i: usize| &sp.cx[i];
+                let cu = |i: usize| &sp.cu[i];
+                let q0 = self.q_function(problem, traj, k, stochastic, (&sp.a, &sp.b), (cx, cu));
+                self.regularize(&sp.b, lin, mu);
+                q0
+            }
+        }
+    }
+
+    fn q_in_place<const NX: usize, const NU: usize>(
+        &mut self,
+        problem: &Problem,
+        traj: &Trajectory,
+        k: usize,
+        stochastic: bool,
+        mu: f64,
+    ) -> f64 {
+        let lin = &traj.lin[k];
+        let (a, b) = (
+            SmallDense::<NX, NX>::of(&lin.a),
+            SmallDense::<NX, NU>::of(&lin.b),
+        );
+        let cx = |i: usize| SmallDense::<NX, NX>::of(&lin.cx[i]);
+        let cu = |i: usize| SmallDense::<NX, NU>::of(&lin.cu[i]);
+        let q0 = self.q_function(problem, traj, k, stochastic, (a, b), (cx, cu));
+        self.regularize(b, lin, mu);
+        q0
+    }
+
+    /// The Q-function of knot `k` (DESIGN §4) from the value `(S, s)` of knot `k + 1`, into
+    /// `qx, qu, qxx, quu, qux`; returns its constant term `Δ l + ½ Σ c_iᵀ S c_i` (without `s`).
+    /// The products take A, B, Cx, Cu by their nonzeros (see `sparse`): n·nnz, not n³.
+    fn q_function<X: ColumnProducts, U: ColumnProducts>(
+        &mut self,
+        problem: &Problem,
+        traj: &Trajectory,
+        k: usize,
+        stochastic: bool,
+        (a, b): (X, U),
+        (cx_of, cu_of): (impl Fn(usize) -> X, impl Fn(usize) -> U),
+    ) -> f64 {
+        let (lin, d) = (&traj.lin[k], &traj.derivs[k]);
         let mut q0 = problem
             .cost
             .running(k, traj.x[k].as_slice(), traj.u[k].as_slice());
         copy(&d.lx, &mut self.qx);
-        sp.a.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qx.as_mut_slice());
+        a.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qx.as_mut_slice());
         copy(&d.lu, &mut self.qu);
-        sp.b.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qu.as_mut_slice());
-        sp.a.right_mul(&self.s_mat, &mut self.sa);
-        sp.b.right_mul(&self.s_mat, &mut self.sb);
+        b.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qu.as_mut_slice());
+        a.right_mul(&self.s_mat, &mut self.sa);
+        b.right_mul(&self.s_mat, &mut self.sb);
         copy(&d.lxx, &mut self.qxx);
         transpose(&self.sa, &mut self.sat);
-        sp.a.right_mul_add(&self.sat, &mut self.qxx);
+        a.right_mul_add(&self.sat, &mut self.qxx);
         copy(&d.luu, &mut self.quu);
-        sp.b.tr_mul_add(1.0, &self.sb, &mut self.quu);
+        b.tr_mul_add(1.0, &self.sb, &mut self.quu);
         copy(&d.lux, &mut self.qux);
-        sp.b.tr_mul_add(1.0, &self.sa, &mut self.qux);
+        b.tr_mul_add(1.0, &self.sa, &mut self.qux);
         if stochastic && lin.noise != NoiseKind::None {
             for i in 0..lin.c.ncols() {
                 self.sc.gemv(1.0, &self.s_mat, &lin.c.column(i), 0.0);
                 q0 += 0.5 * lin.c.column(i).dot(&self.sc);
                 if lin.noise == NoiseKind::Dependent {
-                    let (cx, cu) = (&sp.cx[i], &sp.cu[i]);
+                    let (cx, cu) = (cx_of(i), cu_of(i));
                     cx.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qx.as_mut_slice());
                     cu.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qu.as_mut_slice());
                     cx.right_mul(&self.s_mat, &mut self.scx);
@@ -176,12 +236,12 @@ impl Backward {
     /// control terms, into `quu_reg`, `qux_reg`. As μ grows the gains tend to −(BᵀB)⁻¹BᵀA, which
     /// cancels state deviations, rather than to zero (open loop), so the line search stays
     /// meaningful in an unstable field. The value update uses the unregularised Q.
-    fn regularize(&mut self, sp: &SparseLinearization, lin: &Linearization, mu: f64) {
+    fn regularize(&mut self, b: impl ColumnProducts, lin: &Linearization, mu: f64) {
         copy(&self.quu, &mut self.quu_reg);
         copy(&self.qux, &mut self.qux_reg);
         if mu > 0.0 {
-            sp.b.tr_mul_add(mu, &lin.b, &mut self.quu_reg);
-            sp.b.tr_mul_add(mu, &lin.a, &mut self.qux_reg);
+            b.tr_mul_add(mu, &lin.b, &mut self.quu_reg);
+            b.tr_mul_add(mu, &lin.a, &mut self.qux_reg);
             for j in 0..self.quu_reg.nrows() {
                 // A trace of control-space damping for controls that do not move the state.
                 self.quu_reg[(j, j)] += mu * 1e-6;

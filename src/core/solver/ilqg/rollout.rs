@@ -1,5 +1,6 @@
 //! Rolling a trajectory out and linearising along it.
 
+use super::backward::reads_in_place;
 use super::*;
 
 /// A policy to roll out: the nominal it was made around, the feedforward steps and the gains.
@@ -70,13 +71,16 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
     use rayon::prelude::*;
     let h = problem.horizon;
     let (xs, us) = (&traj.x, &traj.u);
+    let pattern = !reads_in_place(problem.dynamics.nx(), problem.dynamics.nu());
     let knot = |k: usize,
                 lin: &mut Linearization,
                 sparse: &mut SparseLinearization,
                 d: &mut CostDerivatives| {
         let (x, u) = (xs[k].as_slice(), us[k].as_slice());
         problem.dynamics.linearize(k, x, u, lin);
-        sparse.assign(lin);
+        if pattern {
+            sparse.assign(lin);
+        }
         problem.cost.running_derivatives(k, x, u, d);
     };
     if problem.dynamics.parallel_linearization() {
