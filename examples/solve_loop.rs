@@ -1,0 +1,60 @@
+//! Solves one scenario's ILQG plan N times in one process, for whole-process A/B timing of two
+//! builds (`/usr/bin/time -v`, alternated): `cargo run --release --example solve_loop --
+//! config/two_link_reach.toml 3000 [KEY=VALUE ...]`. With a feedback delay in the scenario it
+//! runs the delayed planner (the undelayed tail problem and the delayed gains), cold every time.
+//! Prints the sum of the costs, which two builds that compute the same plans print alike.
+
+use std::path::Path;
+use vic::core::delay::{Delayed, DelayedPlanner};
+use vic::core::solver::{Ilqg, Problem};
+use vic::planning::plan::{self, DelayedCost};
+use vic::planning::scenario::Scenario;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (Some(file), Some(n)) = (
+        args.first(),
+        args.get(1).and_then(|n| n.parse::<usize>().ok()),
+    ) else {
+        eprintln!("usage: solve_loop CONFIG.toml N [KEY=VALUE ...]");
+        std::process::exit(2);
+    };
+    let s = Scenario::load(Path::new(file), &args[2..]).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
+    let setup = plan::setup(&s).expect("scenario sets up");
+    let (steps, d) = (s.task.steps, s.task.delay_steps());
+    let plain = Problem {
+        dynamics: &setup.dynamics,
+        cost: &setup.cost,
+        x0: setup.x0.clone(),
+        horizon: steps,
+        bounds: setup.bounds.clone(),
+    };
+    let mut sum = 0.0;
+    if d == 0 {
+        let mut solver = Ilqg::new(&plain, s.solver.options.clone());
+        for _ in 0..n {
+            sum += solver.solve(&plain, &setup.u_init).cost;
+        }
+    } else {
+        let delayed = Delayed::new(setup.dynamics.clone(), d);
+        let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+        let problem = Problem {
+            dynamics: &delayed,
+            cost: &cost,
+            x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
+            horizon: steps,
+            bounds: setup.bounds.clone(),
+        };
+        let mut planner = DelayedPlanner::new(&plain, &problem, &s.solver.options).expect("fits");
+        for _ in 0..n {
+            let plan = planner
+                .solve(&plain, &problem, &setup.u_init)
+                .expect("plans");
+            sum += plan.solution.cost;
+        }
+    }
+    println!("{sum:.12e}");
+}
