@@ -1,8 +1,11 @@
-//! Solves one scenario's ILQG plan N times in one process, for whole-process A/B timing of two
+//! Solves one scenario's ILQG problem N times in one process, for whole-process A/B timing of two
 //! builds (`/usr/bin/time -v`, alternated): `cargo run --release --example solve_loop --
-//! config/two_link_reach.toml 3000 [KEY=VALUE ...]`. With a feedback delay in the scenario it
-//! runs the delayed planner (the undelayed tail problem and the delayed gains), cold every time.
-//! Prints the sum of the costs, which two builds that compute the same plans print alike.
+//! config/two_link_reach.toml 3000 [KEY=VALUE ...]`. It times what `benches/solver.rs` times,
+//! not `vic plan` (which adds the scenario's method and, for stochastic plans, a deterministic
+//! first phase): `Ilqg::solve` from the scenario's first guess, or with a feedback delay the
+//! delayed planner (the undelayed tail problem and the delayed gains), cold every time.
+//! Prints the sum of the costs exactly (shortest round-trip form): two builds that compute the
+//! same plans print the same.
 
 use std::path::Path;
 use vic::core::delay::{Delayed, DelayedPlanner};
@@ -48,7 +51,11 @@ fn main() {
             horizon: steps,
             bounds: setup.bounds.clone(),
         };
-        let mut planner = DelayedPlanner::new(&plain, &problem, &s.solver.options).expect("fits");
+        let mut planner =
+            DelayedPlanner::new(&plain, &problem, &s.solver.options).unwrap_or_else(|e| {
+                eprintln!("{file}: {e}");
+                std::process::exit(2)
+            });
         for _ in 0..n {
             let plan = planner
                 .solve(&plain, &problem, &setup.u_init)
@@ -56,5 +63,5 @@ fn main() {
             sum += plan.solution.cost;
         }
     }
-    println!("{sum:.12e}");
+    println!("{sum:e}");
 }

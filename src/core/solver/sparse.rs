@@ -117,7 +117,6 @@ impl<T: ColumnProducts> ColumnProducts for &T {
 }
 
 impl ColumnProducts for SparseColumns {
-    /// `y += α Mᵀ v`.
     fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
         for (j, yj) in y.iter_mut().enumerate().take(self.ncols()) {
             let (rows, vals) = self.column(j);
@@ -126,9 +125,8 @@ impl ColumnProducts for SparseColumns {
         }
     }
 
-    /// `out += S M` for a dense `S` (p × nrows); `out` is p × ncols. Column by column, as
-    /// `axpy`s on contiguous columns of `S`, which vectorise.
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        // Column by column, as `axpy`s on contiguous columns of `S`, which vectorise.
         let p = s.nrows();
         debug_assert_eq!(s.ncols(), self.nrows);
         debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
@@ -145,7 +143,6 @@ impl ColumnProducts for SparseColumns {
         }
     }
 
-    /// `out += α Mᵀ X` for a dense `X` (nrows × q); `out` is ncols × q.
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         let n = self.nrows;
         debug_assert_eq!(x.nrows(), n);
@@ -338,18 +335,38 @@ mod tests {
     }
 
     /// A small Jacobian read in place gives the pattern's products bit for bit (the backward
-    /// pass's numbers must not depend on which of the two reads a knot), signed zeros included,
-    /// also for an `S` whose row count differs from the Jacobian's.
+    /// pass's numbers must not depend on which of the two reads a knot), with negative zeros,
+    /// NaN and infinite entries in the Jacobian, infinite entries in the other factor (a zero of
+    /// the Jacobian must skip them, not make a NaN), and an `S` whose row count differs from the
+    /// Jacobian's.
     #[test]
     fn small_dense_matches_the_pattern_bit_for_bit() {
         fn check<const R: usize, const C: usize>(seed: u64) {
-            let m = pattern(R, C, seed);
+            let mut m = pattern(R, C, seed);
+            // Negative zeros (skipped by both), and a NaN and an infinity (kept by both).
+            for (i, v) in m.iter_mut().enumerate() {
+                if *v == 0.0 && i % 3 == 0 {
+                    *v = -0.0;
+                }
+            }
+            if seed % 5 == 1 {
+                m[(R - 1, 0)] = f64::NAN;
+                m[(0, C - 1)] = f64::INFINITY;
+            }
             let mut sp = SparseColumns::new(R, C);
             sp.assign(&m);
             let small = SmallDense::<R, C>::of(&m);
-            let bits = |a: &DMatrix<f64>| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            // A NaN is compared as a NaN: IEEE 754 leaves its sign and payload open, and the
+            // compiler may commute an addition, which decides whose NaN propagates.
+            let bit = |v: &f64| if v.is_nan() { u64::MAX } else { v.to_bits() };
+            let bits = |a: &DMatrix<f64>| a.iter().map(bit).collect::<Vec<_>>();
+            // An infinite entry of S, X or v against a zero of M: skipped, the term is no NaN.
+            let infinite = seed % 5 == 2;
             for p in [R, R + 3] {
-                let s = pattern(p, R, seed + 1);
+                let mut s = pattern(p, R, seed + 1);
+                if infinite {
+                    s[(0, 0)] = f64::INFINITY;
+                }
                 let (mut a, mut b) = (pattern(p, C, seed + 2), pattern(p, C, seed + 2));
                 sp.right_mul_add(&s, &mut a);
                 small.right_mul_add(&s, &mut b);
@@ -358,16 +375,23 @@ mod tests {
                 small.right_mul(&s, &mut b);
                 assert_eq!(bits(&a), bits(&b), "S M (fresh), {R}x{C}, p = {p}");
             }
-            let x = pattern(R, 3, seed + 3);
+            let mut x = pattern(R, 3, seed + 3);
+            if infinite {
+                x[(0, 0)] = f64::INFINITY;
+            }
             let (mut a, mut b) = (pattern(C, 3, seed + 4), pattern(C, 3, seed + 4));
             sp.tr_mul_add(0.7, &x, &mut a);
             small.tr_mul_add(0.7, &x, &mut b);
             assert_eq!(bits(&a), bits(&b), "Mᵀ X, {R}x{C}");
-            let v = pattern(R, 1, seed + 5);
-            let (mut y, mut z) = (vec![0.25; C], vec![0.25; C]);
+            let mut v = pattern(R, 1, seed + 5);
+            if infinite {
+                v[(0, 0)] = f64::INFINITY;
+            }
+            // Longer than M has columns: the entries past C stay as they were in both.
+            let (mut y, mut z) = (vec![0.25; C + 2], vec![0.25; C + 2]);
             sp.tr_mul_vec_add(-1.0, v.as_slice(), &mut y);
             small.tr_mul_vec_add(-1.0, v.as_slice(), &mut z);
-            let vbits = |a: &[f64]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            let vbits = |a: &[f64]| a.iter().map(bit).collect::<Vec<_>>();
             assert_eq!(vbits(&y), vbits(&z), "Mᵀ v, {R}x{C}");
         }
         for seed in 0..20 {

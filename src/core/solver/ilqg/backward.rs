@@ -9,6 +9,7 @@ use crate::core::solver::sparse::{ColumnProducts, SmallDense};
 /// ([`SmallDense`]), rather than by the nonzero pattern of `Trajectory::sparse` (which the
 /// linearisation then need not build): the sizes of the paper's plants (the single joint with
 /// torque or torque and stiffness, the two-link arm with either, the VSA arm).
+/// [`Backward::q_regularized`] must have an arm for each.
 pub(super) fn reads_in_place(nx: usize, nu: usize) -> bool {
     matches!((nx, nu), (2, 1) | (2, 2) | (4, 2) | (4, 4) | (8, 4))
 }
@@ -152,7 +153,9 @@ impl Backward {
             (4, 4) => self.q_in_place::<4, 4>(problem, traj, k, stochastic, mu),
             (8, 4) => self.q_in_place::<8, 4>(problem, traj, k, stochastic, mu),
             (nx, nu) => {
-                debug_assert!(!reads_in_place(nx, nu));
+                // The pattern is not built for the sizes read in place: reading it there would
+                // see zero Jacobians. A size added to one list must be added to the other.
+                assert!(!reads_in_place(nx, nu), "{nx}x{nu} is read in place");
                 let (lin, sp) = (&traj.lin[k], &traj.sparse[k]);
                 let cx = |i: usize| &sp.cx[i];
                 let cu = |i: usize| &sp.cu[i];

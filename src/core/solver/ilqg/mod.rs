@@ -141,7 +141,8 @@ struct Trajectory {
     u: Vec<DVector<f64>>,
     cost: f64,
     lin: Vec<Linearization>,
-    /// The nonzeros of `lin`, for the backward pass's products.
+    /// The nonzeros of `lin`, for the backward pass's products; filled only for the plants
+    /// whose Jacobians the backward pass does not read in place ([`backward::reads_in_place`]).
     sparse: Vec<SparseLinearization>,
     derivs: Vec<CostDerivatives>,
 }
