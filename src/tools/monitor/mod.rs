@@ -16,7 +16,7 @@ pub use draw::draw;
 pub use run::run;
 
 use crate::rt::transport::{MAX_JOINTS, StateMsg, Telemetry};
-use crate::tools::operator::{Ack, Request, Status};
+use crate::tools::operator::{Ack, OperatorError, Request, Status};
 use std::collections::VecDeque;
 
 /// What the keys send and how much history the plots keep.
@@ -355,7 +355,12 @@ impl App {
     }
 
     /// The board's answer to a request the monitor sent (`Err`: why it was not applied).
-    pub fn on_answer(&mut self, label: &str, request: &Request, answer: Result<Ack, String>) {
+    pub fn on_answer(
+        &mut self,
+        label: &str,
+        request: &Request,
+        answer: Result<Ack, OperatorError>,
+    ) {
         let line = match answer {
             Ok(a) => {
                 if matches!(request, Request::Pulse { .. }) {

@@ -30,7 +30,11 @@ const SILENT: Duration = Duration::from_secs(1);
 const ACK_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// The board's answer to one request, from the sending thread.
-type Answer = (String, Request, Result<crate::tools::operator::Ack, String>);
+type Answer = (
+    String,
+    Request,
+    Result<crate::tools::operator::Ack, OperatorError>,
+);
 
 /// Runs the live view of the board in `namespace` until `q`, Esc, Ctrl-C or `stop` is set.
 pub fn run(namespace: &str, settings: Settings, stop: &AtomicBool) -> Result<(), MonitorError> {
@@ -97,7 +101,7 @@ fn send(
     let namespace = namespace.to_string();
     std::thread::spawn(move || {
         for r in requests {
-            let answer = inject(&namespace, r, ACK_TIMEOUT).map_err(|e| e.to_string());
+            let answer = inject(&namespace, r, ACK_TIMEOUT);
             if tx.send((label.clone(), r, answer)).is_err() {
                 return; // the view has quit
             }

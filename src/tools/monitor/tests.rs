@@ -198,13 +198,17 @@ fn answers_count_acknowledged_pulses_and_show_refusals() {
         mode: "idle".into(),
     };
     app.on_answer(&label, &requests[0], Ok(ack));
-    app.on_answer(&label, &requests[0], Err("the board rejected it".into()));
+    app.on_answer(
+        &label,
+        &requests[0],
+        Err(OperatorError::Rejected {
+            namespace: "lab".into(),
+            reason: "stale".into(),
+        }),
+    );
     assert_eq!((app.pulses_sent, app.pulses_acked), (1, 1));
     let rows = screen(&app, 120, 40).join("\n");
     assert!(rows.contains("pulses sent 1, acknowledged 1"), "{rows}");
     assert!(rows.contains("tick 4321"), "{rows}");
-    assert!(
-        rows.contains("NOT") && rows.contains("the board rejected it"),
-        "{rows}"
-    );
+    assert!(rows.contains("NOT") && rows.contains("(stale)"), "{rows}");
 }
