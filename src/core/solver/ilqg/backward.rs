@@ -278,11 +278,13 @@ impl Backward {
             upper[j] = bounds.upper[j] - u[j];
         }
         let unbounded = (0..nu).all(|j| lower[j] == f64::NEG_INFINITY && upper[j] == f64::INFINITY);
-        let (x, free, factor) = if unbounded {
+        // Written in place, never moved (see `SmallCholesky::EMPTY`).
+        let mut factor = SmallCholesky::EMPTY;
+        let (x, free, factored) = if unbounded {
             let all = [0, 1, 2, 3, 4, 5, 6, 7];
-            match newton_step(h, self.qu.as_slice(), &all[..nu]) {
+            match newton_step(h, self.qu.as_slice(), &all[..nu], &mut factor) {
                 None => return false,
-                Some((x, factor)) => (x, [true; MAX_QP], Some(factor)),
+                Some(x) => (x, [true; MAX_QP], true),
             }
         } else {
             let qp = solve_box_qp(
@@ -291,15 +293,16 @@ impl Backward {
                 &lower[..nu],
                 &upper[..nu],
                 l.as_slice(),
+                &mut factor,
             );
             if qp.status == QpStatus::NotPositiveDefinite {
                 return false;
             }
-            (qp.x, qp.free, qp.factor)
+            (qp.x, qp.free, qp.factored)
         };
         l.as_mut_slice().copy_from_slice(&x[..nu]);
         zero(gain);
-        if let Some(factor) = factor {
+        if factored {
             let mut idx = [0usize; MAX_QP];
             let mut nfree = 0;
             for j in (0..nu).filter(|&j| free[j]) {
@@ -366,18 +369,21 @@ impl Backward {
     }
 }
 
-/// The unconstrained Newton step `x = −H⁻¹ g` with the Cholesky factor of `H` over the indices
-/// `idx` (all of them), or `None` when `H` is not positive definite.
+/// The unconstrained Newton step `x = −H⁻¹ g`, with the Cholesky factor of `H` over the indices
+/// `idx` (all of them) written into `factor`; `None` when `H` is not positive definite.
 fn newton_step(
     h: impl Fn(usize, usize) -> f64 + Copy,
     g: &[f64],
     idx: &[usize],
-) -> Option<([f64; MAX_QP], SmallCholesky)> {
-    let factor = SmallCholesky::new(h, idx)?;
+    factor: &mut SmallCholesky,
+) -> Option<[f64; MAX_QP]> {
+    if !factor.factorize(h, idx) {
+        return None;
+    }
     let mut x = [0.0; MAX_QP];
     for (a, &i) in idx.iter().enumerate() {
         x[a] = -g[i];
     }
     factor.solve(&mut x[..idx.len()]);
-    Some((x, factor))
+    Some(x)
 }

@@ -5,7 +5,7 @@
 use super::SoocSolver;
 use crate::core::dense::zero;
 use crate::core::solver::Bounds;
-use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, solve_box_qp};
+use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, SmallCholesky, solve_box_qp};
 use nalgebra::{DMatrix, DVector, SMatrix};
 use serde::{Deserialize, Serialize};
 
@@ -238,6 +238,7 @@ impl SoocSolver {
             reg[j] = mu * curvature[j];
         }
         let mut convexified = false;
+        let mut factor = SmallCholesky::EMPTY;
         loop {
             let quu = &self.bw.quu;
             let hq = |i: usize, j: usize| {
@@ -249,6 +250,7 @@ impl SoocSolver {
                 &lo[..m],
                 &hi[..m],
                 self.ff[k].as_slice(),
+                &mut factor,
             );
             if qp.status == QpStatus::NotPositiveDefinite {
                 if !convexify_stage || convexified {
@@ -259,7 +261,7 @@ impl SoocSolver {
                 continue;
             }
             self.ff[k].copy_from_slice(&qp.x[..m]);
-            feedback_gains(&qp, &self.bw.quz, &mut self.gains[k])?;
+            feedback_gains(&qp, &factor, &self.bw.quz, &mut self.gains[k])?;
             return Some(convexified);
         }
     }
@@ -322,7 +324,12 @@ fn convexify(quu: &mut DMatrix<f64>, curvature: &[f64], reg: &[f64]) {
 
 /// `K` with free rows `−(Q_uu,ff)⁻¹ Q_uz,f` (the QP's factor of the free block) and clamped
 /// rows 0; `None` if the free block has no factor.
-fn feedback_gains(qp: &QpSolution, quz: &DMatrix<f64>, gain: &mut DMatrix<f64>) -> Option<()> {
+fn feedback_gains(
+    qp: &QpSolution,
+    factor: &SmallCholesky,
+    quz: &DMatrix<f64>,
+    gain: &mut DMatrix<f64>,
+) -> Option<()> {
     let (m, nz) = gain.shape();
     zero(gain);
     let mut free = [0usize; MAX_QP];
@@ -336,7 +343,9 @@ fn feedback_gains(qp: &QpSolution, quz: &DMatrix<f64>, gain: &mut DMatrix<f64>) 
     if nf == 0 {
         return Some(());
     }
-    let factor = qp.factor.as_ref()?;
+    if !qp.factored {
+        return None;
+    }
     let mut col = [0.0; MAX_QP];
     for c in 0..nz {
         for (i, &j) in free[..nf].iter().enumerate() {
