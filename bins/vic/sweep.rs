@@ -1,10 +1,11 @@
 //! `vic sweep latency`: flags, then [`vic::tools::sweep`].
 
-use anyhow::Context;
 use std::path::PathBuf;
 use vic::tools::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
 use vic::tools::progress::Progress;
-use vic::tools::sweep::{Execution, Pulse, Strategy, SweepOptions, sweep_latency, write_figure};
+use vic::tools::sweep::{
+    Execution, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs,
+};
 
 #[derive(clap::Args)]
 pub struct SweepArgs {
@@ -75,28 +76,7 @@ struct LatencyArgs {
 impl SweepArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let SweepWhat::Latency(a) = self.what;
-        let pulse = match a.pulse.as_slice() {
-            [] => None,
-            torque => {
-                let ok = |v: f64| v.is_finite();
-                let valid = torque.iter().all(|t| ok(*t))
-                    && ok(a.pulse_at_ms)
-                    && a.pulse_at_ms >= 0.0
-                    && ok(a.pulse_ms)
-                    && a.pulse_ms > 0.0;
-                if !valid {
-                    return Err(anyhow::anyhow!(
-                        "--pulse must be finite N m, --pulse-at-ms ≥ 0 and --pulse-ms > 0"
-                    ))
-                    .input();
-                }
-                Some(Pulse {
-                    torque: [torque[0], torque.get(1).copied().unwrap_or(0.0)],
-                    start: a.pulse_at_ms * 1e-3,
-                    duration: a.pulse_ms * 1e-3,
-                })
-            }
-        };
+        let pulse = pulse_from_flags(&a.pulse, a.pulse_at_ms, a.pulse_ms).input()?;
         let opts = SweepOptions {
             latencies_ms: a.latencies,
             strategies: a.strategies,
@@ -118,67 +98,21 @@ impl SweepArgs {
             progress.step(done.get(), points, p);
             done.set(done.get() + 1);
         })
-        .map_err(|e| {
-            if e.is_input() {
-                vic::tools::cli::input_error(e)
-            } else {
-                anyhow::Error::new(e)
-            }
+        .map_err(|e| match e.is_input() {
+            true => vic::tools::cli::input_error(e),
+            false => anyhow::Error::new(e),
         })?;
         drop(progress);
         if let Some(dir) = &a.out_dir {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("{}: cannot create", dir.display()))?;
-            write_figure(&sweep, &dir.join("sweep.png"), &dir.join("sweep.svg"))?;
-            let text = serde_json::to_string_pretty(&sweep)?;
-            std::fs::write(dir.join("sweep.json"), text)
-                .with_context(|| format!("{}: cannot write sweep.json", dir.display()))?;
+            write_outputs(&sweep, dir)?;
         }
         if a.json.json {
             println!("{}", serde_json::to_string(&sweep)?);
             return Ok(());
         }
-        let unit = sweep.points.first().map_or("", |p| p.unit.name());
-        let show = |v: Option<f64>| v.map_or("diverged".to_string(), |v| format!("{v:.3}"));
-        println!(
-            "{:<19} {:>8} {:>14} {:>14} {:>10} {:>12} {:>9}",
-            "strategy",
-            "latency",
-            format!("final [{unit}]"),
-            "final max",
-            "diverged",
-            "E[C] MC",
-            "mean K"
-        );
-        for p in &sweep.points {
-            println!(
-                "{:<19} {:>5} ms {:>14} {:>14} {:>9.0}% {:>12} {:>9.1}",
-                p.strategy.name(),
-                p.latency_ms,
-                show(p.final_error_mean),
-                show(p.final_error_max),
-                100.0 * p.diverged_fraction,
-                p.expected_cost_mc
-                    .map_or("-".into(), |c| format!("{c:.4e}")),
-                p.mean_stiffness
-            );
-        }
-        // Live: say which points the schedule touched (a late state changes what feedback saw).
-        for p in &sweep.points {
-            if let Some(t) = p.live.filter(|t| !t.on_schedule()) {
-                println!(
-                    "note: {} at {} ms ran off schedule: {} stale feedback knots, {} missing \
-                     and {} off-knot states, {} central overruns, {} safe-hold and {} stalled trials",
-                    p.strategy.name(),
-                    p.latency_ms,
-                    t.stale_feedback,
-                    t.missing_states,
-                    t.off_knot_states,
-                    t.central_overruns,
-                    t.safe_hold_trials,
-                    t.stalled_trials
-                );
-            }
+        print!("{}", sweep.table());
+        for note in sweep.schedule_notes() {
+            println!("note: {note}");
         }
         Ok(())
     }

@@ -15,6 +15,8 @@
 //! integration and the 50 Hz central controller with its delay lines, on a simulated clock.
 
 pub use crate::core::policy::Strategy;
+
+mod output;
 use crate::planning::evaluation::{predicted_cost, summarize};
 pub use crate::planning::montecarlo::Pulse;
 use crate::planning::montecarlo::{Trial, run_trials_disturbed};
@@ -22,6 +24,7 @@ use crate::planning::plan::{Method, PlanError, PlanFile, plan, setup};
 use crate::planning::plan_file::commanded_stiffness;
 use crate::planning::scenario::{ConfigError, Scenario};
 use crate::planning::unit::Unit;
+pub use output::{pulse_from_flags, write_figure, write_outputs};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -58,6 +61,15 @@ pub enum SweepError {
     /// The live daemons could not be started.
     #[error("starting the live board: {0:#}")]
     LiveStart(anyhow::Error),
+    /// A pulse that is not finite, starts before the movement or lasts no time: bad input.
+    #[error("--pulse must be finite N m, --pulse-at-ms ≥ 0 and --pulse-ms > 0")]
+    Pulse,
+    /// The figure or the numbers could not be written into the output folder.
+    #[error("{}: {source}", path.display())]
+    Write {
+        path: std::path::PathBuf,
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// A pulse is a disturbance of the offline plant; the board takes its own (`vic inject`).
     #[error("--pulse runs offline only (the board takes no scripted pulse yet: use vic inject)")]
     PulseNotOffline,
@@ -71,6 +83,7 @@ impl SweepError {
             SweepError::Config(_)
                 | SweepError::Latency { .. }
                 | SweepError::Lockstep { .. }
+                | SweepError::Pulse
                 | SweepError::PulseNotOffline
         )
     }
@@ -494,44 +507,4 @@ fn latency_steps(latency_ms: f64, dt: f64) -> Result<usize, SweepError> {
         });
     }
     Ok(steps.round() as usize)
-}
-
-/// The sweep's figure: final error (mean, spread to the worst trial) against the latency, one line
-/// per strategy, PNG and SVG.
-pub fn write_figure(
-    sweep: &Sweep,
-    png: &Path,
-    svg: &Path,
-) -> Result<(), crate::tools::plot::PlotError> {
-    let mut curves: Vec<crate::tools::plot::Curve> = Vec::new();
-    for p in &sweep.points {
-        let name = p.strategy.name();
-        let i = match curves.iter().position(|c| c.name == name) {
-            Some(i) => i,
-            None => {
-                curves.push(crate::tools::plot::Curve {
-                    name: name.into(),
-                    points: Vec::new(),
-                });
-                curves.len() - 1
-            }
-        };
-        curves[i]
-            .points
-            .push((p.latency_ms, p.final_error_mean, p.final_error_max));
-    }
-    let unit = sweep.points.first().map_or("", |p| p.unit.name());
-    crate::tools::plot::curve_figure(
-        &curves,
-        &format!(
-            "Delay versus stiffness: {} ({} trials)",
-            Path::new(&sweep.scenario)
-                .file_stem()
-                .map_or_else(|| sweep.scenario.clone(), |s| s.to_string_lossy().into()),
-            sweep.trials
-        ),
-        &format!("final error [{unit}]"),
-        png,
-        svg,
-    )
 }
