@@ -1,4 +1,4 @@
-//! The delay wrapper `vic::core::delay::Delayed` (paper Eq. 11–13, 19; DESIGN §6).
+//! The delay wrapper `vic::core::delay::Delayed` (paper Eq. 11–13, 19).
 //!
 //! * With 0 steps it is the plain model: step, noise gain and linearisation identical.
 //! * With `d > 0` steps a rollout of the augmented model from `initial_state(x0, pending)` is a

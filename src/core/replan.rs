@@ -1,5 +1,5 @@
 //! Receding-horizon stiffness planning: the `replan` strategy of a central controller that sees
-//! the state `D` steps late (DESIGN §6, last sentence; issue 13).
+//! the state `D` steps late (paper Eq. 11–13, 19; issue 13).
 //!
 //! Every central period (`period_steps` knots: 2 at Δ = 10 ms and 50 Hz) the controller
 //! predicts the present state `x̂_k` from the delayed measurement over the commands in flight

@@ -4,7 +4,7 @@
 //! `Σ[k+1] = (A + B L) Σ (A + B L)ᵀ + Σ_i (c_i c_iᵀ + (Cx_i + Cu_i L) Σ (Cx_i + Cu_i L)ᵀ)`,
 //! `E[C] ≈ C(x̄, ū) + Σ_k ½ tr((ℓ_xx + Lᵀ ℓ_uu L + Lᵀ ℓ_ux + ℓ_uxᵀ L) Σ[k]) + ½ tr(g_xx Σ[N])`.
 //!
-//! With `L = 0` this is the open-loop plan's spread (DESIGN §5). For a linear plant with quadratic
+//! With `L = 0` this is the open-loop plan's spread (SOOC). For a linear plant with quadratic
 //! cost it is exact, and at an ILQG optimum it equals the backward pass's `s_0`.
 
 use crate::core::cost::CostDerivatives;

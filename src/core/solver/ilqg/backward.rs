@@ -66,7 +66,7 @@ impl Ilqg {
         (0..s.nrows()).map(|i| s[(i, i)].abs()).sum::<f64>() / n as f64
     }
 
-    /// One backward pass (DESIGN §4) at the nominal with regularisation `mu`: per knot, from the
+    /// One backward pass (Todorov & Li 2005) at the nominal with regularisation `mu`: per knot, from the
     /// last, the Q-function, the policy from the (box) QP, the value update. `None` when a
     /// `Q_uu` is not positive definite.
     pub(super) fn backward_pass(
@@ -186,7 +186,7 @@ impl Backward {
         q0
     }
 
-    /// The Q-function of knot `k` (DESIGN §4) from the value `(S, s)` of knot `k + 1`, into
+    /// The Q-function of knot `k` (Todorov & Li 2005) from the value `(S, s)` of knot `k + 1`, into
     /// `qx, qu, qxx, quu, qux`; returns its constant term `Δ l + ½ Σ c_iᵀ S c_i` (without `s`).
     /// The products take A, B, Cx, Cu by their nonzeros (see `sparse`): n·nnz, not n³.
     fn q_function<X: ColumnProducts, U: ColumnProducts>(

@@ -93,7 +93,7 @@ impl Ilqg {
     /// Its gradient is exactly the noise part of the backward pass's `Q_x`, `Q_u` (the `Cxᵀ S c`,
     /// `Cuᵀ S c` terms), so an ILQG step is a descent direction for it. The fully propagated
     /// expected cost ([`crate::core::solver::moments::expected_cost`]) also moves with the linearisation itself, which
-    /// ILQG's first-order step does not see (DESIGN §4), and makes a poor merit.
+    /// ILQG's first-order step does not see (Todorov & Li 2005), and makes a poor merit.
     pub(super) fn merit(&mut self, problem: &Problem, stochastic: bool, candidate: bool) -> f64 {
         let traj = if candidate {
             &self.candidate
