@@ -1,7 +1,8 @@
 //! Derivatives of every model × actuator × field × noise combination.
 //!
 //! * [`ArmModel::f`] and [`ArmModel::diffusion`] against an independent transcription of the
-//!   equations of motion of paper Eq. 1–8 and 15 (written here with nalgebra, not with the crate's code).
+//!   equations of motion of paper Eq. 1–8 and 15 (written here with nalgebra, not with the
+//!   crate's code).
 //! * [`ArmModel::jacobians`] (`f_x`, `f_u`, `∂F/∂x`, `∂F/∂u`) against central finite differences
 //!   of `f` and `diffusion`.
 //! * [`DiscreteDynamics::linearize`] (`A = I + Δ f_x`, `B = Δ f_u`, `c = √Δ F`, `Cx`, `Cu`) against

@@ -1,6 +1,6 @@
-//! ILQG on a linear plant with quadratic cost and additive noise is LQG (Todorov & Li
-//! 2005: the exactness check): its gains, nominal and predicted expected cost must equal those of a discrete-time
-//! Riccati recursion written independently here, and the moment propagation of
+//! ILQG on a linear plant with quadratic cost and additive noise is LQG (Todorov & Li 2005: the
+//! exactness check): its gains, nominal and predicted expected cost must equal those of a
+//! discrete-time Riccati recursion written independently here, and the moment propagation of
 //! `vic::core::solver::moments` must give the same expected cost.
 
 use nalgebra::{DMatrix, DVector};

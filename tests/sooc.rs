@@ -1,5 +1,5 @@
-//! Stochastic optimal open-loop control (SOOC, paper Eq. 10 and 14 on the mean and covariance): the moment dynamics, their cost and the plans
-//! made with them.
+//! Stochastic optimal open-loop control (SOOC, paper Eq. 10 and 14 on the mean and covariance):
+//! the moment dynamics, their cost and the plans made with them.
 //!
 //! * On a linear plant with state-proportional noise (one joint, no gravity, no viscosity) the
 //!   [`MomentDynamics`] rollout and the [`MomentCost`] are exact: checked against a closed-form

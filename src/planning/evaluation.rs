@@ -202,14 +202,14 @@ fn spread(finals: &[Vec<f64>], dim: usize, k: f64) -> Spread {
 
 /// The expected cost (Eq. 14) of executing `policy` with `feedback` on the plant of `setup`,
 /// predicted without sampling: the closed-loop mean/covariance propagation of the linearised plant
-/// under *that* law, the way the open-loop prediction propagates SOOC's (Eq. 10 on the mean and covariance) and ILQG's
-/// `s_0` values the undelayed law. `None` for the naive delayed law (Eq. 13), whose augmented
-/// state would be the past states themselves (not modelled here).
+/// under *that* law, the way the open-loop prediction propagates SOOC's (Eq. 10 on the mean and
+/// covariance) and ILQG's `s_0` values the undelayed law. `None` for the naive delayed law
+/// (Eq. 13), whose augmented state would be the past states themselves (not modelled here).
 ///
 /// Around the nominal `(x̄_k, ū_k)`, `δx_{k+1} = A_k δx_k + B_k δu_k + w_k`, with `w_k = Σ_i (c_i +
-/// Cx_i δx_k + Cu_i δu_k) ε_i` (Todorov & Li's noise model, paper Eq. 8 and 10). A predictor that sees
-/// `x_{k−D}` and runs the model over the commands it sent knows the present up to the noise of the
-/// last `D` steps carried forward: `δx_k − δx̂_k = e_k = Σ_{m=1..D} ε⁽ᵐ⁾_k`, with
+/// Cx_i δx_k + Cu_i δu_k) ε_i` (Todorov & Li's noise model, paper Eq. 8 and 10). A predictor
+/// that sees `x_{k−D}` and runs the model over the commands it sent knows the present up to the
+/// noise of the last `D` steps carried forward: `δx_k − δx̂_k = e_k = Σ_{m=1..D} ε⁽ᵐ⁾_k`, with
 /// `ε⁽¹⁾_{k+1} = w_k`, `ε⁽ᵐ⁺¹⁾_{k+1} = A_k ε⁽ᵐ⁾_k` (independent of the commands: they are known).
 /// So on the augmented state `z = (δx, ε⁽¹⁾ … ε⁽ᴰ⁾)` (dimension `n (D + 1)`) the law is linear,
 /// `δu_k = L_k (δx_k − Σ ε⁽ᵐ⁾_k)` (zero for `k < D`, before any state has arrived), and

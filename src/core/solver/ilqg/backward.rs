@@ -66,8 +66,8 @@ impl Ilqg {
         (0..s.nrows()).map(|i| s[(i, i)].abs()).sum::<f64>() / n as f64
     }
 
-    /// One backward pass (Todorov & Li 2005) at the nominal with regularisation `mu`: per knot, from the
-    /// last, the Q-function, the policy from the (box) QP, the value update. `None` when a
+    /// One backward pass (Todorov & Li 2005) at the nominal with regularisation `mu`: per knot,
+    /// from the last, the Q-function, the policy from the (box) QP, the value update. `None` when a
     /// `Q_uu` is not positive definite.
     pub(super) fn backward_pass(
         &mut self,

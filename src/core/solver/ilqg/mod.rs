@@ -1,6 +1,7 @@
 //! Iterative LQG for stochastic plants with state- and control-dependent noise (Todorov & Li 2005;
-//! the paper's Eq. 8–10 and 14), with box-constrained controls by projected Newton (Tassa, Mansard & Todorov 2014),
-//! adaptive Levenberg–Marquardt regularisation and a backtracking line search.
+//! the paper's Eq. 8–10 and 14), with box-constrained controls by projected Newton (Tassa,
+//! Mansard & Todorov 2014), adaptive Levenberg–Marquardt regularisation and a backtracking line
+//! search.
 //!
 //! The line search compares *expected* costs when the plant is stochastic: the nominal cost plus
 //! the second-order noise cost of the candidate under the new feedback gains
