@@ -1,7 +1,7 @@
 //! Configuration errors: every one names the file, the key (`[task] dt`) and what is wrong, so
 //! that a user who wrote a bad file knows which line to fix.
 
-use super::raw::SECTIONS;
+use super::sections::SECTIONS;
 use serde_path_to_error::Segment;
 use std::path::{Path, PathBuf};
 

@@ -11,6 +11,7 @@ mod board;
 mod error;
 mod overrides;
 mod raw;
+mod sections;
 mod solver;
 mod stability;
 mod validate;
@@ -113,7 +114,7 @@ impl Scenario {
         raw::retag(&mut tagged)
             .map_err(|(section, key, message)| check.invalid(section, key, message))?;
         let raw: raw::RawConfig = serde_path_to_error::deserialize(toml::Value::Table(tagged))
-            .map_err(|e| check.serde_error(e, raw::tag_of))?;
+            .map_err(|e| check.serde_error(e, sections::tag_of))?;
         validate::validate(raw, path, resolved)
     }
 }

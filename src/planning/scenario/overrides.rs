@@ -34,7 +34,7 @@ pub(super) fn apply_override(table: &mut toml::Table, assignment: &str) -> Resul
     let toml::Value::Table(sec) = entry else {
         return Err(err(&format!("{section} is not a section")));
     };
-    if super::raw::tag_of(section) == Some(field) && sec.get(field) != Some(&parsed) {
+    if super::sections::tag_of(section) == Some(field) && sec.get(field) != Some(&parsed) {
         sec.clear();
     }
     sec.insert(field.to_string(), parsed);

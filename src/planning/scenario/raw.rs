@@ -4,6 +4,7 @@
 //! The `[board]` section is the validated [`BoardSection`](super::BoardSection) with its joint
 //! range optional ([`RawBoard`](super::board::RawBoard)), its defaults beside it.
 
+use super::sections::TAGGED;
 use crate::core::dynamics::Integrator;
 use crate::core::solver::IlqgOptions;
 use crate::core::solver::sooc_newton::Indefinite;
@@ -23,24 +24,6 @@ pub(super) struct RawConfig {
     pub solver: RawSolver,
     #[serde(default)]
     pub board: super::board::RawBoard,
-}
-
-/// The sections of a scenario file, in the order they are usually written.
-pub(super) const SECTIONS: [&str; 8] = [
-    "plant", "actuator", "field", "noise", "cost", "task", "solver", "board",
-];
-
-/// The sections whose variant a key selects, and that key.
-const TAGGED: [(&str, &str); 4] = [
-    ("plant", "kind"),
-    ("actuator", "type"),
-    ("field", "kind"),
-    ("noise", "kind"),
-];
-
-/// The key that selects the variant of `section`, if it has one.
-pub(super) fn tag_of(section: &str) -> Option<&'static str> {
-    TAGGED.iter().find(|(s, _)| *s == section).map(|(_, t)| *t)
 }
 
 /// Rewrites each tagged section `{ kind = "x", rest… }` as `{ x = { rest… } }`, the form serde's

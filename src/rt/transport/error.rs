@@ -49,7 +49,7 @@ pub enum TransportError {
     TooManyPorts {
         namespace: String,
         service: &'static str,
-        kind: super::limits::PortKind,
+        kind: PortKind,
         in_use: usize,
         max: usize,
         holders: String,
@@ -70,6 +70,30 @@ impl TransportError {
             namespace: namespace.to_string(),
             what: what.into(),
             reason: format!("{e:?}"),
+        }
+    }
+}
+
+/// Which kind of port of a service is full.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PortKind {
+    Publisher,
+    Subscriber,
+    Notifier,
+    Listener,
+    /// A process (node) attached to the service.
+    Node,
+}
+
+impl PortKind {
+    /// The plural the messages use.
+    pub fn plural(self) -> &'static str {
+        match self {
+            PortKind::Publisher => "publishers",
+            PortKind::Subscriber => "subscribers",
+            PortKind::Notifier => "notifiers",
+            PortKind::Listener => "listeners",
+            PortKind::Node => "processes (nodes)",
         }
     }
 }

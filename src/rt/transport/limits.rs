@@ -7,7 +7,7 @@
 //! They are fixed when the first process of a namespace creates a service; a later process
 //! (including a client of iceoryx2's own bindings) opens the service with the limits it has.
 
-use super::error::TransportError;
+use super::error::{PortKind, TransportError};
 use super::service::Service as Ipc;
 use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::node::NodeView;
@@ -96,30 +96,6 @@ pub(super) fn describe_holders(cfg: &Config, ids: Option<&[UniqueNodeId]>) -> St
         "no live process".into()
     } else {
         parts.join("; ")
-    }
-}
-
-/// Which kind of port of a service is full.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PortKind {
-    Publisher,
-    Subscriber,
-    Notifier,
-    Listener,
-    /// A process (node) attached to the service.
-    Node,
-}
-
-impl PortKind {
-    /// The plural the messages use.
-    pub fn plural(self) -> &'static str {
-        match self {
-            PortKind::Publisher => "publishers",
-            PortKind::Subscriber => "subscribers",
-            PortKind::Notifier => "notifiers",
-            PortKind::Listener => "listeners",
-            PortKind::Node => "processes (nodes)",
-        }
     }
 }
 

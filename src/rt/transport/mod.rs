@@ -34,8 +34,8 @@ pub mod session;
 pub mod wire_enum;
 
 pub use clock::{monotonic_ns, process_session, session_seq};
+pub use error::PortKind;
 pub use error::TransportError;
-pub use limits::PortKind;
 pub use namespace::{
     DEFAULT_NAMESPACE, NodeInfo, NodeLiveness, check_namespace_owner, dead_nodes, ensure_root_dir,
     list_nodes, namespace_files, prefix, remove_namespace, root_dir, validate_namespace,

@@ -2,9 +2,9 @@
 //! service settings ([`Topic`]), port creation that names the limit and its holders when a service
 //! is full, and plain send / drain helpers for the role types of [`super::ports`].
 
-use super::error::TransportError;
+use super::error::{PortKind, TransportError};
 use super::limits::{
-    MAX_LISTENERS, MAX_NODES, MAX_NOTIFIERS, MAX_PUBLISHERS, MAX_SUBSCRIBERS, PortKind, too_many,
+    MAX_LISTENERS, MAX_NODES, MAX_NOTIFIERS, MAX_PUBLISHERS, MAX_SUBSCRIBERS, too_many,
 };
 use super::namespace::{any_node_alive, config, dead_nodes_in, live_nodes_named};
 use super::namespace::{
