@@ -328,15 +328,14 @@ impl Backward {
     /// Returns `(lᵀ Q_u, lᵀ Q_uu l)` for `s_0` and the expected improvement.
     fn value_update(&mut self, l: &DVector<f64>, gain: &DMatrix<f64>) -> (f64, f64) {
         let nu = l.len();
-        self.t_m.gemv(1.0, &self.quu, l, 0.0); // Q_uu l
-        let lqu = l.dot(&self.qu);
-        let lquul = l.dot(&self.t_m);
-        self.t_m += &self.qu; // Q_uu l + Q_u
-        copy(&self.qx, &mut self.s_vec);
-        self.s_vec.gemv_tr(1.0, gain, &self.t_m, 1.0);
-        self.s_vec.gemv_tr(1.0, &self.qux, l, 1.0);
-        copy(&self.qux, &mut self.t_mn);
-        self.t_mn.gemm(1.0, &self.quu, gain, 1.0); // Q_uu L + Q_ux
+        let (lqu, lquul) = match (self.qx.len(), nu) {
+            (2, 1) => self.value_terms::<2, 1>(l, gain),
+            (2, 2) => self.value_terms::<2, 2>(l, gain),
+            (4, 2) => self.value_terms::<4, 2>(l, gain),
+            (4, 4) => self.value_terms::<4, 4>(l, gain),
+            (8, 4) => self.value_terms::<8, 4>(l, gain),
+            _ => self.value_terms_dynamic(l, gain),
+        };
         // S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L as 2m rank-one updates, each an axpy on
         // contiguous columns of the transposed thin factors (nalgebra's transposed products
         // are plain dot loops).
@@ -369,6 +368,79 @@ impl Backward {
     }
 }
 
+impl Backward {
+    /// The products of the value update before its rank-one part, by nalgebra: `t_m = Q_uu l +
+    /// Q_u`, `s = Q_x + Lᵀ t_m + Q_uxᵀ l`, `t_mn = Q_uu L + Q_ux`; returns `(lᵀ Q_u, lᵀ Q_uu l)`.
+    fn value_terms_dynamic(&mut self, l: &DVector<f64>, gain: &DMatrix<f64>) -> (f64, f64) {
+        self.t_m.gemv(1.0, &self.quu, l, 0.0); // Q_uu l
+        let lqu = l.dot(&self.qu);
+        let lquul = l.dot(&self.t_m);
+        self.t_m += &self.qu; // Q_uu l + Q_u
+        copy(&self.qx, &mut self.s_vec);
+        self.s_vec.gemv_tr(1.0, gain, &self.t_m, 1.0);
+        self.s_vec.gemv_tr(1.0, &self.qux, l, 1.0);
+        copy(&self.qux, &mut self.t_mn);
+        self.t_mn.gemm(1.0, &self.quu, gain, 1.0); // Q_uu L + Q_ux
+        (lqu, lquul)
+    }
+
+    /// [`Backward::value_terms_dynamic`] for the paper's plant sizes, in fixed-size loops on the
+    /// column-major storage: nalgebra's dynamic calls cost more than their few products there.
+    /// The same operations in the same order as nalgebra 0.35's (`gemv`: one column at a time,
+    /// `y += A_{:,j} x_j`; `dot` of short dynamic vectors: `0 + Σ` from the first term on;
+    /// `gemv_tr`: `y_j += dot(A_{:,j}, x)`; `gemm` below 6 rows or columns: a `gemv` per
+    /// column), so the same numbers to the bit (`value_terms_match_nalgebra_bit_for_bit`).
+    fn value_terms<const NX: usize, const NU: usize>(
+        &mut self,
+        l: &DVector<f64>,
+        gain: &DMatrix<f64>,
+    ) -> (f64, f64) {
+        let dot = |a: &[f64], b: &[f64]| {
+            let mut r = 0.0;
+            for k in 0..NU {
+                r += a[k] * b[k];
+            }
+            r
+        };
+        let (l, gd) = (&l.as_slice()[..NU], &gain.as_slice()[..NU * NX]);
+        let quu = &self.quu.as_slice()[..NU * NU];
+        let qu = &self.qu.as_slice()[..NU];
+        let mut tm = [0.0; NU];
+        for j in 0..NU {
+            for i in 0..NU {
+                let p = quu[j * NU + i] * l[j];
+                tm[i] = if j == 0 { p } else { p + tm[i] };
+            }
+        }
+        let (lqu, lquul) = (dot(l, qu), dot(l, &tm));
+        for i in 0..NU {
+            tm[i] += qu[i];
+        }
+        self.t_m.as_mut_slice().copy_from_slice(&tm);
+        let qux = &self.qux.as_slice()[..NU * NX];
+        let (qx, sv) = (
+            &self.qx.as_slice()[..NX],
+            &mut self.s_vec.as_mut_slice()[..NX],
+        );
+        sv.copy_from_slice(qx);
+        for j in 0..NX {
+            sv[j] += dot(&gd[j * NU..], &tm);
+            sv[j] += dot(&qux[j * NU..], l);
+        }
+        let tmn = &mut self.t_mn.as_mut_slice()[..NU * NX];
+        for c in 0..NX {
+            let col = &mut tmn[c * NU..(c + 1) * NU];
+            col.copy_from_slice(&qux[c * NU..(c + 1) * NU]);
+            for j in 0..NU {
+                for i in 0..NU {
+                    col[i] += quu[j * NU + i] * gd[c * NU + j];
+                }
+            }
+        }
+        (lqu, lquul)
+    }
+}
+
 /// The unconstrained Newton step `x = −H⁻¹ g`, with the Cholesky factor of `H` over the indices
 /// `idx` (all of them) written into `factor`; `None` when `H` is not positive definite.
 fn newton_step(
@@ -386,4 +458,69 @@ fn newton_step(
     }
     factor.solve(&mut x[..idx.len()]);
     Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Entries of every kind the products meet: ordinary values, exact zeros of both signs
+    /// (whose sums depend on the order and the starting zero) and values far apart in scale.
+    fn entries(seed: &mut u64, n: usize) -> Vec<f64> {
+        (0..n)
+            .map(|_| {
+                *seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = (*seed >> 11) as f64 / (1u64 << 53) as f64;
+                match *seed >> 60 {
+                    0 => 0.0,
+                    1 => -0.0,
+                    2 => (u - 0.5) * 1e12,
+                    3 => (u - 0.5) * 1e-9,
+                    _ => u - 0.5,
+                }
+            })
+            .collect()
+    }
+
+    fn filled(nx: usize, nu: usize, seed: &mut u64) -> Backward {
+        let mut b = Backward::new(nx, nu);
+        b.quu = DMatrix::from_vec(nu, nu, entries(seed, nu * nu));
+        b.qu = DVector::from_vec(entries(seed, nu));
+        b.qx = DVector::from_vec(entries(seed, nx));
+        b.qux = DMatrix::from_vec(nu, nx, entries(seed, nu * nx));
+        // Stale contents that both versions must overwrite.
+        b.t_m = DVector::from_vec(entries(seed, nu));
+        b.s_vec = DVector::from_vec(entries(seed, nx));
+        b.t_mn = DMatrix::from_vec(nu, nx, entries(seed, nu * nx));
+        b
+    }
+
+    #[test]
+    fn value_terms_match_nalgebra_bit_for_bit() {
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut seed = 7;
+        for (nx, nu) in [(2, 1), (2, 2), (4, 2), (4, 4), (8, 4)] {
+            for _ in 0..200 {
+                let start = seed;
+                let mut fixed = filled(nx, nu, &mut seed);
+                let mut dynamic = filled(nx, nu, &mut { start });
+                let l = DVector::from_vec(entries(&mut seed, nu));
+                let gain = DMatrix::from_vec(nu, nx, entries(&mut seed, nu * nx));
+                let a = match (nx, nu) {
+                    (2, 1) => fixed.value_terms::<2, 1>(&l, &gain),
+                    (2, 2) => fixed.value_terms::<2, 2>(&l, &gain),
+                    (4, 2) => fixed.value_terms::<4, 2>(&l, &gain),
+                    (4, 4) => fixed.value_terms::<4, 4>(&l, &gain),
+                    _ => fixed.value_terms::<8, 4>(&l, &gain),
+                };
+                let b = dynamic.value_terms_dynamic(&l, &gain);
+                assert_eq!(bits(&[a.0, a.1]), bits(&[b.0, b.1]), "{nx}x{nu}");
+                assert_eq!(bits(fixed.t_m.as_slice()), bits(dynamic.t_m.as_slice()));
+                assert_eq!(bits(fixed.s_vec.as_slice()), bits(dynamic.s_vec.as_slice()));
+                assert_eq!(bits(fixed.t_mn.as_slice()), bits(dynamic.t_mn.as_slice()));
+            }
+        }
+    }
 }
