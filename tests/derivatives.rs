@@ -1,7 +1,7 @@
 //! Derivatives of every model × actuator × field × noise combination.
 //!
 //! * [`ArmModel::f`] and [`ArmModel::diffusion`] against an independent transcription of the
-//!   equations of motion of paper Eq. 1–8 and 15 (written here with nalgebra, not with the
+//!   equations of motion of paper Eq. 1–8, 15 and 16 (written here with nalgebra, not with the
 //!   crate's code).
 //! * [`ArmModel::jacobians`] (`f_x`, `f_u`, `∂F/∂x`, `∂F/∂u`) against central finite differences
 //!   of `f` and `diffusion`.
@@ -204,7 +204,7 @@ fn step_size(v: f64) -> f64 {
 }
 
 // ---------------------------------------------------------------------------------------------
-// An independent transcription of paper Eq. 1–8 and 15.
+// An independent transcription of paper Eq. 1–8, 15 and 16.
 // ---------------------------------------------------------------------------------------------
 
 /// Mass matrix, bias torques `C + B_v q' + g`, hand Jacobian and hand position of the limb.
@@ -258,7 +258,7 @@ fn limb(plant: &Plant, q: &[f64], qd: &[f64]) -> Limb {
     }
 }
 
-/// `x' = f(x, u)` from paper Eq. 1–8 and 15.
+/// `x' = f(x, u)` from paper Eq. 1–8, 15 and 16.
 fn reference_drift(model: &ArmModel, x: &[f64], u: &[f64], ex: &Exogenous) -> Vec<f64> {
     let n = model.dof();
     let mut q = [0.0; 2];
@@ -306,8 +306,8 @@ fn reference_drift(model: &ArmModel, x: &[f64], u: &[f64], ex: &Exogenous) -> Ve
     xdot
 }
 
-/// `F(x, u)` from paper Eq. 8: `σ x_c I`, or the torque noise `(a + b q'_i) √T_s` on joint `i`
-/// through `M⁻¹`.
+/// `F(x, u)` from paper Eq. 8 and 16: `σ x_c I`, or the torque noise `(a + b q'_i) √T_s` on
+/// joint `i` through `M⁻¹`.
 fn reference_diffusion(model: &ArmModel, x: &[f64]) -> DMatrix<f64> {
     let (n, nx) = (model.dof(), model.nx());
     match model.noise {

@@ -64,7 +64,10 @@ pub enum SweepError {
     /// A pulse that is not finite, starts before the movement or lasts no time: bad input.
     #[error("--pulse must be finite N m, --pulse-at-ms ≥ 0 and --pulse-ms > 0")]
     Pulse,
-    /// The figure or the numbers could not be written into the output folder.
+    /// The figure could not be drawn or written (the error names its file).
+    #[error(transparent)]
+    Figure(#[from] crate::tools::plot::PlotError),
+    /// The folder or the numbers could not be written.
     #[error("{}: {source}", path.display())]
     Write {
         path: std::path::PathBuf,

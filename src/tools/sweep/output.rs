@@ -38,7 +38,7 @@ pub fn write_outputs(sweep: &Sweep, dir: &Path) -> Result<(), SweepError> {
         dir.join("sweep.svg"),
         dir.join("sweep.json"),
     );
-    write_figure(sweep, &png, &svg).map_err(|e| failed(&png)(e.into()))?;
+    write_figure(sweep, &png, &svg)?;
     let text = serde_json::to_string_pretty(sweep).map_err(|e| failed(&json)(e.into()))?;
     std::fs::write(&json, text).map_err(|e| failed(&json)(e.into()))
 }
