@@ -25,13 +25,7 @@ fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
 
 fn bench_plain(c: &mut Criterion, name: &str, file: &str, overrides: &[&str]) {
     let (s, setup) = load(file, overrides);
-    let problem = Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: s.task.steps,
-        bounds: setup.bounds.clone(),
-    };
+    let problem = setup.problem(s.task.steps);
     let mut solver = Ilqg::new(&problem, s.solver.options.clone());
     let sol = solver.solve(&problem, &setup.u_init);
     eprintln!(
@@ -69,13 +63,7 @@ fn solvers(c: &mut Criterion) {
         horizon: s.task.steps,
         bounds: setup.bounds.clone(),
     };
-    let plain = Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: s.task.steps,
-        bounds: setup.bounds.clone(),
-    };
+    let plain = setup.problem(s.task.steps);
     // The whole plan (vic::core::delay::DelayedPlanner): the undelayed plant's plan from the
     // state the commands in flight lead to, then ILQG on the 42-dimensional delayed plant for
     // its gains.

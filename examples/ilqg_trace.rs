@@ -3,9 +3,8 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::core::delay::Delayed;
 use vic::core::solver::{Ilqg, Problem};
-use vic::planning::plan::{self, DelayedCost};
+use vic::planning::plan;
 use vic::planning::scenario::Scenario;
 
 fn main() {
@@ -17,22 +16,9 @@ fn main() {
     let s = Scenario::load(Path::new(&file), &args[1.min(args.len())..]).expect("scenario loads");
     let setup = plan::setup(&s).expect("scenario sets up");
     let (steps, d) = (s.task.steps, s.task.delay_steps());
-    let delayed = Delayed::new(setup.dynamics.clone(), d);
-    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
-    let problem = Problem {
-        dynamics: &delayed,
-        cost: &cost,
-        x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
-        horizon: steps,
-        bounds: setup.bounds.clone(),
-    };
-    let plain = Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: s.task.steps,
-        bounds: setup.bounds.clone(),
-    };
+    let delayed = setup.delayed(d);
+    let problem = delayed.problem(steps);
+    let plain = setup.problem(s.task.steps);
     let u_init: Vec<DVector<f64>> = if std::env::var("UNDELAYED").is_ok() {
         let t = std::time::Instant::now();
         let u = vic::core::delay::undelayed_guess(
@@ -59,8 +45,8 @@ fn main() {
     }));
     let mut sol = solver.try_solve(&problem, &u_init).expect("solves");
     let (later_dynamics, later_cost) = (
-        vic::core::delay::Offset::new(&delayed, 2),
-        vic::core::delay::Offset::new(&cost, 2),
+        vic::core::delay::Offset::new(&delayed.dynamics, 2),
+        vic::core::delay::Offset::new(&delayed.cost, 2),
     );
     if std::env::var("WARM").is_ok() {
         println!(

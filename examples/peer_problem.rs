@@ -9,7 +9,7 @@
 use std::path::Path;
 use std::time::Instant;
 use vic::core::model::Plant;
-use vic::core::solver::{Ilqg, Problem};
+use vic::core::solver::Ilqg;
 use vic::planning::plan;
 use vic::planning::scenario::Scenario;
 
@@ -24,13 +24,7 @@ fn main() {
     let Plant::TwoLink(arm) = &s.model.plant else {
         panic!("the peer problem is the two-link arm")
     };
-    let problem = Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: s.task.steps,
-        bounds: setup.bounds.clone(),
-    };
+    let problem = setup.problem(s.task.steps);
     let mut solver = Ilqg::new(&problem, s.solver.options.clone());
     solver.options.stochastic = false;
     let sol = solver.try_solve(&problem, &setup.u_init).expect("solves");

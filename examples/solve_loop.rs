@@ -8,9 +8,9 @@
 //! same plans print the same.
 
 use std::path::Path;
-use vic::core::delay::{Delayed, DelayedPlanner};
-use vic::core::solver::{Ilqg, Problem};
-use vic::planning::plan::{self, DelayedCost};
+use vic::core::delay::DelayedPlanner;
+use vic::core::solver::Ilqg;
+use vic::planning::plan;
 use vic::planning::scenario::Scenario;
 
 fn main() {
@@ -28,13 +28,7 @@ fn main() {
     });
     let setup = plan::setup(&s).expect("scenario sets up");
     let (steps, d) = (s.task.steps, s.task.delay_steps());
-    let plain = Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: steps,
-        bounds: setup.bounds.clone(),
-    };
+    let plain = setup.problem(steps);
     let mut sum = 0.0;
     if d == 0 {
         let mut solver = Ilqg::new(&plain, s.solver.options.clone());
@@ -42,15 +36,8 @@ fn main() {
             sum += solver.solve(&plain, &setup.u_init).cost;
         }
     } else {
-        let delayed = Delayed::new(setup.dynamics.clone(), d);
-        let cost = DelayedCost::new(&setup.cost, setup.x0.len());
-        let problem = Problem {
-            dynamics: &delayed,
-            cost: &cost,
-            x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
-            horizon: steps,
-            bounds: setup.bounds.clone(),
-        };
+        let delayed = setup.delayed(d);
+        let problem = delayed.problem(steps);
         let mut planner =
             DelayedPlanner::new(&plain, &problem, &s.solver.options).unwrap_or_else(|e| {
                 eprintln!("{file}: {e}");

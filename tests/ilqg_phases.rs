@@ -12,9 +12,8 @@
 use nalgebra::DVector;
 use std::path::Path;
 use vic::core::cost::{Cost, CostDerivatives};
-use vic::core::delay::Delayed;
 use vic::core::solver::{Ilqg, Problem};
-use vic::planning::plan::{self, DelayedCost, Setup};
+use vic::planning::plan::{self, Setup};
 use vic::planning::scenario::Scenario;
 
 /// A scenario of `config/` with overrides, and its plan setup.
@@ -34,27 +33,14 @@ fn solve(file: &str, overrides: &[&str], delay: Option<usize>) -> (f64, f64, usi
     let steps = s.task.steps;
     match delay {
         None => {
-            let problem = Problem {
-                dynamics: &setup.dynamics,
-                cost: &setup.cost,
-                x0: setup.x0.clone(),
-                horizon: steps,
-                bounds: setup.bounds.clone(),
-            };
+            let problem = setup.problem(steps);
             let mut solver = Ilqg::new(&problem, s.solver.options.clone());
             let sol = solver.solve(&problem, &setup.u_init);
             (sol.cost, sol.expected_cost, sol.iterations)
         }
         Some(d) => {
-            let delayed = Delayed::new(setup.dynamics.clone(), d);
-            let cost = DelayedCost::new(&setup.cost, setup.x0.len());
-            let problem = Problem {
-                dynamics: &delayed,
-                cost: &cost,
-                x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
-                horizon: steps,
-                bounds: setup.bounds.clone(),
-            };
+            let delayed = setup.delayed(d);
+            let problem = delayed.problem(steps);
             let u_init: Vec<DVector<f64>> = (0..steps)
                 .map(|k| setup.u_init[(k + d).min(steps - 1)].clone())
                 .collect();

@@ -26,13 +26,7 @@ fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
 }
 
 fn problem<'a>(s: &Scenario, setup: &'a Setup) -> Problem<'a> {
-    Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: s.task.steps,
-        bounds: setup.bounds.clone(),
-    }
+    setup.problem(s.task.steps)
 }
 
 /// Allocations of one solve capped at `iterations` (the solution's copies are the same for
@@ -209,22 +203,9 @@ fn undelayed_guess_is_the_deterministic_delayed_optimum() {
     let (s, setup) = load("single_joint_delay.toml", &["noise.kind=none"]);
     let d = s.task.delay_steps();
     let steps = s.task.steps;
-    let delayed = Delayed::new(setup.dynamics.clone(), d);
-    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
-    let problem = Problem {
-        dynamics: &delayed,
-        cost: &cost,
-        x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
-        horizon: steps,
-        bounds: setup.bounds.clone(),
-    };
-    let plain = Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: s.task.steps,
-        bounds: setup.bounds.clone(),
-    };
+    let delayed = setup.delayed(d);
+    let problem = delayed.problem(steps);
+    let plain = setup.problem(s.task.steps);
     let guess = vic::core::delay::undelayed_guess(
         &plain,
         setup.u_init[0].as_slice(),

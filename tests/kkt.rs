@@ -26,13 +26,7 @@ fn solve(overrides: &[String]) -> (Scenario, Setup, Solution) {
 }
 
 fn problem<'a>(scenario: &Scenario, setup: &'a Setup) -> Problem<'a> {
-    Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: scenario.task.steps,
-        bounds: setup.bounds.clone(),
-    }
+    setup.problem(scenario.task.steps)
 }
 
 /// First and second derivatives of the deterministic total cost with respect to every control

@@ -2,8 +2,6 @@
 //! command's work). The set-up lives in [`setup`](crate::planning::setup), the file format in
 //! [`plan_file`](crate::planning::plan_file); both are re-exported here.
 
-use crate::core::cost::TrackingCost;
-use crate::core::delay::Delayed;
 use crate::core::dynamics::Dynamics;
 use crate::core::model::Noise;
 use crate::core::solver::ilqg::{OnIteration, Progress};
@@ -18,7 +16,7 @@ pub use crate::planning::plan_file::{
     OpenLoopPrediction, PLAN_VERSION, PlanFile, PlanSummary, Stop, final_position_covariance,
 };
 use crate::planning::scenario::Scenario;
-pub use crate::planning::setup::{PlanError, Setup, setup};
+pub use crate::planning::setup::{DelayedCost, DelayedPlant, PlanError, Setup, setup};
 use nalgebra::{DMatrix, DVector};
 use std::sync::Arc;
 
@@ -181,13 +179,7 @@ pub fn plan(
     let setup = setup(s)?;
     let nu = setup.dynamics.nu();
     let steps = s.task.steps;
-    let plain = Problem {
-        dynamics: &setup.dynamics,
-        cost: &setup.cost,
-        x0: setup.x0.clone(),
-        horizon: steps,
-        bounds: setup.bounds.clone(),
-    };
+    let plain = setup.problem(steps);
     let mut verdict = None;
     let (solution, d) = match method {
         Method::Sooc => {
@@ -276,19 +268,8 @@ fn plan_delayed(
     let nx = setup.dynamics.nx();
     let steps = s.task.steps;
     let d = s.task.delay_steps();
-    let delayed = Delayed::new(setup.dynamics.clone(), d);
-    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
-    let cost = DelayedCost {
-        inner: &setup.cost,
-        nx,
-    };
-    let problem = Problem {
-        dynamics: &delayed,
-        cost: &cost,
-        x0,
-        horizon: steps,
-        bounds: setup.bounds.clone(),
-    };
+    let delayed = setup.delayed(d);
+    let problem = delayed.problem(steps);
     // A command issued at k acts at k + d: start from the undelayed plant's plan from
     // the state the commands in flight lead to (the deterministic optimum, exactly).
     let guess_time = std::time::Instant::now();
@@ -347,46 +328,4 @@ pub fn solve_in_phases(
     second.iterations += first.iterations;
     second.solve_time += first.solve_time;
     Ok(second)
-}
-
-/// The cost of the plain plant applied to the plant block of a delay-augmented state.
-pub struct DelayedCost<'a> {
-    inner: &'a TrackingCost,
-    nx: usize,
-}
-
-impl<'a> DelayedCost<'a> {
-    /// Wraps `inner`, a cost on the first `nx` components of the state.
-    pub fn new(inner: &'a TrackingCost, nx: usize) -> Self {
-        DelayedCost { inner, nx }
-    }
-}
-
-impl crate::core::cost::Cost for DelayedCost<'_> {
-    fn running(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
-        self.inner.running(k, &x[..self.nx], u)
-    }
-    fn terminal(&self, x: &[f64]) -> f64 {
-        self.inner.terminal(&x[..self.nx])
-    }
-    fn running_derivatives(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        d: &mut crate::core::cost::CostDerivatives,
-    ) {
-        // The augmented derivatives are zero outside the plant block. The tracking cost clears
-        // every entry it is given and writes only the joint angles and velocities (the first
-        // 2·dof components), so it fills the augmented derivatives in place, without a copy
-        // (and without allocating in the solver's iterations).
-        debug_assert!(self.inner.nx <= x.len());
-        self.inner.running_derivatives(k, x, u, d);
-    }
-    fn terminal_derivatives(&self, x: &[f64], d: &mut crate::core::cost::CostDerivatives) {
-        self.inner.terminal_derivatives(x, d);
-    }
-    fn nonnegative(&self) -> bool {
-        self.inner.nonnegative()
-    }
 }

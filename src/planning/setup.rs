@@ -2,9 +2,10 @@
 //! cost, the start state and a warm start from inverse dynamics.
 
 use crate::core::cost::TrackingCost;
+use crate::core::delay::Delayed;
 use crate::core::dynamics::DiscreteDynamics;
 use crate::core::model::{Actuator, ArmModel, Exogenous};
-use crate::core::solver::Bounds;
+use crate::core::solver::{Bounds, Problem};
 use crate::planning::reference::{self, PathError};
 use crate::planning::scenario::{Scenario, Task, TaskPath};
 use nalgebra::DVector;
@@ -53,6 +54,96 @@ pub struct Setup {
     pub u_init: Vec<DVector<f64>>,
     pub bounds: Bounds,
     pub reference: Vec<Exogenous>,
+}
+
+impl Setup {
+    /// The undelayed planning problem of `horizon` steps from x₀.
+    pub fn problem(&self, horizon: usize) -> Problem<'_> {
+        Problem {
+            dynamics: &self.dynamics,
+            cost: &self.cost,
+            x0: self.x0.clone(),
+            horizon,
+            bounds: self.bounds.clone(),
+        }
+    }
+
+    /// The plant augmented with `d` steps of commands in flight (Eq. 11–13) and its cost, the
+    /// commands in flight at the start all equal to the warm start's first.
+    pub fn delayed(&self, d: usize) -> DelayedPlant<'_> {
+        let dynamics = Delayed::new(self.dynamics.clone(), d);
+        let x0 = dynamics.initial_state(&self.x0, self.u_init[0].as_slice());
+        DelayedPlant {
+            dynamics,
+            cost: DelayedCost::new(&self.cost, self.x0.len()),
+            x0,
+            bounds: self.bounds.clone(),
+        }
+    }
+}
+
+/// A scenario's delay-augmented plant, its cost and start state ([`Setup::delayed`]), owned so
+/// that its [`Problem`] can borrow them.
+pub struct DelayedPlant<'a> {
+    pub dynamics: Delayed<DiscreteDynamics>,
+    pub cost: DelayedCost<'a>,
+    pub x0: Vec<f64>,
+    bounds: Bounds,
+}
+
+impl DelayedPlant<'_> {
+    /// The delayed planning problem of `horizon` steps.
+    pub fn problem(&self, horizon: usize) -> Problem<'_> {
+        Problem {
+            dynamics: &self.dynamics,
+            cost: &self.cost,
+            x0: self.x0.clone(),
+            horizon,
+            bounds: self.bounds.clone(),
+        }
+    }
+}
+
+/// The cost of the plain plant applied to the plant block of a delay-augmented state.
+pub struct DelayedCost<'a> {
+    inner: &'a TrackingCost,
+    nx: usize,
+}
+
+impl<'a> DelayedCost<'a> {
+    /// Wraps `inner`, a cost on the first `nx` components of the state.
+    pub fn new(inner: &'a TrackingCost, nx: usize) -> Self {
+        DelayedCost { inner, nx }
+    }
+}
+
+impl crate::core::cost::Cost for DelayedCost<'_> {
+    fn running(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
+        self.inner.running(k, &x[..self.nx], u)
+    }
+    fn terminal(&self, x: &[f64]) -> f64 {
+        self.inner.terminal(&x[..self.nx])
+    }
+    fn running_derivatives(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        d: &mut crate::core::cost::CostDerivatives,
+    ) {
+        // The augmented derivatives are zero outside the plant block. The tracking cost clears
+        // every entry it is given and writes only the joint angles and velocities (the first
+        // 2·dof components), so it fills the augmented derivatives in place, without a copy
+        // (and without allocating in the solver's iterations).
+        debug_assert!(self.inner.nx <= x.len());
+        self.inner.running_derivatives(k, x, u, d);
+    }
+    fn terminal_derivatives(&self, x: &[f64], d: &mut crate::core::cost::CostDerivatives) {
+        self.inner.terminal_derivatives(x, d);
+    }
+    fn nonnegative(&self) -> bool {
+        self.inner.nonnegative()
+    }
 }
 
 /// Builds the discrete model, the cost, the start state and the warm start of a scenario.
