@@ -9,6 +9,8 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
 use vic::core::delay::{Delayed, DelayedPlanner, Offset};
+use vic::core::solver::sooc::{MomentCost, MomentDynamics};
+use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
 use vic::core::solver::{Ilqg, Problem};
 use vic::planning::plan::{self, Setup};
 use vic::planning::scenario::Scenario;
@@ -186,7 +188,57 @@ fn solvers(c: &mut Criterion) {
             b.iter(|| black_box(plan::solve_sooc(&setup, &section, &setup.u_init, &None)))
         });
     }
+    sooc_targets(&mut group);
     group.finish();
+}
+
+/// The two SOOC targets of the solver issue on the type-2 arm in the divergent field (N = 100):
+/// the cold plan as `vic plan --method sooc` makes it ([`plan::plan_sooc`]: the deterministic
+/// optimum as first guess, then the scenario's options and continuation), and the receding-horizon re-solve one 50 Hz period later,
+/// from the plan's mean at knot 2 with the plan shifted by 2 knots as its warm start, run to
+/// the same convergence test.
+fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>) {
+    let (s, setup) = load("two_link_divergent.toml", &[]);
+    let plain = setup.problem(s.task.steps);
+    let (cold, (stop, _)) = plan::plan_sooc(&s, &setup, &plain, &None).expect("SOOC solves");
+    eprintln!(
+        "two_link_divergent_sooc_cold: {stop:?}, {} iterations, {:.1} ms (single run)",
+        cold.iterations,
+        cold.solve_time.as_secs_f64() * 1e3
+    );
+    group.bench_function("two_link_divergent_sooc_cold", |b| {
+        b.iter(|| black_box(plan::plan_sooc(&s, &setup, &plain, &None)))
+    });
+
+    let shift = 2;
+    let next = setup.shifted(shift, cold.x[shift].as_slice());
+    let mut warm = cold.u.clone();
+    let last = warm[warm.len() - 1].clone();
+    warm.drain(..shift);
+    warm.extend(std::iter::repeat_n(last, shift));
+    let horizon = warm.len();
+    let moments = MomentDynamics::new(&next.dynamics);
+    let cost = MomentCost::new(&next.cost, horizon);
+    let problem = SoocProblem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: &next.x0,
+        bounds: &next.bounds,
+        horizon,
+    };
+    // `solve` from the shifted controls is `resolve_shifted` without the state it keeps between
+    // calls, so every sample starts from the same point.
+    let mut solver = SoocSolver::new(&moments, horizon, s.solver.sooc_options());
+    let sol = solver.solve(&problem, &warm).expect("re-solves");
+    eprintln!(
+        "two_link_divergent_sooc_warm_shift2: {:?}, {} iterations, {:.1} ms (single run)",
+        sol.stop,
+        sol.iterations,
+        sol.solve_time.as_secs_f64() * 1e3
+    );
+    group.bench_function("two_link_divergent_sooc_warm_shift2", |b| {
+        b.iter(|| black_box(solver.solve(&problem, &warm)))
+    });
 }
 
 criterion_group!(benches, solvers);

@@ -542,25 +542,6 @@ fn sooc_predicted_cost_matches_monte_carlo() {
     );
 }
 
-/// `setup` moved `shift` knots along: reference shifted (last knot repeated), a new start.
-fn shifted(setup: &Setup, shift: usize, x0: &[f64]) -> Setup {
-    let mut s = setup.clone();
-    let shift_ref = |r: &mut Vec<Exogenous>| {
-        let last = *r.last().expect("reference");
-        r.drain(..shift);
-        r.extend(std::iter::repeat_n(last, shift));
-    };
-    shift_ref(&mut s.reference);
-    shift_ref(&mut s.dynamics.exogenous);
-    shift_ref(&mut s.cost.reference);
-    s.x0 = x0.to_vec();
-    let n = s.u_init.len();
-    let last = s.u_init[n - 1].clone();
-    s.u_init.drain(..shift);
-    s.u_init.extend(std::iter::repeat_n(last, shift));
-    s
-}
-
 /// The receding-horizon warm start: the converged plan shifted by 2 knots, from the mean state at
 /// knot 2, re-converges through [`SoocSolver::resolve_shifted`] to the cost a cold start from the
 /// same state reaches.
@@ -584,7 +565,7 @@ fn warm_start_from_a_shifted_plan_reaches_the_cold_start_cost() {
     assert_eq!(first.stop, SoocStop::Converged);
 
     let x2: Vec<f64> = first.z[2].rows(0, n).iter().copied().collect();
-    let next = shifted(setup, 2, &x2);
+    let next = setup.shifted(2, &x2);
     let moments2 = MomentDynamics::new(&next.dynamics);
     let cost2 = MomentCost::new(&next.cost, horizon);
     let problem2 = SoocProblem {
@@ -636,7 +617,7 @@ fn a_few_steps_without_the_flows_third_derivatives_decrease_the_cost_as_exact_on
     let mut x: Vec<f64> = plan.z[shift].rows(0, n).iter().copied().collect();
     x[0] += 0.03;
     x[1] -= 0.03;
-    let next = shifted(setup, shift, &x);
+    let next = setup.shifted(shift, &x);
     let horizon = plan.u.len();
     let mut warm = plan.u[shift..].to_vec();
     warm.extend(std::iter::repeat_n(plan.u[horizon - 1].clone(), shift));

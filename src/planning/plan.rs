@@ -6,9 +6,7 @@ use crate::core::dynamics::Dynamics;
 use crate::core::model::Noise;
 use crate::core::solver::ilqg::{OnIteration, Progress};
 use crate::core::solver::sooc::{MomentCost, MomentDynamics, unpack};
-use crate::core::solver::sooc_newton::{
-    Optimality, SoocOptions, SoocProblem, SoocSolver, SoocStop,
-};
+use crate::core::solver::sooc_newton::{Optimality, SoocProblem, SoocSolver, SoocStop};
 use crate::core::solver::{Ilqg, IlqgOptions, Problem, Solution, StopReason};
 pub use crate::planning::method::Method;
 use crate::planning::plan_file::plan_file;
@@ -72,14 +70,7 @@ pub fn solve_sooc(
     let mut iterations = 0;
     let mut history = Vec::new();
     let horizon = u.len();
-    let options = SoocOptions {
-        max_iterations: solver.options.max_iterations,
-        indefinite: solver.indefinite,
-        third_derivatives_below: solver
-            .third_derivatives_below
-            .unwrap_or(SoocOptions::default().third_derivatives_below),
-        ..SoocOptions::default()
-    };
+    let options = solver.sooc_options();
     let sizing = MomentDynamics::new(&setup.dynamics);
     let mut workspace = SoocSolver::new(&sizing, horizon, options);
     let stage = Arc::new(std::sync::atomic::AtomicU64::new(0));
@@ -219,7 +210,10 @@ pub fn plan(
 /// SOOC (Method::Sooc): the open-loop moments optimised from the deterministic optimum with the
 /// configured initial stiffness. Returns the solution (its `cost` the noise-free cost of the
 /// plan, `expected_cost` the moment problem's) and the solver's verdict.
-fn plan_sooc(
+/// The scenario's SOOC plan as `vic plan --method sooc` makes it: the deterministic ILQG
+/// optimum as the first guess (stiffness reset to the configured start when there is noise),
+/// then [`solve_sooc`]. Iterations and time count both.
+pub fn plan_sooc(
     s: &Scenario,
     setup: &Setup,
     plain: &Problem,

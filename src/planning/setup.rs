@@ -68,6 +68,27 @@ impl Setup {
         }
     }
 
+    /// The same movement `shift` knots later, for a receding horizon of the same length: from
+    /// `x0` (the state reached at knot `shift`), the reference, the exogenous inputs and the warm
+    /// start advanced by `shift` knots and held at their last value past the end.
+    pub fn shifted(&self, shift: usize, x0: &[f64]) -> Setup {
+        fn advance<T: Clone>(v: &mut Vec<T>, shift: usize) {
+            let Some(last) = v.last().cloned() else {
+                return;
+            };
+            let s = shift.min(v.len());
+            v.drain(..s);
+            v.extend(std::iter::repeat_n(last, s));
+        }
+        let mut next = self.clone();
+        advance(&mut next.reference, shift);
+        advance(&mut next.dynamics.exogenous, shift);
+        advance(&mut next.cost.reference, shift);
+        advance(&mut next.u_init, shift);
+        next.x0 = x0.to_vec();
+        next
+    }
+
     /// The plant augmented with `d` steps of commands in flight (Eq. 11–13) and its cost, the
     /// commands in flight at the start all equal to the warm start's first.
     pub fn delayed(&self, d: usize) -> DelayedPlant<'_> {
@@ -274,4 +295,56 @@ fn warm_start(
                 .collect()
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::setup;
+    use crate::planning::scenario::Scenario;
+    use std::path::Path;
+
+    /// Every knot-indexed input of the shifted setup is the original's `shift` knots later, the
+    /// last one held past the end, and the start is the given state.
+    #[test]
+    fn a_shifted_setup_reads_the_original_later() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/two_link_divergent.toml");
+        let s = Scenario::load(&path, &[]).expect("scenario loads");
+        let original = setup(&s).expect("scenario sets up");
+        let x0 = [0.1, 0.2, 0.3, 0.4];
+        for shift in [0, 2, 7] {
+            let next = original.shifted(shift, &x0);
+            assert_eq!(next.x0, x0);
+            let at = |k: usize, len: usize| (k + shift).min(len - 1);
+            for k in 0..original.u_init.len() {
+                let n = original.u_init.len();
+                assert_eq!(next.u_init[k], original.u_init[at(k, n)], "u_init[{k}]");
+            }
+            for (name, got, want) in [
+                ("reference", &next.reference, &original.reference),
+                (
+                    "exogenous",
+                    &next.dynamics.exogenous,
+                    &original.dynamics.exogenous,
+                ),
+                (
+                    "cost reference",
+                    &next.cost.reference,
+                    &original.cost.reference,
+                ),
+            ] {
+                assert_eq!(got.len(), want.len(), "{name}");
+                for k in 0..got.len() {
+                    assert_eq!(
+                        got[k],
+                        want[at(k, want.len())],
+                        "{name}[{k}], shift {shift}"
+                    );
+                }
+            }
+        }
+        assert_ne!(
+            original.reference[0], original.reference[7],
+            "a reference that moves"
+        );
+    }
 }

@@ -3,7 +3,7 @@
 use super::error::{ConfigError, FileCheck};
 use super::raw::RawSolver;
 use crate::core::solver::IlqgOptions;
-use crate::core::solver::sooc_newton::Indefinite;
+use crate::core::solver::sooc_newton::{Indefinite, SoocOptions};
 use crate::planning::method::Method;
 
 /// The `[solver]` section: the method and the solver's options (every key optional).
@@ -35,6 +35,22 @@ impl Default for SolverSection {
             noise_continuation: raw.noise_continuation,
             indefinite: raw.indefinite,
             third_derivatives_below: raw.third_derivatives_below,
+        }
+    }
+}
+
+impl SolverSection {
+    /// SOOC's options from this section: the iteration limit (per noise stage), the treatment of
+    /// indefinite stages and when the flow's third derivatives join the Newton model; the rest
+    /// SOOC's defaults.
+    pub fn sooc_options(&self) -> SoocOptions {
+        SoocOptions {
+            max_iterations: self.options.max_iterations,
+            indefinite: self.indefinite,
+            third_derivatives_below: self
+                .third_derivatives_below
+                .unwrap_or(SoocOptions::default().third_derivatives_below),
+            ..SoocOptions::default()
         }
     }
 }

@@ -1,0 +1,74 @@
+//! Prints SOOC's progress on the receding-horizon re-solve of a scenario, step by step (`J`,
+//! relative μ, step length): the cold plan as `vic plan --method sooc` makes it, then the plan
+//! shifted by SHIFT knots (default 2, one 50 Hz period) re-solved from its mean at that knot.
+//! `cargo run --release --example sooc_trace -- config/two_link_divergent.toml [SHIFT] [KEY=VALUE ...]`.
+
+use std::path::Path;
+use std::sync::Arc;
+use vic::core::solver::sooc::{MomentCost, MomentDynamics};
+use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
+use vic::planning::plan;
+use vic::planning::scenario::Scenario;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some(file) = args.first() else {
+        eprintln!("usage: sooc_trace CONFIG.toml [SHIFT] [KEY=VALUE ...]");
+        std::process::exit(2);
+    };
+    let shift: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(2);
+    let overrides: Vec<String> = args
+        .iter()
+        .skip(1)
+        .filter(|a| a.contains('='))
+        .cloned()
+        .collect();
+    let s = Scenario::load(Path::new(file), &overrides).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
+    let setup = plan::setup(&s).expect("scenario sets up");
+    let plain = setup.problem(s.task.steps);
+    let (cold, (stop, optimality)) =
+        plan::plan_sooc(&s, &setup, &plain, &None).expect("SOOC solves");
+    println!(
+        "cold: {stop:?}, {} iterations, {:.1} ms, J = {:.9e}, {optimality:?}",
+        cold.iterations,
+        cold.solve_time.as_secs_f64() * 1e3,
+        cold.expected_cost
+    );
+
+    let next = setup.shifted(shift, cold.x[shift].as_slice());
+    let mut warm = cold.u.clone();
+    let last = warm[warm.len() - 1].clone();
+    warm.drain(..shift);
+    warm.extend(std::iter::repeat_n(last, shift));
+    let horizon = warm.len();
+    let moments = MomentDynamics::new(&next.dynamics);
+    let cost = MomentCost::new(&next.cost, horizon);
+    let problem = SoocProblem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: &next.x0,
+        bounds: &next.bounds,
+        horizon,
+    };
+    let mut solver = SoocSolver::new(&moments, horizon, s.solver.sooc_options());
+    solver.observer = Some(Arc::new(|p| {
+        println!(
+            "  step {:3}  J = {:.12e}  mu = {:.3e}  alpha = {:.4}",
+            p.iteration, p.merit, p.mu, p.alpha
+        )
+    }));
+    let sol = solver.solve(&problem, &warm).expect("re-solves");
+    println!(
+        "warm after {shift} knots: {:?}, {} iterations ({} without third derivatives), {:.1} ms, \
+         J = {:.12e}, {:?}",
+        sol.stop,
+        sol.iterations,
+        sol.without_third,
+        sol.solve_time.as_secs_f64() * 1e3,
+        sol.expected_cost,
+        sol.optimality
+    );
+}
