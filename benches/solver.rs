@@ -196,7 +196,8 @@ fn solvers(c: &mut Criterion) {
 /// the cold plan as `vic plan --method sooc` makes it ([`plan::plan_sooc`]: the deterministic
 /// optimum as first guess, then the scenario's options and continuation), and the receding-horizon re-solve one 50 Hz period later,
 /// from the plan's mean at knot 2 with the plan shifted by 2 knots as its warm start, run to
-/// the same convergence test.
+/// the same convergence test: over a horizon of the same length (the last control held), and
+/// over the remaining movement as the central controller's replanner solves it.
 fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>) {
     let (s, setup) = load("two_link_divergent.toml", &[]);
     let plain = setup.problem(s.task.steps);
@@ -238,6 +239,31 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
     );
     group.bench_function("two_link_divergent_sooc_warm_shift2", |b| {
         b.iter(|| black_box(solver.solve(&problem, &warm)))
+    });
+
+    // What the central controller's replanner solves at that moment: the remaining 98 knots from
+    // the mean at knot 2 (believed exact), warm-started with the plan's tail.
+    let rest = setup.remaining(shift, cold.x[shift].as_slice());
+    let tail = &cold.u[shift..];
+    let moments = MomentDynamics::new(&rest.dynamics);
+    let cost = MomentCost::new(&rest.cost, tail.len());
+    let problem = SoocProblem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: &rest.x0,
+        bounds: &rest.bounds,
+        horizon: tail.len(),
+    };
+    let mut solver = SoocSolver::new(&moments, tail.len(), s.solver.sooc_options());
+    let sol = solver.solve(&problem, tail).expect("re-solves");
+    eprintln!(
+        "two_link_divergent_sooc_remaining: {:?}, {} iterations, {:.1} ms (single run)",
+        sol.stop,
+        sol.iterations,
+        sol.solve_time.as_secs_f64() * 1e3
+    );
+    group.bench_function("two_link_divergent_sooc_remaining", |b| {
+        b.iter(|| black_box(solver.solve(&problem, tail)))
     });
 }
 

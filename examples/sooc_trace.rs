@@ -38,18 +38,40 @@ fn main() {
         cold.expected_cost
     );
 
-    let next = setup.shifted(shift, cold.x[shift].as_slice());
+    // SHRINK=1: the remaining movement (horizon N - SHIFT), as the central controller's
+    // replanner re-solves; SHRINK=moments: the same from the plan's whole moment state at that
+    // knot (mean and covariance), where the plan's tail is already optimal.
+    let shrink = std::env::var("SHRINK").ok();
+    let mut next = setup.shifted(shift, cold.x[shift].as_slice());
     let mut warm = cold.u.clone();
-    let last = warm[warm.len() - 1].clone();
-    warm.drain(..shift);
-    warm.extend(std::iter::repeat_n(last, shift));
+    if shrink.is_some() {
+        next = setup.remaining(shift, cold.x[shift].as_slice());
+        warm.drain(..shift);
+    } else {
+        let last = warm[warm.len() - 1].clone();
+        warm.drain(..shift);
+        warm.extend(std::iter::repeat_n(last, shift));
+    }
     let horizon = warm.len();
     let moments = MomentDynamics::new(&next.dynamics);
     let cost = MomentCost::new(&next.cost, horizon);
+    let z0: Vec<f64> = if shrink.as_deref() == Some("moments") {
+        let sizing = MomentDynamics::new(&setup.dynamics);
+        let mut z = sizing.initial_state(&setup.x0);
+        let mut after = z.clone();
+        for (k, u) in cold.u.iter().take(shift).enumerate() {
+            use vic::core::dynamics::Dynamics;
+            sizing.step(k, &z, u.as_slice(), &mut after);
+            std::mem::swap(&mut z, &mut after);
+        }
+        z
+    } else {
+        next.x0.clone()
+    };
     let problem = SoocProblem {
         dynamics: &moments,
         cost: &cost,
-        x0: &next.x0,
+        x0: &z0,
         bounds: &next.bounds,
         horizon,
     };

@@ -89,6 +89,23 @@ impl Setup {
         next
     }
 
+    /// The rest of the movement from knot `k0` on (`k0` knots fewer), from `x0`: what the
+    /// central controller's replanner re-solves (`core::replan`), with the warm start's tail.
+    pub fn remaining(&self, k0: usize, x0: &[f64]) -> Setup {
+        let mut rest = self.clone();
+        let keep_last = |len: usize| k0.min(len.saturating_sub(1));
+        rest.reference.drain(..keep_last(rest.reference.len()));
+        rest.dynamics
+            .exogenous
+            .drain(..keep_last(rest.dynamics.exogenous.len()));
+        rest.cost
+            .reference
+            .drain(..keep_last(rest.cost.reference.len()));
+        rest.u_init.drain(..k0.min(rest.u_init.len()));
+        rest.x0 = x0.to_vec();
+        rest
+    }
+
     /// The plant augmented with `d` steps of commands in flight (Eq. 11–13) and its cost, the
     /// commands in flight at the start all equal to the warm start's first.
     pub fn delayed(&self, d: usize) -> DelayedPlant<'_> {
@@ -304,9 +321,10 @@ mod tests {
     use std::path::Path;
 
     /// Every knot-indexed input of the shifted setup is the original's `shift` knots later, the
-    /// last one held past the end, and the start is the given state.
+    /// last one held past the end, and the start is the given state; the remaining movement is
+    /// the original's tail.
     #[test]
-    fn a_shifted_setup_reads_the_original_later() {
+    fn shifted_and_remaining_setups_read_the_original_later() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/two_link_divergent.toml");
         let s = Scenario::load(&path, &[]).expect("scenario loads");
         let original = setup(&s).expect("scenario sets up");
