@@ -211,12 +211,14 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
         b.iter(|| black_box(plan::plan_sooc(&s, &setup, &plain, &None)))
     });
 
+    // The plan as the warm start, moved along with everything else.
     let shift = 2;
-    let next = setup.shifted(shift, cold.x[shift].as_slice());
-    let mut warm = cold.u.clone();
-    let last = warm[warm.len() - 1].clone();
-    warm.drain(..shift);
-    warm.extend(std::iter::repeat_n(last, shift));
+    let planned = Setup {
+        u_init: cold.u.clone(),
+        ..setup.clone()
+    };
+    let next = planned.shifted(shift, cold.x[shift].as_slice());
+    let warm = &next.u_init;
     let horizon = warm.len();
     let moments = MomentDynamics::new(&next.dynamics);
     let cost = MomentCost::new(&next.cost, horizon);
@@ -230,7 +232,7 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
     // `solve` from the shifted controls is `resolve_shifted` without the state it keeps between
     // calls, so every sample starts from the same point.
     let mut solver = SoocSolver::new(&moments, horizon, s.solver.sooc_options());
-    let sol = solver.solve(&problem, &warm).expect("re-solves");
+    let sol = solver.solve(&problem, warm).expect("re-solves");
     eprintln!(
         "two_link_divergent_sooc_warm_shift2: {:?}, {} iterations, {:.1} ms (single run)",
         sol.stop,
@@ -238,13 +240,13 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
         sol.solve_time.as_secs_f64() * 1e3
     );
     group.bench_function("two_link_divergent_sooc_warm_shift2", |b| {
-        b.iter(|| black_box(solver.solve(&problem, &warm)))
+        b.iter(|| black_box(solver.solve(&problem, warm)))
     });
 
     // What the central controller's replanner solves at that moment: the remaining 98 knots from
     // the mean at knot 2 (believed exact), warm-started with the plan's tail.
-    let rest = setup.remaining(shift, cold.x[shift].as_slice());
-    let tail = &cold.u[shift..];
+    let rest = planned.remaining(shift, cold.x[shift].as_slice());
+    let tail = &rest.u_init;
     let moments = MomentDynamics::new(&rest.dynamics);
     let cost = MomentCost::new(&rest.cost, tail.len());
     let problem = SoocProblem {

@@ -42,16 +42,16 @@ fn main() {
     // replanner re-solves; SHRINK=moments: the same from the plan's whole moment state at that
     // knot (mean and covariance), where the plan's tail is already optimal.
     let shrink = std::env::var("SHRINK").ok();
-    let mut next = setup.shifted(shift, cold.x[shift].as_slice());
-    let mut warm = cold.u.clone();
-    if shrink.is_some() {
-        next = setup.remaining(shift, cold.x[shift].as_slice());
-        warm.drain(..shift);
-    } else {
-        let last = warm[warm.len() - 1].clone();
-        warm.drain(..shift);
-        warm.extend(std::iter::repeat_n(last, shift));
-    }
+    // The plan as the warm start, moved along with everything else.
+    let planned = plan::Setup {
+        u_init: cold.u.clone(),
+        ..setup.clone()
+    };
+    let next = match shrink {
+        Some(_) => planned.remaining(shift, cold.x[shift].as_slice()),
+        None => planned.shifted(shift, cold.x[shift].as_slice()),
+    };
+    let warm = &next.u_init;
     let horizon = warm.len();
     let moments = MomentDynamics::new(&next.dynamics);
     let cost = MomentCost::new(&next.cost, horizon);
@@ -82,7 +82,7 @@ fn main() {
             p.iteration, p.merit, p.mu, p.alpha
         )
     }));
-    let sol = solver.solve(&problem, &warm).expect("re-solves");
+    let sol = solver.solve(&problem, warm).expect("re-solves");
     println!(
         "warm after {shift} knots: {:?}, {} iterations ({} without third derivatives), {:.1} ms, \
          J = {:.12e}, {:?}",
