@@ -9,9 +9,11 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
 use vic::core::delay::{Delayed, DelayedPlanner, Offset};
+use vic::core::replan::{ReplanOptions, Replanner};
 use vic::core::solver::sooc::{MomentCost, MomentDynamics};
 use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
 use vic::core::solver::{Ilqg, Problem};
+use vic::planning::method::Method;
 use vic::planning::plan::{self, Setup};
 use vic::planning::scenario::Scenario;
 
@@ -266,6 +268,27 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
     );
     group.bench_function("two_link_divergent_sooc_remaining", |b| {
         b.iter(|| black_box(solver.solve(&problem, tail)))
+    });
+
+    // The live replanner's own re-solve at that knot (`Replanner::replan_from` with its 50 Hz
+    // defaults: at most 3 Newton steps, no third derivatives): what a central period must fit.
+    let file = plan::plan(&s, Method::Sooc, None).expect("plans");
+    let policy = file.policy(&setup).expect("policy");
+    let options = ReplanOptions::at_50_hz(setup.dynamics.dt);
+    let mut replanner = Replanner::new(&policy, &setup.dynamics, &setup.cost, options);
+    let x2: Vec<f64> = policy.nominal[shift].iter().copied().collect();
+    let t = std::time::Instant::now();
+    let outcome = replanner.replan_from(shift, &x2);
+    eprintln!(
+        "two_link_divergent_replan_knot2: {outcome:?}, {} iterations, {:.1} ms (single run)",
+        replanner.stats.iterations,
+        t.elapsed().as_secs_f64() * 1e3
+    );
+    group.bench_function("two_link_divergent_replan_knot2", |b| {
+        b.iter(|| {
+            replanner.reset();
+            black_box(replanner.replan_from(shift, &x2))
+        })
     });
 }
 

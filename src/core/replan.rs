@@ -42,9 +42,12 @@ use crate::core::solver::sooc_newton::{SoocOptions, SoocProblem, SoocSolver, Soo
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
-/// Newton iterations per re-solve. One stagewise Newton step on the arm costs about 7 ms over the
-/// whole movement (less as the horizon shrinks); from a warm start the first steps take most of
-/// the decrease, and three keep a Monte Carlo of the arm to seconds per point.
+/// Newton iterations per re-solve. One stagewise Newton step without the third derivatives costs
+/// about 9.5 ms on the arm over the whole movement (less as the horizon shrinks; the solver bench's
+/// `two_link_divergent_replan_knot2`: 28.5 ms for three, more than the 20 ms central period, which
+/// is why the live controller re-solves in the background with a lead); from a warm start the
+/// first steps take most of the decrease, and three keep a Monte Carlo of the arm to seconds per
+/// point.
 pub const REPLAN_MAX_ITERATIONS: usize = 3;
 
 /// The central period of the paper's iCub layer [s] (50 Hz).
