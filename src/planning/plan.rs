@@ -207,12 +207,11 @@ pub fn plan(
     Ok(file)
 }
 
-/// SOOC (Method::Sooc): the open-loop moments optimised from the deterministic optimum with the
-/// configured initial stiffness. Returns the solution (its `cost` the noise-free cost of the
-/// plan, `expected_cost` the moment problem's) and the solver's verdict.
-/// The scenario's SOOC plan as `vic plan --method sooc` makes it: the deterministic ILQG
-/// optimum as the first guess (stiffness reset to the configured start when there is noise),
-/// then [`solve_sooc`]. Iterations and time count both.
+/// The scenario's SOOC plan (`Method::Sooc`) as `vic plan --method sooc` makes it: the open-loop
+/// moments optimised by [`solve_sooc`] from the deterministic ILQG optimum (stiffness reset to
+/// the configured start when there is noise). Returns the solution (its `cost` the noise-free
+/// cost of the plan, `expected_cost` the moment problem's) and the solver's verdict; iterations
+/// and time count both solves.
 pub fn plan_sooc(
     s: &Scenario,
     setup: &Setup,
