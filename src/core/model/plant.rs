@@ -208,7 +208,8 @@ impl Plant {
 pub(crate) mod tests {
     use super::*;
 
-    fn arm() -> Plant {
+    /// A two-link arm for the tests of this module and of the solvers'.
+    pub(crate) fn arm() -> Plant {
         Plant::TwoLink(TwoLink {
             l1: 0.30,
             l2: 0.33,
