@@ -5,7 +5,7 @@
 use crate::core::model::{ArmModel, Exogenous};
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX, Scalar};
 use nalgebra::DMatrix;
-use num_dual::Dual;
+use num_dual::{Dual, DualNum};
 
 /// What kind of noise a linearisation carries; the backward pass skips what is absent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -149,9 +149,9 @@ pub fn flow<S: Scalar>(
 ) {
     let nx = model.nx();
     let h = dt / substeps as f64;
-    let mut cur = [S::zero(); MAX_NX];
+    let mut cur = [<S as Scalar>::zero(); MAX_NX];
     cur[..nx].copy_from_slice(&x[..nx]);
-    let mut xdot = [S::zero(); MAX_NX];
+    let mut xdot = [<S as Scalar>::zero(); MAX_NX];
     for _ in 0..substeps {
         model.f(&cur[..nx], u, ex, &mut xdot[..nx]);
         match integrator {
@@ -281,21 +281,28 @@ impl DiscreteDynamics {
     /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` of the step (column-major n×n and n×m) by forward-mode AD
     /// through every sub-step, in any scalar type: with dual numbers in, the result carries the
     /// second derivatives of the flow (what the moment dynamics of SOOC need).
-    pub fn flow_jacobian<S: Scalar>(&self, k: usize, x: &[S], u: &[S], a: &mut [S], b: &mut [S]) {
+    pub fn flow_jacobian<S: Scalar + DualNum<Primitive = f64>>(
+        &self,
+        k: usize,
+        x: &[S],
+        u: &[S],
+        a: &mut [S],
+        b: &mut [S],
+    ) {
         let (nx, nu) = (self.nx(), self.nu());
-        let mut xd = [Dual::from_re(S::zero()); MAX_NX];
-        let mut ud = [Dual::from_re(S::zero()); MAX_NU];
+        let mut xd = [Dual::from_re(<S as Scalar>::zero()); MAX_NX];
+        let mut ud = [Dual::from_re(<S as Scalar>::zero()); MAX_NU];
         for (d, v) in xd.iter_mut().zip(x) {
             *d = Dual::from_re(*v);
         }
         for (d, v) in ud.iter_mut().zip(u) {
             *d = Dual::from_re(*v);
         }
-        let mut out = [Dual::from_re(S::zero()); MAX_NX];
+        let mut out = [Dual::from_re(<S as Scalar>::zero()); MAX_NX];
         for j in 0..nx + nu {
-            seed(&mut xd, &mut ud, nx, j, S::one());
+            seed(&mut xd, &mut ud, nx, j, <S as Scalar>::one());
             self.flow(k, &xd[..nx], &ud[..nu], &mut out[..nx]);
-            seed(&mut xd, &mut ud, nx, j, S::zero());
+            seed(&mut xd, &mut ud, nx, j, <S as Scalar>::zero());
             let col = if j < nx {
                 &mut a[j * nx..(j + 1) * nx]
             } else {
@@ -359,7 +366,7 @@ impl DiscreteDynamics {
 
     /// The noise gain `G = √Δ F` (layout of [`ArmModel::diffusion`]) and its derivatives
     /// `dgx[j]`, `dgu[j]` with respect to `x_j` and `u_j`, in any scalar type.
-    pub fn noise_jacobian<S: Scalar>(
+    pub fn noise_jacobian<S: Scalar + DualNum<Primitive = f64>>(
         &self,
         x: &[S],
         u: &[S],
@@ -370,19 +377,19 @@ impl DiscreteDynamics {
         let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
         let block = nx * nw;
         let s = self.dt.sqrt();
-        let mut xd = [Dual::from_re(S::zero()); MAX_NX];
-        let mut ud = [Dual::from_re(S::zero()); MAX_NU];
+        let mut xd = [Dual::from_re(<S as Scalar>::zero()); MAX_NX];
+        let mut ud = [Dual::from_re(<S as Scalar>::zero()); MAX_NU];
         for (d, v) in xd.iter_mut().zip(x) {
             *d = Dual::from_re(*v);
         }
         for (d, v) in ud.iter_mut().zip(u) {
             *d = Dual::from_re(*v);
         }
-        let mut big_f = [Dual::from_re(S::zero()); MAX_NX * MAX_NW];
+        let mut big_f = [Dual::from_re(<S as Scalar>::zero()); MAX_NX * MAX_NW];
         for j in 0..nx + nu {
-            seed(&mut xd, &mut ud, nx, j, S::one());
+            seed(&mut xd, &mut ud, nx, j, <S as Scalar>::one());
             self.model.diffusion(&xd[..nx], &ud[..nu], &mut big_f);
-            seed(&mut xd, &mut ud, nx, j, S::zero());
+            seed(&mut xd, &mut ud, nx, j, <S as Scalar>::zero());
             if j == 0 {
                 for (dst, v) in g.iter_mut().zip(&big_f[..block]) {
                     *dst = v.re * s;
@@ -401,7 +408,13 @@ impl DiscreteDynamics {
 }
 
 /// Sets the derivative seed of variable `j` of the stacked vector `(x, u)`.
-fn seed<S: Scalar>(x: &mut [Dual<S>], u: &mut [Dual<S>], nx: usize, j: usize, value: S) {
+fn seed<S: Scalar + DualNum<Primitive = f64>>(
+    x: &mut [Dual<S>],
+    u: &mut [Dual<S>],
+    nx: usize,
+    j: usize,
+    value: S,
+) {
     if j < nx {
         x[j].eps = value;
     } else {

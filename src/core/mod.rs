@@ -15,3 +15,4 @@ pub mod replan;
 pub mod rng;
 pub mod scalar;
 pub mod solver;
+pub mod taylor;

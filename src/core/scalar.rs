@@ -1,16 +1,57 @@
 //! The scalar type the models are written in.
 //!
 //! Every model equation is written once, generic over [`Scalar`], and evaluated with `f64` for
-//! simulation, with [`num_dual::Dual64`] for exact first derivatives and with
-//! [`num_dual::HyperDual64`] for exact second derivatives (forward-mode automatic differentiation).
-//! No derivative is ever written by hand, so none can drift from the equation it differentiates.
+//! simulation, with [`num_dual::Dual64`] for exact first derivatives, with nested dual numbers
+//! for exact second derivatives, and with [`crate::core::taylor::Taylor3`] for third
+//! derivatives along many directions at once (forward-mode automatic differentiation). No
+//! derivative is ever written by hand, so none can drift from the equation it differentiates.
+//!
+//! The trait asks only for what the models use: field arithmetic, arithmetic with `f64`
+//! constants, and the sine and cosine of an angle. Every `num-dual` number is a `Scalar`; a
+//! type of this crate can be one without implementing `num-dual`'s much wider interface.
 
 use num_dual::DualNum;
+use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
-/// A real number or a dual number over `f64`.
-pub trait Scalar: DualNum<Primitive = f64> + Copy {}
+/// A real number, or a number carrying derivatives along with its real part.
+pub trait Scalar:
+    Copy
+    + From<f64>
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + Add<f64, Output = Self>
+    + Sub<f64, Output = Self>
+    + Mul<f64, Output = Self>
+    + Div<f64, Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+{
+    /// `0` (every derivative 0).
+    fn zero() -> Self;
+    /// `1` (every derivative 0).
+    fn one() -> Self;
+    /// `(sin x, cos x)`, the trigonometry computed once for both.
+    fn sin_cos(self) -> (Self, Self);
+}
 
-impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
+impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {
+    #[inline(always)]
+    fn zero() -> Self {
+        T::from(0.0)
+    }
+    #[inline(always)]
+    fn one() -> Self {
+        T::from(1.0)
+    }
+    #[inline(always)]
+    fn sin_cos(self) -> (Self, Self) {
+        DualNum::sin_cos(&self)
+    }
+}
 
 /// A constant lifted into any scalar type.
 #[inline(always)]

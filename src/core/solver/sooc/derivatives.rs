@@ -11,8 +11,9 @@ use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
 
 /// The largest number of variables `v = (x, u)` of one knot.
 const MAX_NV: usize = MAX_NX + MAX_NU;
+use crate::core::taylor::Taylor3;
 use nalgebra::DMatrix;
-use num_dual::{Dual, Dual3_64, Dual64};
+use num_dual::{Dual, Dual64};
 
 impl MomentDynamics<'_> {
     /// The first derivatives of the moment step at knot `k` into `e.a`, `e.b`, and what
@@ -250,53 +251,61 @@ fn noise_sensitivity(s: &mut MomentExpansion, j: usize, i: usize, g: &[Dual64], 
 }
 
 /// `s.h3 = 2 Σ_{r,c} T_{rc} ∂³Φ_r/∂x_c∂v_a∂v_b` with `T = s.t2`, from third derivatives of the
-/// flow along single directions (univariate Taylor polynomials, [`Dual3_64`]; Griewank, Utke &
-/// Walther, Math. Comp. 2000). Along `w` the flow gives `D³Φ[w] = Σ_{ijk} ∂³Φ/∂v_i∂v_j∂v_k w_i
-/// w_j w_k`, so
+/// flow along single directions (univariate Taylor polynomials; Griewank, Utke & Walther, Math.
+/// Comp. 2000). Along `w` the flow gives `D³Φ[w] = Σ_{ijk} ∂³Φ/∂v_i∂v_j∂v_k w_i w_j w_k`, so
 ///
 /// * `w = e_a` gives `∂_aaa`;
 /// * `w = e_a ± e_b` give `∂_aaa ± 3 ∂_aab + 3 ∂_abb ± ∂_bbb`, hence `∂_aab` and `∂_abb`;
 /// * `w = e_a + e_b + e_c` gives `6 ∂_abc` plus entries already known.
 ///
-/// Every distinct entry with a state index costs one flow of four numbers per component, where a
-/// triple-nested dual (`Dual<Dual<Dual64>>`, one flow per entry) carries eight and multiplies
-/// with 27 products instead of 13: about half the work. The entries are combinations of a few
-/// flows, so their rounding is that of the largest term combined (relative 1e-15 of it), not
-/// the nested duals' bits.
+/// The directions go through the flow [`LANES`] at a time on one [`Taylor3`], which computes
+/// the real part (and every sine, cosine and reciprocal of the model) once for all of them:
+/// where a triple-nested dual (`Dual<Dual<Dual64>>`, one flow per entry) carries eight numbers
+/// and multiplies with 27 products, a lane carries three derivatives and 11 products. The
+/// entries are combinations of a few directions, so their rounding is that of the largest
+/// term combined (relative 1e-15 of it), not the nested duals' bits.
 fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
     let At { base, k, x, u } = at;
     let (n, m) = (base.nx(), base.nu());
     let nv = n + m;
-    let (mut x3, mut u3) = lift::<Dual3_64>(x, u);
-    let mut out = [Dual3_64::from_re(0.0); MAX_NX];
+    let mut dirs = [Direction::default(); MAX_DIRECTIONS];
+    let count = directions(n, nv, &mut dirs);
+    let mut d3 = [[0.0; MAX_NX]; MAX_DIRECTIONS];
+    let (mut xt, mut ut) = lift::<Taylor3<LANES>>(x, u);
+    let mut out = [Taylor3::<LANES>::constant(0.0); MAX_NX];
+    for first in (0..count).step_by(LANES) {
+        let chunk = &dirs[first..count.min(first + LANES)];
+        for (l, d) in chunk.iter().enumerate() {
+            for j in 0..d.len {
+                lane(&mut xt, &mut ut, n, d.index[j])[l] = d.weight[j];
+            }
+        }
+        base.flow(k, &xt[..n], &ut[..m], &mut out[..n]);
+        for (l, d) in chunk.iter().enumerate() {
+            for j in 0..d.len {
+                lane(&mut xt, &mut ut, n, d.index[j])[l] = 0.0;
+            }
+            for (r, o) in out[..n].iter().enumerate() {
+                d3[first + l][r] = o.v3[l];
+            }
+        }
+    }
+    // Back from the directions to the entries, in the order `directions` lists them.
     zero(&mut s.h3);
-    // D³Φ along `w`, one row per state: `w` as (index, weight) pairs.
-    let mut along = |w: &[(usize, f64)], d: &mut [f64; MAX_NX]| {
-        for &(i, v) in w {
-            direction(&mut x3, &mut u3, n, i, v);
-        }
-        base.flow(k, &x3[..n], &u3[..m], &mut out[..n]);
-        for &(i, _) in w {
-            direction(&mut x3, &mut u3, n, i, 0.0);
-        }
-        for (dr, o) in d.iter_mut().zip(&out[..n]) {
-            *dr = o.v3;
-        }
-    };
+    let mut next = d3.iter();
     // cube[a] = ∂_aaa; pair[a][b] = ∂_aab (a ≠ b), each a row per state.
     let mut cube = [[0.0; MAX_NX]; MAX_NV];
     let mut pair = [[[0.0; MAX_NX]; MAX_NV]; MAX_NV];
     for a in 0..nv {
-        along(&[(a, 1.0)], &mut cube[a]);
+        cube[a] = *next.next().expect("one direction per cube");
         if a < n {
             contract_triple(s, n, [a, a, a], &cube[a][..n]);
         }
     }
-    let (mut plus, mut minus) = ([0.0; MAX_NX], [0.0; MAX_NX]);
     for a in 0..nv {
         for b in a + 1..nv {
-            along(&[(a, 1.0), (b, 1.0)], &mut plus);
-            along(&[(a, 1.0), (b, -1.0)], &mut minus);
+            let plus = next.next().expect("e_a + e_b");
+            let minus = next.next().expect("e_a - e_b");
             for r in 0..n {
                 pair[a][b][r] = (plus[r] - minus[r] - 2.0 * cube[b][r]) / 6.0;
                 pair[b][a][r] = (plus[r] + minus[r] - 2.0 * cube[a][r]) / 6.0;
@@ -312,7 +321,7 @@ fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
     for a in 0..n.min(nv) {
         for b in a + 1..nv {
             for c in b + 1..nv {
-                along(&[(a, 1.0), (b, 1.0), (c, 1.0)], &mut d);
+                let sum = next.next().expect("e_a + e_b + e_c");
                 for r in 0..n {
                     let known = cube[a][r]
                         + cube[b][r]
@@ -324,7 +333,7 @@ fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
                                 + pair[c][a][r]
                                 + pair[b][c][r]
                                 + pair[c][b][r]);
-                    d[r] = (d[r] - known) / 6.0;
+                    d[r] = (sum[r] - known) / 6.0;
                 }
                 contract_triple(s, n, [a, b, c], &d[..n]);
             }
@@ -332,12 +341,61 @@ fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
     }
 }
 
-/// Sets the direction `v_j` of a univariate Taylor polynomial to `value`.
-fn direction(x: &mut [Dual3_64], u: &mut [Dual3_64], n: usize, j: usize, value: f64) {
+/// Directions a [`Taylor3`] carries through one flow: enough to fill SIMD registers several
+/// times over, few enough that the lanes of a partly filled last flow cost little.
+const LANES: usize = 8;
+
+/// The most directions [`directions`] lists: `nv + nv (nv − 1) + C(nv, 3)` at `nv = 12`.
+const MAX_DIRECTIONS: usize =
+    MAX_NV + MAX_NV * (MAX_NV - 1) + MAX_NV * (MAX_NV - 1) * (MAX_NV - 2) / 6;
+
+/// A direction `w = Σ_j weight_j e_{index_j}` over `v = (x, u)` with at most three terms.
+#[derive(Clone, Copy, Default)]
+struct Direction {
+    index: [usize; 3],
+    weight: [f64; 3],
+    len: usize,
+}
+
+/// Lists into `out` the directions [`flow_third_contracted`] needs, in the order it reads them
+/// back: `e_a` for every `a`; `e_a + e_b`, `e_a − e_b` for every `a < b`; `e_a + e_b + e_c` for
+/// every `a < b < c` with `a` a state. Returns how many.
+fn directions(n: usize, nv: usize, out: &mut [Direction; MAX_DIRECTIONS]) -> usize {
+    let mut count = 0;
+    let mut push = |index: [usize; 3], weight: [f64; 3], len: usize| {
+        out[count] = Direction { index, weight, len };
+        count += 1;
+    };
+    for a in 0..nv {
+        push([a, 0, 0], [1.0, 0.0, 0.0], 1);
+    }
+    for a in 0..nv {
+        for b in a + 1..nv {
+            push([a, b, 0], [1.0, 1.0, 0.0], 2);
+            push([a, b, 0], [1.0, -1.0, 0.0], 2);
+        }
+    }
+    for a in 0..n.min(nv) {
+        for b in a + 1..nv {
+            for c in b + 1..nv {
+                push([a, b, c], [1.0, 1.0, 1.0], 3);
+            }
+        }
+    }
+    count
+}
+
+/// The first-derivative lanes of entry `j` of `v = (x, u)`.
+fn lane<'a>(
+    x: &'a mut [Taylor3<LANES>],
+    u: &'a mut [Taylor3<LANES>],
+    n: usize,
+    j: usize,
+) -> &'a mut [f64; LANES] {
     if j < n {
-        x[j].v1 = value;
+        &mut x[j].v1
     } else {
-        u[j - n].v1 = value;
+        &mut u[j - n].v1
     }
 }
 
@@ -524,18 +582,8 @@ mod tests {
         };
         let divergent = Field::Divergent { beta: 200.0 };
         let cases = [
-            (
-                "two-link torque",
-                arm(),
-                Actuator::Torque,
-                divergent,
-            ),
-            (
-                "two-link impedance",
-                arm(),
-                impedance.clone(),
-                divergent,
-            ),
+            ("two-link torque", arm(), Actuator::Torque, divergent),
+            ("two-link impedance", arm(), impedance.clone(), divergent),
             ("two-link VSA", arm(), vsa, divergent),
             ("single-joint impedance", joint(), impedance, Field::None),
         ];
