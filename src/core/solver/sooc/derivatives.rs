@@ -8,12 +8,12 @@ use crate::core::dynamics::{DiscreteDynamics, Dynamics, NoiseKind};
 #[cfg(test)]
 use crate::core::model::Plant;
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
-
-/// The largest number of variables `v = (x, u)` of one knot.
-const MAX_NV: usize = MAX_NX + MAX_NU;
 use crate::core::taylor::Taylor3;
 use nalgebra::DMatrix;
 use num_dual::{Dual, Dual64};
+
+/// The largest number of variables `v = (x, u)` of one knot.
+const MAX_NV: usize = MAX_NX + MAX_NU;
 
 impl MomentDynamics<'_> {
     /// The first derivatives of the moment step at knot `k` into `e.a`, `e.b`, and what
