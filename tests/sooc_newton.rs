@@ -448,13 +448,43 @@ fn sooc_optimum_does_not_depend_on_the_start() {
     assert!(hi - lo <= 1e-3 * lo, "costs {costs:?}");
 }
 
+/// Where a solve that took another path than the regularised exact one ends must be an optimum
+/// of the problem, not of the path's modified model: the regularised exact solver started there
+/// stops at once, by its own criterion. And no worse than the landscape's spread: within 1e-3
+/// of the regularised optimum's cost, as from three starts in
+/// `sooc_optimum_does_not_depend_on_the_start`. (Not the same optimum to the last digits: this
+/// landscape has several within 1e-4 of each other, and which one a path reaches moves with the
+/// rounding of the derivatives; measured, both alternative paths below have ended on the
+/// regularised path's optimum to 1e-12, and on another 1.4e-4 lower.)
+fn assert_an_optimum_as_good(what: &str, setup: &Setup, alt: &SoocSolution, reg: &SoocSolution) {
+    assert_eq!(
+        alt.stop,
+        SoocStop::Converged,
+        "{what}: {:?}",
+        alt.optimality
+    );
+    assert!(alt.optimality.met());
+    let again = solve_from(setup, &alt.u);
+    assert_eq!(
+        again.stop,
+        SoocStop::Converged,
+        "{what}: {:?}",
+        again.optimality
+    );
+    assert_eq!(
+        again.iterations, 0,
+        "{what}: the exact solver moved on from where this path stopped"
+    );
+    let rel = (alt.expected_cost - reg.expected_cost).abs() / reg.expected_cost;
+    assert!(rel < 1e-3, "{what}: relative difference {rel:e}");
+}
+
 /// The saddle-free treatment of an indefinite Newton model (each indefinite stage's `Q_uu` by its
-/// absolute value, no global μ) changes the path, not the optimum: from the same start it must
-/// convexify some stages (else this test says nothing) and converge to the regularised solve's
-/// cost within 1e-6 (nearly equal optima of this landscape differ by ~1e-4), with its own
-/// criterion met.
+/// absolute value, no global μ) changes the path, not what the solve ends on: from the same
+/// start it must convexify some stages (else this test says nothing) and converge to an optimum
+/// as good as the regularised solve's ([`assert_an_optimum_as_good`]).
 #[test]
-fn saddle_free_steps_reach_the_regularised_optimum() {
+fn saddle_free_steps_reach_an_optimum_as_good_as_the_regularised_one() {
     let (s, setup, reg) = divergent();
     let warm = with_stiffness(s, setup, &setup.u_init, s.initial_stiffness);
     let options = SoocOptions {
@@ -466,22 +496,20 @@ fn saddle_free_steps_reach_the_regularised_optimum() {
         "saddle-free: {:?}, {} Newton steps, {} stages convexified, J = {:.12e} (regularised {} steps, {:.12e})",
         sf.stop, sf.iterations, sf.convexified, sf.expected_cost, reg.iterations, reg.expected_cost
     );
-    assert_eq!(sf.stop, SoocStop::Converged, "{:?}", sf.optimality);
-    assert!(sf.optimality.met());
     assert!(
         sf.convexified > 0,
         "no stage was indefinite: the test is vacuous"
     );
     assert_eq!(reg.convexified, 0);
-    let rel = (sf.expected_cost - reg.expected_cost).abs() / reg.expected_cost;
-    assert!(rel < 1e-6, "relative difference {rel:e}");
+    assert_an_optimum_as_good("saddle-free", setup, &sf, reg);
 }
 
 #[test]
-fn steps_without_the_third_derivatives_far_from_the_optimum_reach_the_same_optimum() {
+fn steps_without_the_third_derivatives_far_from_the_optimum_reach_an_optimum_as_good() {
     // Leaving the flow's third derivatives out of the Newton model while steps still gain more
-    // than 1 % of J (a fifth of an iteration's cost) must not change where the solve ends, nor
-    // what `Converged` means: the exact model's tests at the end.
+    // than 1 % of J (a fifth of an iteration's cost) must not change what the solve ends on (an
+    // optimum as good, `assert_an_optimum_as_good`), nor what `Converged` means: the exact
+    // model's tests at the end.
     let (s, setup, exact) = divergent();
     let warm = with_stiffness(s, setup, &setup.u_init, s.initial_stiffness);
     let options = SoocOptions {
@@ -499,16 +527,13 @@ fn steps_without_the_third_derivatives_far_from_the_optimum_reach_the_same_optim
         exact.iterations,
         exact.expected_cost
     );
-    assert_eq!(mixed.stop, SoocStop::Converged, "{:?}", mixed.optimality);
-    assert!(mixed.optimality.met());
     assert!(
         mixed.without_third > 0,
         "every step had the third derivatives: the test is vacuous"
     );
     assert!(mixed.without_third < mixed.iterations);
     assert_eq!(exact.without_third, 0);
-    let rel = (mixed.expected_cost - exact.expected_cost).abs() / exact.expected_cost;
-    assert!(rel < 1e-6, "relative difference {rel:e}");
+    assert_an_optimum_as_good("third derivatives below 1 %", setup, &mixed, exact);
 }
 
 /// The predicted expected cost of the converged plan against a seeded Monte Carlo of the

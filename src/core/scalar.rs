@@ -2,8 +2,9 @@
 //!
 //! Every model equation is written once, generic over [`Scalar`], and evaluated with `f64` for
 //! simulation, with [`num_dual::Dual64`] for exact first derivatives, with nested dual numbers
-//! for exact second derivatives, and with the Taylor polynomials of `core::taylor` for
-//! third derivatives along many directions at once (forward-mode automatic differentiation). No
+//! for exact second derivatives one pair at a time, and with the Taylor polynomials of
+//! `core::taylor` for second and third derivatives along many directions at once (forward-mode
+//! automatic differentiation). No
 //! derivative is ever written by hand, so none can drift from the equation it differentiates.
 //!
 //! The trait asks only for what the models use: field arithmetic, arithmetic with `f64`

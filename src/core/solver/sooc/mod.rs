@@ -16,6 +16,7 @@
 
 mod cost;
 mod derivatives;
+mod directional;
 mod expansion;
 mod moment_dynamics;
 
