@@ -43,9 +43,10 @@ use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
 /// Newton iterations per re-solve. One stagewise Newton step without the third derivatives costs
-/// about 9.5 ms on the arm over the whole movement (less as the horizon shrinks; the solver bench's
-/// `two_link_divergent_replan_knot2`: 28.5 ms for three, more than the 20 ms central period, which
-/// is why the live controller re-solves in the background with a lead); from a warm start the
+/// about 7 ms on the arm over the whole movement (less as the horizon shrinks; the solver bench's
+/// `two_link_divergent_replan_knot2`: 20–25 ms for three on a shared 2-core host, about the 20 ms
+/// central period, which is why the live controller re-solves in the background with a lead;
+/// `docs/BENCHMARKS.md`); from a warm start the
 /// first steps take most of the decrease, and three keep a Monte Carlo of the arm to seconds per
 /// point.
 pub const REPLAN_MAX_ITERATIONS: usize = 3;
@@ -75,7 +76,8 @@ pub struct ReplanOptions {
     /// Whether each re-solve's Newton model includes the flow's third derivatives (the exact
     /// Hessian; [`SoocOptions::flow_third_derivatives`]). Off by default: with at most
     /// [`REPLAN_MAX_ITERATIONS`] warm-started steps a re-solve never reaches the tolerances that
-    /// need the exact model, and the third derivatives are ~80 % of each step. Measured on the
+    /// need the exact model, and the third derivatives are about two thirds of each step (~80 %
+    /// when this was measured). Measured on the
     /// divergent arm at 200 ms (4 trials, seed 1): 13.8 s of CPU with them, 2.8 s without, final
     /// error 0.99 and 0.88 mm, Monte Carlo cost 1222 and 1211.
     #[serde(default)]

@@ -26,6 +26,26 @@ pub enum Indefinite {
 /// Gauss–Newton curvature (see [`convexify`]).
 const EIGEN_FLOOR: f64 = 0.1;
 
+/// The costate-weighted curvature `H` of the moment step at one knot
+/// ([`crate::core::solver::sooc::MomentExpansion::curvature`]): computed once per Newton model,
+/// for every knot in parallel, and read by every backward pass on that model (each retry at a
+/// higher μ) and by [`SoocSolver::hessian_diagonal_pass`].
+pub(super) struct Curvature {
+    pub(super) hzz: DMatrix<f64>,
+    pub(super) huz: DMatrix<f64>,
+    pub(super) huu: DMatrix<f64>,
+}
+
+impl Curvature {
+    pub(super) fn new(nz: usize, m: usize) -> Self {
+        Curvature {
+            hzz: DMatrix::zeros(nz, nz),
+            huz: DMatrix::zeros(m, nz),
+            huu: DMatrix::zeros(m, m),
+        }
+    }
+}
+
 /// Scratch of the backward pass.
 pub(super) struct Backward {
     v: DMatrix<f64>,
@@ -37,9 +57,6 @@ pub(super) struct Backward {
     quu: DMatrix<f64>,
     qz: DVector<f64>,
     qu: DVector<f64>,
-    hzz: DMatrix<f64>,
-    huz: DMatrix<f64>,
-    huu: DMatrix<f64>,
     kt_quu: DMatrix<f64>,
     t_mz: DMatrix<f64>,
     /// The open-loop second derivative of the cost-to-go in `z` (every later control held):
@@ -62,9 +79,6 @@ impl Backward {
             quu: zm(m, m),
             qz: DVector::zeros(nz),
             qu: DVector::zeros(m),
-            hzz: zm(nz, nz),
-            huz: zm(m, nz),
-            huu: zm(m, m),
             kt_quu: zm(nz, m),
             t_mz: zm(m, nz),
             s: zm(nz, nz),
@@ -126,7 +140,7 @@ impl SoocSolver {
         let mut step = Backstep::default();
         for k in (0..h).rev() {
             self.q_function(k, newton);
-            if self.stage_policy(k, bounds, mu, convexify_stages)? {
+            if self.stage_policy(k, bounds, mu, newton, convexify_stages)? {
                 step.convexified += 1;
             }
             let (d1, d2) = self.bw.value_update(&self.ff[k], &self.gains[k]);
@@ -139,67 +153,56 @@ impl SoocSolver {
     /// The diagonal of the exact `∇²J` into `hess_diag`: per knot from the last,
     /// `∂²J/∂u_{k,j}²` with every other control held, `ℓ_uu + H_uu + Bᵀ S_{k+1} B`, and
     /// `S_k = ℓ_zz + H_zz + Aᵀ S_{k+1} A` (`H` the costate-weighted curvature of the moment step;
-    /// needs the Newton model's second-order expansion at the current controls). A pass of its
-    /// own, run only when the convergence test needs it.
+    /// needs the Newton model at the current controls: its curvature `H` in `curvatures`). A
+    /// pass of its own, run only when the convergence test needs it.
     pub(super) fn hessian_diagonal_pass(&mut self) {
         let h = self.horizon;
         self.bw.s.copy_from(&self.derivs[h].lxx);
         for k in (0..h).rev() {
-            let bw = &mut self.bw;
-            self.expansions[k].curvature(
-                self.lam[k + 1].as_slice(),
-                &mut bw.hzz,
-                &mut bw.huz,
-                &mut bw.huu,
-            );
             self.open_loop_diagonal(k);
         }
     }
 
-    /// One knot of [`Self::hessian_diagonal_pass`], with `H` in the scratch.
+    /// One knot of [`Self::hessian_diagonal_pass`].
     fn open_loop_diagonal(&mut self, k: usize) {
         let bw = &mut self.bw;
         let e = &self.expansions[k];
+        let c = &self.curvatures[k];
         let d = &self.derivs[k];
         bw.sb.gemm(1.0, &bw.s, &e.b, 0.0);
         let diag = &mut self.hess_diag[k];
         for j in 0..diag.len() {
-            diag[j] = d.luu[(j, j)] + bw.huu[(j, j)] + e.b.column(j).dot(&bw.sb.column(j));
+            diag[j] = d.luu[(j, j)] + c.huu[(j, j)] + e.b.column(j).dot(&bw.sb.column(j));
         }
         bw.sa.gemm(1.0, &bw.s, &e.a, 0.0);
         bw.s.copy_from(&d.lxx);
-        bw.s += &bw.hzz;
+        bw.s += &c.hzz;
         bw.s.gemm_tr(1.0, &e.a, &bw.sa, 1.0);
     }
 
     /// `Q` at knot `k` from the value `(V, v)` of knot `k + 1`: the Gauss–Newton terms plus, for
-    /// Newton, the costate-weighted curvature of the moment step.
+    /// Newton, the costate-weighted curvature of the moment step (`curvatures[k]`).
     fn q_function(&mut self, k: usize, newton: bool) {
         let bw = &mut self.bw;
-        let e = &mut self.expansions[k];
+        let e = &self.expansions[k];
+        let c = &self.curvatures[k];
         let d = &self.derivs[k];
-        if newton {
-            e.curvature(
-                self.lam[k + 1].as_slice(),
-                &mut bw.hzz,
-                &mut bw.huz,
-                &mut bw.huu,
-            );
-        } else {
-            zero(&mut bw.hzz);
-            zero(&mut bw.huz);
-            zero(&mut bw.huu);
-        }
         bw.va.gemm(1.0, &bw.v, &e.a, 0.0);
         bw.vb.gemm(1.0, &bw.v, &e.b, 0.0);
         bw.qzz.copy_from(&d.lxx);
-        bw.qzz += &bw.hzz;
+        if newton {
+            bw.qzz += &c.hzz;
+        }
         bw.qzz.gemm_tr(1.0, &e.a, &bw.va, 1.0);
         bw.quz.copy_from(&d.lux);
-        bw.quz += &bw.huz;
+        if newton {
+            bw.quz += &c.huz;
+        }
         bw.quz.gemm_tr(1.0, &e.b, &bw.va, 1.0);
         bw.quu.copy_from(&d.luu);
-        bw.quu += &bw.huu;
+        if newton {
+            bw.quu += &c.huu;
+        }
         bw.quu.gemm_tr(1.0, &e.b, &bw.vb, 1.0);
         bw.qz.copy_from(&d.lx);
         bw.qz.gemv_tr(1.0, &e.a, &bw.vv, 1.0);
@@ -215,6 +218,7 @@ impl SoocSolver {
         k: usize,
         bounds: &Bounds,
         mu: f64,
+        newton: bool,
         convexify_stage: bool,
     ) -> Option<bool> {
         let m = self.nu;
@@ -233,7 +237,12 @@ impl SoocSolver {
             // the expected cost through the covariance, so a μ relative to ℓ_uu could not
             // convexify an indefinite Newton model before μ reached its limit, and the solver
             // fell back to Gauss–Newton steps that crawl (the VSA plans stalled that way).
-            let gauss_newton = (bw.quu[(j, j)] - bw.huu[(j, j)]).abs();
+            let costate_term = if newton {
+                self.curvatures[k].huu[(j, j)]
+            } else {
+                0.0
+            };
+            let gauss_newton = (bw.quu[(j, j)] - costate_term).abs();
             curvature[j] = gauss_newton.max(d.luu[(j, j)].abs()).max(1e-12);
             reg[j] = mu * curvature[j];
         }

@@ -39,7 +39,7 @@ mod optimality;
 mod options;
 
 pub use backward::Indefinite;
-use backward::{Backstep, Backward};
+use backward::{Backstep, Backward, Curvature};
 use forward::rollout;
 pub use optimality::Optimality;
 use optimality::control_scales;
@@ -133,6 +133,8 @@ pub struct SoocSolver {
     cand_z: Vec<DVector<f64>>,
     cand_u: Vec<DVector<f64>>,
     expansions: Vec<MomentExpansion>,
+    /// The Newton model's curvature per knot, with the second-order expansions.
+    curvatures: Vec<Curvature>,
     derivs: Vec<CostDerivatives>,
     lam: Vec<DVector<f64>>,
     grad: Vec<DVector<f64>>,
@@ -168,6 +170,7 @@ impl SoocSolver {
             expansions: (0..horizon)
                 .map(|_| MomentExpansion::for_dynamics(dynamics))
                 .collect(),
+            curvatures: (0..horizon).map(|_| Curvature::new(nz, m)).collect(),
             derivs: (0..=horizon).map(|_| CostDerivatives::new(nz, m)).collect(),
             lam: (0..=horizon).map(|_| DVector::zeros(nz)).collect(),
             grad: (0..horizon).map(|_| DVector::zeros(m)).collect(),
@@ -487,18 +490,21 @@ impl SoocSolver {
         (predicted, newton)
     }
 
-    /// The second-order pieces of the moment step at every knot (in parallel), for the Newton
-    /// model.
+    /// The second-order pieces of the moment step at every knot and their contraction with the
+    /// costates, the curvature `H` (in parallel: the knots are independent), for the Newton
+    /// model. Computed here once, not in each backward pass, which runs one knot after another
+    /// and again at every higher μ.
     fn expand_second_order(&mut self, problem: &SoocProblem, third: bool) {
         let (z, u, lam) = (&self.z, &self.u, &self.lam);
         self.expansions
             .par_iter_mut()
+            .zip(self.curvatures.par_iter_mut())
             .enumerate()
-            .for_each(|(k, e)| {
+            .for_each(|(k, (e, c))| {
                 let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
-                problem
-                    .dynamics
-                    .second_order(k, zk, uk, lam[k + 1].as_slice(), third, e);
+                let lam_next = lam[k + 1].as_slice();
+                problem.dynamics.second_order(k, zk, uk, lam_next, third, e);
+                e.curvature(lam_next, &mut c.hzz, &mut c.huz, &mut c.huu);
             });
     }
 
