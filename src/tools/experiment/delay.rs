@@ -292,15 +292,17 @@ give.
 
 **Replanning and feedback on top of stiffness.** `replan` re-solves the stiffness plan every \
 20 ms from the present predicted over the latency. On the arm in the divergent field it ends \
-closer to the target than the stiffness plan at every latency (2.8–4.2 mm against 5.3 mm) and \
-never loses a trial; its expected cost is lower than the stiffness plan's up to 200 ms and 6 % \
-higher at 300 ms. What it does is buy stiffness: its re-solves command 34–39 N m/rad on \
+closer to the target than the stiffness plan at every latency (2.8–4.3 mm against 5.3 mm) and \
+never loses a trial; its expected cost is lower than the stiffness plan's up to 100 ms (24 % \
+lower with no latency) and within 5 % of it beyond (1 % higher at 150 ms, 4 % at 300 ms; 20 \
+trials a point). What it does is buy stiffness: its re-solves command 34–39 N m/rad on \
 average where the plan made in advance holds 24 (the column \"mean stiffness\" is what the \
 trials commanded), as a controller that sees the field push the hand off its path, late, \
 should. Its final error even shrinks at the longest latencies, where its first re-solve comes \
 later in the movement (why that helps is not analysed yet). On the single joint, without a \
-field, replanning buys a lower expected cost up to 150 ms (20 % lower with no latency, 0.5 % \
-at 150 ms) and about the same beyond (within 0.2 % at 200 and 300 ms) with a little less stiffness than the plan (12–14 N m/rad against 14.4), and \
+field, replanning buys a lower expected cost up to 200 ms (20 % lower with no latency, 0.1–1.2 % \
+from 100 to 200 ms) and about the same at 300 ms (0.4 % higher) with a little less stiffness \
+than the plan (12–14 N m/rad against 14.4), and \
 ends a little farther from the target than the plan it replans: there the plan made in \
 advance is already close to what a re-solve from a stale, noisy prediction can give. Each re-solve takes at most 3 Newton steps of a model without the flow's \
 third derivatives (the exact Hessian costs about twice as much for the same gain from a warm \
