@@ -30,17 +30,7 @@ pub(super) fn flow_second_derivatives(at: At, s: &mut MomentExpansion) {
     let n = at.base.nx();
     let nv = n + at.base.nu();
     let mut dirs = [Direction::default(); MAX_DIRECTIONS];
-    let mut count = 0;
-    for a in 0..nv {
-        dirs[count] = Direction::along(&[a], &[1.0]);
-        count += 1;
-    }
-    for a in 0..nv {
-        for b in a + 1..nv {
-            dirs[count] = Direction::along(&[a, b], &[1.0, 1.0]);
-            count += 1;
-        }
-    }
+    let count = second_order_directions(nv, &mut dirs);
     let mut d2 = [[0.0; MAX_NX]; MAX_DIRECTIONS];
     directional::<2, LANES2>(at, &dirs[..count], &mut d2);
     let mut put = |a: usize, b: usize, d: &[f64; MAX_NX]| {
@@ -79,8 +69,8 @@ pub(super) fn flow_second_derivatives(at: At, s: &mut MomentExpansion) {
 /// * `w = e_a ± e_b` give `∂_aaa ± 3 ∂_aab + 3 ∂_abb ± ∂_bbb`, hence `∂_aab` and `∂_abb`;
 /// * `w = e_a + e_b + e_c` gives `6 ∂_abc` plus entries already known.
 ///
-/// The directions go through the flow [`LANES`] at a time on one [`Taylor`] of order 3, which computes
-/// the real part (and every sine, cosine and reciprocal of the model) once for all of them:
+/// The directions go through the flow [`LANES`] at a time on one [`Taylor`] of order 3, which
+/// computes the real part (and every sine, cosine and reciprocal of the model) once for all of them:
 /// where a triple-nested dual (`Dual<Dual<Dual64>>`, one flow per entry) carries eight numbers
 /// and multiplies with 27 products, a lane carries three derivatives and 11 products. The
 /// entries are combinations of a few directions, so their rounding is that of the largest
@@ -169,24 +159,43 @@ struct Direction {
 /// every `a < b < c` with `a` a state. Returns how many.
 fn directions(n: usize, nv: usize, out: &mut [Direction; MAX_DIRECTIONS]) -> usize {
     let mut count = 0;
-    let mut push = |index: [usize; 3], weight: [f64; 3], len: usize| {
-        out[count] = Direction { index, weight, len };
+    let mut push = |index: &[usize], weights: &[f64]| {
+        out[count] = Direction::along(index, weights);
         count += 1;
     };
     for a in 0..nv {
-        push([a, 0, 0], [1.0, 0.0, 0.0], 1);
+        push(&[a], &[1.0]);
     }
     for a in 0..nv {
         for b in a + 1..nv {
-            push([a, b, 0], [1.0, 1.0, 0.0], 2);
-            push([a, b, 0], [1.0, -1.0, 0.0], 2);
+            push(&[a, b], &[1.0, 1.0]);
+            push(&[a, b], &[1.0, -1.0]);
         }
     }
     for a in 0..n.min(nv) {
         for b in a + 1..nv {
             for c in b + 1..nv {
-                push([a, b, c], [1.0, 1.0, 1.0], 3);
+                push(&[a, b, c], &[1.0, 1.0, 1.0]);
             }
+        }
+    }
+    count
+}
+
+/// Lists into `out` the directions [`flow_second_derivatives`] needs, in the order it reads
+/// them back: `e_a` for every `a`, then `e_a + e_b` for every `a < b`. Returns how many.
+fn second_order_directions(nv: usize, out: &mut [Direction; MAX_DIRECTIONS]) -> usize {
+    let mut count = 0;
+    let mut push = |index: &[usize], weights: &[f64]| {
+        out[count] = Direction::along(index, weights);
+        count += 1;
+    };
+    for a in 0..nv {
+        push(&[a], &[1.0]);
+    }
+    for a in 0..nv {
+        for b in a + 1..nv {
+            push(&[a, b], &[1.0, 1.0]);
         }
     }
     count
