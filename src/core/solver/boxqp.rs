@@ -53,6 +53,33 @@ impl SmallCholesky {
         true
     }
 
+    /// Solves `H x = b_c` in place for `N` right-hand sides at once: the same operations per
+    /// column as [`SmallCholesky::solve`] (so the same numbers), interleaved across the columns
+    /// so that their divisions overlap instead of waiting on one another.
+    pub fn solve_many<const N: usize>(&self, b: &mut [[f64; MAX_QP]; N]) {
+        let n = self.n;
+        for i in 0..n {
+            let d = self.l[i][i];
+            for col in b.iter_mut() {
+                let mut s = col[i];
+                for k in 0..i {
+                    s -= self.l[i][k] * col[k];
+                }
+                col[i] = s / d;
+            }
+        }
+        for i in (0..n).rev() {
+            let d = self.l[i][i];
+            for col in b.iter_mut() {
+                let mut s = col[i];
+                for k in i + 1..n {
+                    s -= self.l[k][i] * col[k];
+                }
+                col[i] = s / d;
+            }
+        }
+    }
+
     /// Solves `H x = b` in place.
     pub fn solve(&self, b: &mut [f64]) {
         let n = self.n;
@@ -317,6 +344,52 @@ impl<H: Fn(usize, usize) -> f64 + Copy> BoxQp<'_, H> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn solving_many_columns_at_once_gives_each_column_s_numbers() {
+        let mut seed = 11u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for n in 1..=MAX_QP {
+            for _ in 0..50 {
+                // H = M Mᵀ + n I: positive definite, entries of mixed sign.
+                let m: Vec<f64> = (0..n * n).map(|_| next()).collect();
+                let h = |i: usize, j: usize| {
+                    (0..n).map(|k| m[i * n + k] * m[j * n + k]).sum::<f64>()
+                        + if i == j { n as f64 } else { 0.0 }
+                };
+                let idx: Vec<usize> = (0..n).collect();
+                let c = SmallCholesky::new(h, &idx).expect("positive definite");
+                let mut many = [[0.0; MAX_QP]; 4];
+                for col in &mut many {
+                    for v in &mut col[..n] {
+                        *v = next() * 1e3;
+                    }
+                }
+                let mut one = many;
+                c.solve_many(&mut many);
+                for col in &mut one {
+                    c.solve(&mut col[..n]);
+                }
+                let bits = |a: &[[f64; MAX_QP]; 4]| a.map(|c| c.map(f64::to_bits));
+                assert_eq!(bits(&many), bits(&one), "n = {n}");
+                // And it solves: H x = b to round-off for the first column.
+                let mut b = [0.0; MAX_QP];
+                for (i, bi) in b[..n].iter_mut().enumerate() {
+                    *bi = (0..n).map(|j| h(i, j) * many[0][j]).sum::<f64>();
+                }
+                let mut again = b;
+                c.solve(&mut again[..n]);
+                for i in 0..n {
+                    assert!((again[i] - many[0][i]).abs() <= 1e-9 * (1.0 + many[0][i].abs()));
+                }
+            }
+        }
+    }
 
     /// Brute force: enumerate every active set and keep the best feasible KKT point.
     fn brute(h: &[[f64; 3]; 3], g: &[f64; 3], lo: &[f64; 3], hi: &[f64; 3]) -> f64 {

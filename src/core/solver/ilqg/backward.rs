@@ -309,18 +309,51 @@ impl Backward {
                 idx[nfree] = j;
                 nfree += 1;
             }
-            let mut col = [0.0; MAX_QP];
-            for c in 0..gain.ncols() {
-                for (a, &j) in idx[..nfree].iter().enumerate() {
-                    col[a] = self.qux_reg[(j, c)];
-                }
-                factor.solve(&mut col[..nfree]);
-                for (a, &j) in idx[..nfree].iter().enumerate() {
-                    gain[(j, c)] = -col[a];
+            let idx = &idx[..nfree];
+            match gain.ncols() {
+                2 => self.free_gains::<2>(&factor, idx, gain),
+                4 => self.free_gains::<4>(&factor, idx, gain),
+                8 => self.free_gains::<8>(&factor, idx, gain),
+                _ => {
+                    let mut col = [0.0; MAX_QP];
+                    for c in 0..gain.ncols() {
+                        for (a, &j) in idx.iter().enumerate() {
+                            col[a] = self.qux_reg[(j, c)];
+                        }
+                        factor.solve(&mut col[..nfree]);
+                        for (a, &j) in idx.iter().enumerate() {
+                            gain[(j, c)] = -col[a];
+                        }
+                    }
                 }
             }
         }
         true
+    }
+
+    /// The gains `L = −Q_uu⁻¹ Q_ux` on the free controls `idx` for the paper's state sizes:
+    /// all `N` columns solved at once ([`SmallCholesky::solve_many`], the same numbers as one
+    /// column at a time).
+    fn free_gains<const N: usize>(
+        &self,
+        factor: &SmallCholesky,
+        idx: &[usize],
+        gain: &mut DMatrix<f64>,
+    ) {
+        let (nu, qux) = (self.qux_reg.nrows(), self.qux_reg.as_slice());
+        let mut cols = [[0.0; MAX_QP]; N];
+        for (c, col) in cols.iter_mut().enumerate() {
+            for (a, &j) in idx.iter().enumerate() {
+                col[a] = qux[c * nu + j];
+            }
+        }
+        factor.solve_many(&mut cols);
+        let g = gain.as_mut_slice();
+        for (c, col) in cols.iter().enumerate() {
+            for (a, &j) in idx.iter().enumerate() {
+                g[c * nu + j] = -col[a];
+            }
+        }
     }
 
     /// Value function update (Tassa 2012 form, valid with regularisation and clamping):
