@@ -147,7 +147,12 @@ impl ArmModel {
     pub fn f<S: Scalar>(&self, x: &[S], u: &[S], ex: &Exogenous, xdot: &mut [S]) {
         let n = self.dof();
         let (q, qd) = (&x[..n], &x[n..2 * n]);
-        let angles = self.plant.angles(q);
+        // The hand's kinematics only for the field's force.
+        let angles = if self.field.is_none() {
+            self.plant.dynamics_angles(q)
+        } else {
+            self.plant.angles(q)
+        };
         let mut tau = [S::zero(); 2];
         self.joint_torque(x, u, ex, &mut tau);
         let mut bias = [S::zero(); 2];

@@ -101,6 +101,29 @@ impl Plant {
         }
     }
 
+    /// The [`Angles`] that [`Plant::mass_matrix_at`] and [`Plant::bias_torque_at`] read, and no
+    /// more: for the two-link arm only the elbow's (`s2`, `c2`; the mass matrix and the Coriolis
+    /// torques depend on `q2` alone), one `sin_cos` instead of three. Without a force field the
+    /// dynamics needs nothing else, and the trigonometry is a large part of a rollout. The hand's
+    /// entries (`s1`, `c1`, `s12`, `c12`) are NaN, so that a kinematic use of them shows at once.
+    pub fn dynamics_angles<S: Scalar>(&self, q: &[S]) -> Angles<S> {
+        match self {
+            Plant::SingleJoint(_) => self.angles(q),
+            Plant::TwoLink(_) => {
+                let (s2, c2) = q[1].sin_cos();
+                let nan = c::<S>(f64::NAN);
+                Angles {
+                    s1: nan,
+                    c1: nan,
+                    s2,
+                    c2,
+                    s12: nan,
+                    c12: nan,
+                }
+            }
+        }
+    }
+
     /// Mass matrix `M(q)`, row-major 2×2 (only `[0][0]` used for a single joint).
     pub fn mass_matrix<S: Scalar>(&self, q: &[S]) -> [[S; 2]; 2] {
         self.mass_matrix_at(&self.angles(q))
@@ -231,6 +254,27 @@ pub(crate) mod tests {
             gravity: 9.81,
             viscosity: 0.05,
         })
+    }
+
+    #[test]
+    fn the_dynamics_angles_give_the_same_dynamics_and_no_hand() {
+        for (p, q) in [
+            (arm(), [0.3_f64, 1.1]),
+            (arm(), [-2.0, 2.9]),
+            (joint(), [0.7, 0.0]),
+        ] {
+            let (all, few) = (p.angles(&q), p.dynamics_angles(&q));
+            let qd = [0.4, -1.3];
+            let (mut b_all, mut b_few) = ([0.0; 2], [0.0; 2]);
+            p.bias_torque_at(&all, &qd, &mut b_all);
+            p.bias_torque_at(&few, &qd, &mut b_few);
+            assert_eq!(b_all.map(f64::to_bits), b_few.map(f64::to_bits));
+            let (m_all, m_few) = (p.mass_matrix_at(&all), p.mass_matrix_at(&few));
+            assert_eq!(m_all, m_few);
+            if matches!(p, Plant::TwoLink(_)) {
+                assert!(p.hand_position_at(&few).iter().all(|v| v.is_nan()));
+            }
+        }
     }
 
     #[test]
