@@ -75,6 +75,7 @@ impl Plant {
     /// dynamics needs them in the mass matrix, the bias torques, the hand position and the
     /// Jacobian, and with nested dual numbers (the solver's derivatives) the trigonometry is most
     /// of the cost of an evaluation.
+    #[inline(always)]
     pub fn angles<S: Scalar>(&self, q: &[S]) -> Angles<S> {
         let (s1, c1) = q[0].sin_cos();
         match self {
@@ -106,6 +107,7 @@ impl Plant {
     /// torques depend on `q2` alone), one `sin_cos` instead of three. Without a force field the
     /// dynamics needs nothing else, and the trigonometry is a large part of a rollout. The hand's
     /// entries (`s1`, `c1`, `s12`, `c12`) are NaN, so that a kinematic use of them shows at once.
+    #[inline(always)]
     pub fn dynamics_angles<S: Scalar>(&self, q: &[S]) -> Angles<S> {
         match self {
             Plant::SingleJoint(_) => self.angles(q),
