@@ -54,8 +54,10 @@ impl SmallCholesky {
     }
 
     /// Solves `H x = b_c` in place for `N` right-hand sides at once: the same operations per
-    /// column as [`SmallCholesky::solve`] (so the same numbers), interleaved across the columns
-    /// so that their divisions overlap instead of waiting on one another.
+    /// column as [`SmallCholesky::solve`] (so the same numbers), interleaved across the columns,
+    /// whose substitutions are independent of one another. The ILQG policy solves all the state
+    /// columns of its gains this way, from slices, rather than one checked-index gather and
+    /// solve per column (measured: the reach 0.86 of the time).
     pub fn solve_many<const N: usize>(&self, b: &mut [[f64; MAX_QP]; N]) {
         let n = self.n;
         for i in 0..n {
