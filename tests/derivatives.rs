@@ -3,8 +3,8 @@
 //! * [`ArmModel::f`] and [`ArmModel::diffusion`] against an independent transcription of the
 //!   equations of motion of paper Eq. 1–8, 15 and 16 (written here with nalgebra, not with the
 //!   crate's code).
-//! * [`ArmModel::jacobians`] (`f_x`, `f_u`, `∂F/∂x`, `∂F/∂u`) against central finite differences
-//!   of `f` and `diffusion`.
+//! * The forward-mode Jacobians of `f` and `diffusion` (`f_x`, `f_u`, `∂F/∂x`, `∂F/∂u`) against
+//!   central finite differences, and [`ArmModel::f_jacobian`], written out, against them.
 //! * [`DiscreteDynamics::linearize`] (`A = I + Δ f_x`, `B = Δ f_u`, `c = √Δ F`, `Cx`, `Cu`) against
 //!   central finite differences of [`DiscreteDynamics::step`] and [`DiscreteDynamics::noise_gain`].
 
@@ -444,6 +444,60 @@ fn arm_model_jacobians_match_finite_differences() {
             jacobians(&model, &x, &u, &ex, &mut fx2, &mut fu2, None);
             assert_eq!(fx.as_slice(), &fx2[..], "{name}: f_x without noise request");
             assert_eq!(fu.as_slice(), &fu2[..], "{name}: f_u without noise request");
+        }
+    }
+}
+
+/// The drift's written-out Jacobian ([`ArmModel::f_jacobian`]) is the dual numbers' to
+/// round-off, and the drift that comes with it is `f`'s bit for bit; through the sub-steps, the
+/// chain rule over it ([`DiscreteDynamics::flow_jacobian_f64`]) is the dual numbers carried
+/// through the whole flow ([`DiscreteDynamics::flow_jacobian`]).
+#[test]
+fn written_out_jacobians_match_the_dual_numbers() {
+    let mut rng = StdRng::seed_from_u64(3);
+    for model in all_models() {
+        let name = describe(&model);
+        let (nx, nu) = (model.nx(), model.nu());
+        for _ in 0..POINTS {
+            let (x, u) = random_point(&model, &mut rng);
+            let ex = random_exogenous(&mut rng);
+            let mut fx = vec![f64::NAN; nx * nx];
+            let mut fu = vec![f64::NAN; nx * nu];
+            jacobians(&model, &x, &u, &ex, &mut fx, &mut fu, None);
+            let mut jac = vec![f64::NAN; nx * (nx + nu)];
+            let mut xdot = vec![f64::NAN; nx];
+            model.f_jacobian(&x, &u, &ex, &mut xdot, &mut jac);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&xdot), bits(&drift(&model, &x, &u, &ex)), "{name}: f");
+            let dual = DMatrix::from_iterator(nx, nx + nu, fx.into_iter().chain(fu));
+            let written = DMatrix::from_column_slice(nx, nx + nu, &jac);
+            assert_close(&format!("{name}: [f_x | f_u]"), &written, &dual, 1e-13, 0.0);
+
+            for (integrator, substeps) in DISCRETISATIONS {
+                let mut d = DiscreteDynamics::euler(model.clone(), 0.01, vec![ex]);
+                d.integrator = integrator;
+                d.substeps = substeps;
+                let (mut a, mut b) = (vec![f64::NAN; nx * nx], vec![f64::NAN; nx * nu]);
+                let (mut a_dual, mut b_dual) = (a.clone(), b.clone());
+                d.flow_jacobian_f64(0, &x, &u, &mut a, &mut b);
+                d.flow_jacobian(0, &x, &u, &mut a_dual, &mut b_dual);
+                let what = format!("{name}, {integrator:?} × {substeps}");
+                let m = |v: &[f64], cols| DMatrix::from_column_slice(nx, cols, v);
+                assert_close(
+                    &format!("{what}: A"),
+                    &m(&a, nx),
+                    &m(&a_dual, nx),
+                    1e-13,
+                    0.0,
+                );
+                assert_close(
+                    &format!("{what}: B"),
+                    &m(&b, nu),
+                    &m(&b_dual, nu),
+                    1e-13,
+                    0.0,
+                );
+            }
         }
     }
 }

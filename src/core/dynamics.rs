@@ -203,20 +203,8 @@ impl Dynamics for DiscreteDynamics {
     }
 
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        let (nx, nu) = (self.nx(), self.nu());
-        let mut a = [0.0; MAX_NX * MAX_NX];
-        let mut b = [0.0; MAX_NX * MAX_NU];
-        self.flow_jacobian_f64(k, x, u, &mut a, &mut b);
-        for j in 0..nx {
-            for i in 0..nx {
-                lin.a[(i, j)] = a[j * nx + i];
-            }
-        }
-        for j in 0..nu {
-            for i in 0..nx {
-                lin.b[(i, j)] = b[j * nx + i];
-            }
-        }
+        // DMatrix is column-major: its slices have flow_jacobian's layout.
+        self.flow_jacobian_f64(k, x, u, lin.a.as_mut_slice(), lin.b.as_mut_slice());
         self.noise_linearization(x, u, lin, true);
     }
 
@@ -314,23 +302,27 @@ impl DiscreteDynamics {
         }
     }
 
-    /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` in `f64` (layout of [`DiscreteDynamics::flow_jacobian`]) by one flow
-    /// with a vector dual number carrying all `nx + nu` directions at once: the model's
-    /// trigonometry and mass-matrix solve run once instead of once per direction. The same
-    /// derivative arithmetic per direction, so the same numbers.
+    /// `A = ∂Φ/∂x` and `B = ∂Φ/∂u` in `f64` (layout of [`DiscreteDynamics::flow_jacobian`]), by
+    /// the chain rule through the sub-steps with the drift's written-out Jacobian
+    /// ([`ArmModel::f_jacobian`]): `J ← J + h (f_x J + [0 | f_u])` per explicit Euler sub-step
+    /// (`J` = `[∂x/∂x₀ | ∂x/∂u]`, from `[I | 0]`); the semi-implicit step updates the velocity
+    /// rows so, then adds `h` times the new velocity rows to the position rows. The states of the
+    /// sub-steps are [`flow`]'s, bit for bit.
     pub fn flow_jacobian_f64(&self, k: usize, x: &[f64], u: &[f64], a: &mut [f64], b: &mut [f64]) {
-        macro_rules! by_width {
-            ($($n:literal)*) => {
-                match self.nx() + self.nu() {
-                    $($n => self.flow_jacobian_vec::<$n>(k, x, u, a, b),)*
+        macro_rules! by_size {
+            ($(($n:literal, $c:literal))*) => {
+                match (self.nx(), self.nx() + self.nu()) {
+                    $(($n, $c) => self.flow_jacobian_fixed::<$n, $c>(k, x, u, a, b),)*
                     _ => self.flow_jacobian(k, x, u, a, b),
                 }
             };
         }
-        by_width!(3 4 6 8 12);
+        by_size!((2, 3)(2, 4)(4, 6)(4, 8)(8, 12));
     }
 
-    fn flow_jacobian_vec<const N: usize>(
+    /// [`DiscreteDynamics::flow_jacobian_f64`] for `N` states and `C` = `N` + controls columns,
+    /// on the stack.
+    fn flow_jacobian_fixed<const N: usize, const C: usize>(
         &self,
         k: usize,
         x: &[f64],
@@ -338,28 +330,72 @@ impl DiscreteDynamics {
         a: &mut [f64],
         b: &mut [f64],
     ) {
-        use nalgebra::{Const, U1};
-        use num_dual::{Derivative, DualSVec64};
-        let (nx, nu) = (self.nx(), self.nu());
-        debug_assert_eq!(nx + nu, N);
-        let zero = DualSVec64::<N>::from_re(0.0);
-        let mut xd = [zero; MAX_NX];
-        let mut ud = [zero; MAX_NU];
-        for (j, (d, v)) in xd.iter_mut().zip(x).take(nx).enumerate() {
-            *d = DualSVec64::new(*v, Derivative::derivative_generic(Const::<N>, U1, j));
+        let ex = self.exo(k);
+        let h = self.dt / self.substeps as f64;
+        let mut cur = [0.0; N];
+        cur.copy_from_slice(&x[..N]);
+        let mut xdot = [0.0; N];
+        // The drift's Jacobian at the sub-step, its product with J (the total derivative of the
+        // drift with respect to (x₀, u)), and J, column by column.
+        let mut f = [[0.0; N]; C];
+        let mut df = [[0.0; N]; C];
+        let mut jac = [[0.0; N]; C];
+        for (i, column) in jac.iter_mut().enumerate().take(N) {
+            column[i] = 1.0;
         }
-        for (j, (d, v)) in ud.iter_mut().zip(u).take(nu).enumerate() {
-            *d = DualSVec64::new(*v, Derivative::derivative_generic(Const::<N>, U1, nx + j));
-        }
-        let mut out = [zero; MAX_NX];
-        self.flow(k, &xd[..nx], &ud[..nu], &mut out[..nx]);
-        for (i, o) in out[..nx].iter().enumerate() {
-            let eps = o.eps.unwrap_generic(Const::<N>, U1);
-            for j in 0..nx {
-                a[j * nx + i] = eps[j];
+        for sub in 0..self.substeps {
+            self.model.f_jacobian_fixed(&cur, u, ex, &mut xdot, &mut f);
+            let total = if sub == 0 {
+                // J = [I | 0]: the product is f's Jacobian itself.
+                &f
+            } else {
+                for (col, (out, j_col)) in df.iter_mut().zip(&jac).enumerate() {
+                    *out = if col < N { [0.0; N] } else { f[col] };
+                    for (l, &j_l) in j_col.iter().enumerate() {
+                        if j_l != 0.0 {
+                            for (o, fv) in out.iter_mut().zip(&f[l]) {
+                                *o += fv * j_l;
+                            }
+                        }
+                    }
+                }
+                &df
+            };
+            match self.integrator {
+                Integrator::Euler => {
+                    for (j_col, t_col) in jac.iter_mut().zip(total) {
+                        for (jv, t) in j_col.iter_mut().zip(t_col) {
+                            *jv += t * h;
+                        }
+                    }
+                    for i in 0..N {
+                        cur[i] += xdot[i] * h;
+                    }
+                }
+                Integrator::SemiImplicit => {
+                    let dof = self.model.dof();
+                    for block in (0..N).step_by(2 * dof) {
+                        for i in 0..dof {
+                            let (p, v) = (block + i, block + dof + i);
+                            for (j_col, t_col) in jac.iter_mut().zip(total) {
+                                j_col[v] += t_col[v] * h;
+                                j_col[p] += j_col[v] * h;
+                            }
+                            cur[v] += xdot[v] * h;
+                            cur[p] += cur[v] * h;
+                        }
+                    }
+                }
             }
-            for j in 0..nu {
-                b[j * nx + i] = eps[nx + j];
+        }
+        for (col, column) in jac.iter().enumerate() {
+            let dst = if col < N {
+                &mut a[col * N..(col + 1) * N]
+            } else {
+                &mut b[(col - N) * N..(col - N + 1) * N]
+            };
+            for (d, v) in dst.iter_mut().zip(column) {
+                *d = *v;
             }
         }
     }

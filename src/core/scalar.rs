@@ -4,8 +4,10 @@
 //! simulation, with [`num_dual::Dual64`] for exact first derivatives, with nested dual numbers
 //! for exact second derivatives one pair at a time, and with the Taylor polynomials of
 //! `core::taylor` for second and third derivatives along many directions at once (forward-mode
-//! automatic differentiation). No
-//! derivative is ever written by hand, so none can drift from the equation it differentiates.
+//! automatic differentiation). One derivative is written by hand, the drift's first
+//! ([`crate::core::model::ArmModel::f_jacobian`], for ILQG's linearisations, where the dual
+//! numbers cost a quarter of a solve); the tests check it against the dual numbers on every model,
+//! so it cannot drift from the equation it differentiates.
 //!
 //! The trait asks only for what the models use: field arithmetic, arithmetic with `f64`
 //! constants, and the sine and cosine of an angle. Every `num-dual` number is a `Scalar`; a

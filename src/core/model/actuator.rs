@@ -29,6 +29,16 @@ impl Damping {
     }
 }
 
+impl Damping {
+    /// `∂K_D/∂K_P`.
+    pub fn slope(&self) -> f64 {
+        match *self {
+            Damping::Proportional { alpha } => alpha,
+            Damping::Affine { slope, .. } => slope,
+        }
+    }
+}
+
 /// The actuator type.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub enum Actuator {

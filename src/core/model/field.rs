@@ -29,6 +29,16 @@ impl Field {
         }
     }
 
+    /// `(∂D/∂p, ∂D/∂v)`, row-major: both fields are linear in the hand's position and velocity,
+    /// so these are constants (the drift's Jacobian uses them).
+    pub fn gradients(&self) -> ([[f64; 2]; 2], [[f64; 2]; 2]) {
+        match *self {
+            Field::None => ([[0.0; 2]; 2], [[0.0; 2]; 2]),
+            Field::Divergent { beta } => ([[beta, 0.0], [0.0; 2]], [[0.0; 2]; 2]),
+            Field::Curl { matrix } => ([[0.0; 2]; 2], matrix),
+        }
+    }
+
     /// True when there is no field (the joint torques need no Jacobian).
     pub fn is_none(&self) -> bool {
         matches!(self, Field::None) || matches!(self, Field::Divergent { beta } if *beta == 0.0)

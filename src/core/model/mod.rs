@@ -3,10 +3,13 @@
 //!
 //! [`ArmModel::f`] and [`ArmModel::diffusion`] are the only places the equations of motion are
 //! written. They are generic over [`Scalar`], so the same code simulates (with `f64`), gives exact
-//! Jacobians (with dual numbers) and runs inside the board's 1 kHz loop.
+//! Jacobians (with dual numbers) and runs inside the board's 1 kHz loop. The drift's first
+//! derivatives are also written out ([`ArmModel::f_jacobian`], checked against the dual numbers
+//! by the tests) because ILQG needs them at every knot of every iteration.
 
 pub mod actuator;
 pub mod field;
+mod jacobian;
 pub mod noise;
 pub mod plant;
 
@@ -145,6 +148,19 @@ impl ArmModel {
 
     /// The drift `x' = f(x, u)` (paper Eq. 2).
     pub fn f<S: Scalar>(&self, x: &[S], u: &[S], ex: &Exogenous, xdot: &mut [S]) {
+        self.drift(x, u, ex, xdot);
+    }
+
+    /// [`ArmModel::f`], returning what [`ArmModel::f_jacobian`] reuses: the configuration's
+    /// angles and the mass matrix.
+    #[inline(always)]
+    fn drift<S: Scalar>(
+        &self,
+        x: &[S],
+        u: &[S],
+        ex: &Exogenous,
+        xdot: &mut [S],
+    ) -> (Angles<S>, [[S; 2]; 2]) {
         let n = self.dof();
         let (q, qd) = (&x[..n], &x[n..2 * n]);
         // The hand's kinematics only for the field's force.
@@ -170,8 +186,12 @@ impl ArmModel {
         let mut qdd = [S::zero(); 2];
         let m = self.plant.mass_matrix_at(&angles);
         Plant::solve_with(&m, n, &rhs[..n], &mut qdd[..n]);
-        xdot[..n].copy_from_slice(qd);
-        xdot[n..2 * n].copy_from_slice(&qdd[..n]);
+        // Element by element: a slice copy of one or two numbers is a call to memcpy.
+        #[allow(clippy::manual_memcpy)]
+        for i in 0..n {
+            xdot[i] = qd[i];
+            xdot[n + i] = qdd[i];
+        }
         if let Actuator::Vsa { motor_inertia } = &self.actuator {
             for i in 0..n {
                 let theta = x[2 * n + i];
@@ -179,6 +199,7 @@ impl ArmModel {
                 xdot[3 * n + i] = (u[i] - u[n + i] * (theta - q[i])) / motor_inertia[i];
             }
         }
+        (angles, m)
     }
 
     /// The diffusion `F(x, u)` (n × p, column-major: column `i` is `out[i*n .. (i+1)*n]`).

@@ -164,6 +164,52 @@ impl Plant {
         }
     }
 
+    /// `∂M/∂q_j` for each joint `j` (entry `j`), from the configuration's [`Angles`]: the
+    /// two-link arm's mass matrix depends on `q2` alone, a single joint's is constant. For the
+    /// drift's Jacobian ([`crate::core::model::ArmModel::f_jacobian`]).
+    pub fn mass_matrix_gradient_at(&self, a: &Angles<f64>) -> [[[f64; 2]; 2]; 2] {
+        match self {
+            Plant::SingleJoint(_) => [[[0.0; 2]; 2]; 2],
+            Plant::TwoLink(p) => {
+                let dh = -(p.m2 * p.l1 * p.s2) * a.s2;
+                [[[0.0; 2]; 2], [[dh * 2.0, dh], [dh, 0.0]]]
+            }
+        }
+    }
+
+    /// The bias torques' Jacobians `(∂/∂q, ∂/∂q')` (row `i`: torque `i`, column `j`: joint `j`),
+    /// from the configuration's [`Angles`]: [`Plant::bias_torque_at`] differentiated.
+    pub fn bias_torque_jacobian_at(
+        &self,
+        a: &Angles<f64>,
+        qd: &[f64],
+    ) -> ([[f64; 2]; 2], [[f64; 2]; 2]) {
+        match self {
+            Plant::SingleJoint(p) => (
+                [[-(p.mass * p.gravity * p.com) * a.s1, 0.0], [0.0; 2]],
+                [[p.viscosity, 0.0], [0.0; 2]],
+            ),
+            Plant::TwoLink(p) => {
+                let k = p.m2 * p.l1 * p.s2;
+                let (h, dh) = (k * a.s2, k * a.c2);
+                let b = &p.viscosity;
+                (
+                    [
+                        [0.0, -dh * qd[1] * (qd[0] * 2.0 + qd[1])],
+                        [0.0, dh * qd[0] * qd[0]],
+                    ],
+                    [
+                        [
+                            -h * qd[1] * 2.0 + b[0][0],
+                            -h * (qd[0] + qd[1]) * 2.0 + b[0][1],
+                        ],
+                        [h * qd[0] * 2.0 + b[1][0], b[1][1]],
+                    ],
+                )
+            }
+        }
+    }
+
     /// Position of the hand (two-link) or of the forearm tip (single joint) [m], shoulder at the
     /// origin: `x = l1 cos q1 + l2 cos(q1 + q2)`, `y = l1 sin q1 + l2 sin(q1 + q2)`.
     pub fn hand_position<S: Scalar>(&self, q: &[S]) -> [S; 2] {
@@ -191,6 +237,24 @@ impl Plant {
                 [-a.s1 * p.l1 - a.s12 * p.l2, -a.s12 * p.l2],
                 [a.c1 * p.l1 + a.c12 * p.l2, a.c12 * p.l2],
             ],
+        }
+    }
+
+    /// `∂J/∂q_j` for each joint `j` (entry `j`, row-major like [`Plant::jacobian_at`]), from the
+    /// configuration's [`Angles`].
+    pub fn jacobian_gradient_at(&self, a: &Angles<f64>) -> [[[f64; 2]; 2]; 2] {
+        match self {
+            Plant::SingleJoint(p) => [
+                [[-a.c1 * p.length, 0.0], [-a.s1 * p.length, 0.0]],
+                [[0.0; 2]; 2],
+            ],
+            Plant::TwoLink(p) => {
+                let (c12, s12) = (a.c12 * p.l2, a.s12 * p.l2);
+                [
+                    [[-a.c1 * p.l1 - c12, -c12], [-a.s1 * p.l1 - s12, -s12]],
+                    [[-c12, -c12], [-s12, -s12]],
+                ]
+            }
         }
     }
 
