@@ -29,8 +29,17 @@ fn main() {
     });
     let setup = plan::setup(&s).expect("scenario sets up");
     let plain = setup.problem(s.task.steps);
+    // COLD=1: the cold plan's steps too (each phase: the deterministic warm start, then SOOC).
+    let progress: Option<plan::ProgressFn> = std::env::var("COLD").ok().map(|_| {
+        Arc::new(|phase: &str, p: &vic::core::solver::ilqg::Progress| {
+            println!(
+                "  {phase} {:3}  J = {:.12e}  mu = {:.3e}  alpha = {:.4}",
+                p.iteration, p.merit, p.mu, p.alpha
+            )
+        }) as plan::ProgressFn
+    });
     let (cold, (stop, optimality)) =
-        plan::plan_sooc(&s, &setup, &plain, &None).expect("SOOC solves");
+        plan::plan_sooc(&s, &setup, &plain, &progress).expect("SOOC solves");
     println!(
         "cold: {stop:?}, {} iterations, {:.1} ms, J = {:.9e}, {optimality:?}",
         cold.iterations,
