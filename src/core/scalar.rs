@@ -5,7 +5,7 @@
 //! for exact second derivatives one pair at a time, and with the Taylor polynomials of
 //! `core::taylor` for second and third derivatives along many directions at once (forward-mode
 //! automatic differentiation). One derivative is written by hand, the drift's first
-//! ([`crate::core::model::ArmModel::f_jacobian`], for ILQG's linearisations, where the dual
+//! (`ArmModel::f_jacobian` of the model module, for ILQG's linearisations, where the dual
 //! numbers cost a quarter of a solve); the tests check it against the dual numbers on every model,
 //! so it cannot drift from the equation it differentiates.
 //!
