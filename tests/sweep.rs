@@ -212,13 +212,17 @@ fn the_live_sweep_runs_the_daemons_and_matches_the_lockstep_without_noise() {
             let count = |k: &str| timing[k].as_u64().expect("a count");
             // The open-loop plan reads no state, and a late board tick integrates every period
             // it missed with the law evaluated in each: its plant ends exactly where lockstep's
-            // does however late the ticks were, unless a slice came too late (safe hold). What
-            // the central process *records* can still be off: a knot whose state never came
-            // repeats the previous knot's, and one from a later tick is a period off, so the
-            // final error is compared only when every recorded state is its knot's.
+            // does however late the ticks were, unless a slice came too late: after its knot's
+            // time (`late_knots`, the board acted on the knot before in its place) or so late
+            // that the board went to safe hold. What the central process *records* can still be
+            // off: a knot whose state never came repeats the previous knot's, and one from a
+            // later tick is a period off, so the final error is compared only when every
+            // recorded state is its knot's.
             let recorded_on_knot = count("missing_states") + count("off_knot_states") == 0;
+            let slices_in_time = count("late_knots") == 0;
             if a["strategy"] == "stiffness"
                 && recorded_on_knot
+                && slices_in_time
                 && count("safe_hold_trials") + count("stalled_trials") == 0
                 && a["final_error_mean"] != b["final_error_mean"]
             {

@@ -284,14 +284,15 @@ fn print_result(result: &StrategyResult, delays: &Delays) {
     );
     println!(
         "diverged {} of {}; safe hold in {}, fault in {}, stalled {} trials; {} stale feedback \
-         knots, {} off-knot states",
+         knots, {} off-knot states, {} late knots",
         result.diverged,
         result.trials,
         result.safe_hold_trials,
         result.fault_trials,
         result.stalled_trials,
         result.stale_feedback,
-        result.off_knot_states
+        result.off_knot_states,
+        result.late_knots
     );
     let c = &result.central;
     println!(

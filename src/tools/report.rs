@@ -102,6 +102,10 @@ pub struct StrategyResult {
     /// Knots whose state came from a later board tick than the knot's (all trials).
     #[serde(default)]
     pub off_knot_states: usize,
+    /// Knots no slice brought to the board before their time (all trials): the board may have
+    /// acted on another knot there.
+    #[serde(default)]
+    pub late_knots: usize,
     /// Monte Carlo expected cost over the trials that did not diverge.
     pub expected_cost: Option<f64>,
     /// The central loop's compute time per period and its overruns (all trials).
@@ -206,6 +210,7 @@ pub fn summarize(
         stale_feedback: records.iter().map(|r| r.stale_feedback).sum(),
         missing_states: records.iter().map(|r| r.missing_states).sum(),
         off_knot_states: records.iter().map(|r| r.off_knot_states).sum(),
+        late_knots: records.iter().map(|r| r.late_knots).sum(),
         expected_cost: some(kept.iter().map(|t| t.cost).sum::<f64>() / count),
         central: central.compute_timing(),
     }

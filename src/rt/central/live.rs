@@ -186,6 +186,9 @@ fn stream_trial(
         for c in &out {
             ep.publish_command(c)?;
         }
+        if !out.is_empty() {
+            central.sent(&out, monotonic_ns());
+        }
         if now > limit || stop.load(Ordering::Relaxed) {
             central.stalled = true;
             return Ok(TrialEnd::Stalled);

@@ -11,7 +11,9 @@
 //! code path ([`Policy::command_into`]) for both. Live, the state must also have
 //! passed the sensor delay line before knot `k` is computed, and the slice must pass the command
 //! delay line and reach the board before knot `k` acts; when the state of `k − D` is not there
-//! yet, the freshest released state is used and the knot is counted in `stale_feedback`.
+//! yet, the freshest released state is used and the knot is counted in `stale_feedback`. A knot
+//! first published after its time (a planner that woke late) is counted in `late_knots`: the
+//! board acted on the knot before in its place ([`Central::sent`]).
 
 use crate::core::cost::TrackingCost;
 use crate::core::dynamics::DiscreteDynamics;
@@ -136,6 +138,11 @@ pub struct TrialRecord {
     /// knot's tick, or its state was lost): the truth recorded there, and what the feedback saw
     /// of that knot, is up to a few board periods off.
     pub off_knot_states: usize,
+    /// Knots of the movement that no slice published before the knot's time carried (a slice
+    /// sent late, e.g. by a planner that woke a period or more late, or never sent): the board
+    /// may have acted on the knot before (or the reset's hold) in its place, within the watchdog
+    /// time without any safe hold. Even the open-loop plan then ends elsewhere.
+    pub late_knots: usize,
     /// The board went to safe hold or fault during the movement.
     pub safe_hold: bool,
     pub fault: bool,
@@ -164,8 +171,11 @@ pub struct Central {
     command_line: VecDeque<(u64, CommandSlice)>,
     knots: Vec<Knot>,
     sent_u: Vec<[f64; MAX_NU]>,
+    /// Per knot: a slice carrying it was published ([`Central::sent`]).
+    published: Vec<bool>,
     stale_feedback: usize,
     off_knot_states: usize,
+    late_knots: usize,
     safe_hold: bool,
     fault: bool,
     /// A state acknowledging this trial's reset arrived.
@@ -226,8 +236,10 @@ impl Central {
             command_line: VecDeque::new(),
             knots: Vec::with_capacity(n),
             sent_u: Vec::with_capacity(n),
+            published: vec![false; n],
             stale_feedback: 0,
             off_knot_states: 0,
+            late_knots: 0,
             safe_hold: false,
             fault: false,
             acknowledged: false,
@@ -297,8 +309,10 @@ impl Central {
         self.command_line.clear();
         self.knots.clear();
         self.sent_u.clear();
+        self.published.iter_mut().for_each(|p| *p = false);
         self.stale_feedback = 0;
         self.off_knot_states = 0;
+        self.late_knots = 0;
         self.safe_hold = false;
         self.fault = false;
         self.acknowledged = false;
@@ -521,6 +535,30 @@ impl Central {
         }
     }
 
+    /// The slices `sent` (what [`Central::poll`] returned) were published at monotonic `at_ns`
+    /// (live: the clock read after the last one went out; lockstep: the poll's time). Counts the
+    /// knots they bring for the first time after the knot's time has come (`late_knots`).
+    ///
+    /// A knot `k` published at `at_ns ≤ start + k Δ` is in time for the board whatever its
+    /// schedule: the board's trial time never runs ahead of the controller's (it starts at its
+    /// first tick at or after the start), and the period `[kΔ, kΔ + 1 ms)` is integrated by a
+    /// step that takes its messages after that period's end. A knot published later may have
+    /// been needed before it arrived.
+    pub fn sent(&mut self, sent: &[CommandSlice], at_ns: u64) {
+        let (dt, steps) = (self.track.dt_ns, self.track.steps);
+        let now = self.trial_time(at_ns);
+        for c in sent.iter().filter(|c| c.trial == self.trial) {
+            let first = (c.start_ns / dt) as usize;
+            let last = (first + c.count as usize).min(steps);
+            for k in first..last {
+                if !self.published[k] {
+                    self.published[k] = true;
+                    self.late_knots += (k as u64 * dt < now) as usize;
+                }
+            }
+        }
+    }
+
     /// Whether a state acknowledging the present trial's reset has arrived.
     pub fn acknowledged(&self) -> bool {
         self.acknowledged
@@ -565,6 +603,8 @@ impl Central {
             stale_feedback: self.stale_feedback,
             missing_states: missing,
             off_knot_states: self.off_knot_states,
+            // Knots never published count too: the board acted on another one there.
+            late_knots: self.late_knots + self.published.iter().filter(|p| !**p).count(),
             safe_hold: self.safe_hold,
             fault: self.fault,
             stalled: self.stalled || !self.trial_done(),

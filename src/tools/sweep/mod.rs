@@ -194,6 +194,10 @@ pub struct LiveTiming {
     /// Knots whose state came from a later board tick than the knot's (a late board tick or a
     /// lost state): what was recorded and fed back there is a board period or more off.
     pub off_knot_states: usize,
+    /// Knots no slice brought to the board before their time (a planner that woke late): the
+    /// board may have acted on the knot before in their place. Even the open-loop plan sees it.
+    #[serde(default)]
+    pub late_knots: usize,
     /// Central periods whose work overran the period (the previous slice went out again).
     pub central_overruns: u64,
     /// Trials in which the board fell back to safe hold (a slice came too late).
@@ -305,6 +309,7 @@ pub fn sweep_latency(
                             stale_feedback: r.stale_feedback,
                             missing_states: r.missing_states,
                             off_knot_states: r.off_knot_states,
+                            late_knots: r.late_knots,
                             central_overruns: r.central.overruns,
                             safe_hold_trials: r.safe_hold_trials,
                             stalled_trials: r.stalled_trials,

@@ -86,12 +86,14 @@ impl Sweep {
                 let t = p.live.unwrap_or_default();
                 format!(
                     "{} at {} ms ran off schedule: {} stale feedback knots, {} missing and {} \
-                     off-knot states, {} central overruns, {} safe-hold and {} stalled trials",
+                     off-knot states, {} late knots, {} central overruns, {} safe-hold and {} \
+                     stalled trials",
                     p.strategy.name(),
                     p.latency_ms,
                     t.stale_feedback,
                     t.missing_states,
                     t.off_knot_states,
+                    t.late_knots,
                     t.central_overruns,
                     t.safe_hold_trials,
                     t.stalled_trials
