@@ -28,7 +28,7 @@ mod live;
 mod lockstep;
 pub use compute::{ComputeTiming, ReplanTiming};
 pub use live::{LiveError, run_live};
-pub use lockstep::lockstep;
+pub use lockstep::{lockstep, lockstep_polled};
 
 use crate::rt::realtime::LatencyHistogram;
 use crate::rt::transport::{
