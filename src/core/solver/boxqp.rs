@@ -5,20 +5,23 @@
 /// Largest QP handled.
 pub const MAX_QP: usize = 8;
 
-/// A dense Cholesky factor `H = R Rᵀ` (lower triangular, row-major) of the free block.
+/// A dense Cholesky factor `H = R Rᵀ` (lower triangular, row-major) of the free block, for at
+/// most `M` variables. A plant whose control count is known at compile time sizes it exactly
+/// (the ILQG backward pass on the stack), so that the compiler unrolls the factorisation and the
+/// substitutions; the operations, and so the numbers, do not depend on `M`.
 #[derive(Debug, Clone, Copy)]
-pub struct SmallCholesky {
+pub struct SmallCholesky<const M: usize = MAX_QP> {
     n: usize,
-    l: [[f64; MAX_QP]; MAX_QP],
+    l: [[f64; M]; M],
 }
 
-impl SmallCholesky {
+impl<const M: usize> SmallCholesky<M> {
     /// A factor of nothing, to be written by [`SmallCholesky::factorize`] (or by
     /// [`solve_box_qp`]) in place: the factor is 0.5 KiB, and moving it through return values
     /// cost the two-link reach a tenth of its solve time in copies.
-    pub const EMPTY: SmallCholesky = SmallCholesky {
+    pub const EMPTY: Self = SmallCholesky {
         n: 0,
-        l: [[0.0; MAX_QP]; MAX_QP],
+        l: [[0.0; M]; M],
     };
 
     /// Factorises the symmetric `h` restricted to the indices `idx`; `None` if not positive definite.
@@ -58,7 +61,7 @@ impl SmallCholesky {
     /// whose substitutions are independent of one another. The ILQG policy solves all the state
     /// columns of its gains this way, from slices, rather than one checked-index gather and
     /// solve per column (measured: the reach 0.86 of the time).
-    pub fn solve_many<const N: usize>(&self, b: &mut [[f64; MAX_QP]; N]) {
+    pub fn solve_many<const N: usize>(&self, b: &mut [[f64; M]; N]) {
         let n = self.n;
         for i in 0..n {
             let d = self.l[i][i];
@@ -131,16 +134,16 @@ pub struct QpSolution {
 /// Newton on the free variables with a projected Armijo line search (Bertsekas 1982, as in
 /// Tassa, Mansard & Todorov 2014). The factor of the final free block is written into
 /// `factor` ([`QpSolution::factored`] says whether it was).
-pub fn solve_box_qp(
+pub fn solve_box_qp<const M: usize>(
     h: impl Fn(usize, usize) -> f64 + Copy,
     g: &[f64],
     lower: &[f64],
     upper: &[f64],
     x0: &[f64],
-    factor: &mut SmallCholesky,
+    factor: &mut SmallCholesky<M>,
 ) -> QpSolution {
     let n = g.len();
-    assert!(n <= MAX_QP, "box QP of size {n} exceeds {MAX_QP}");
+    assert!(n <= M, "box QP of size {n} exceeds {M}");
     let qp = BoxQp {
         h,
         g,
@@ -268,12 +271,12 @@ impl<H: Fn(usize, usize) -> f64 + Copy> BoxQp<'_, H> {
 
     /// The Newton step on the free variables `idx` with the clamped ones fixed (`chol`: the
     /// factor of the free block of `H`), as a direction from `x`.
-    fn newton_direction(
+    fn newton_direction<const M: usize>(
         &self,
         x: &[f64; MAX_QP],
         free: &[bool; MAX_QP],
         idx: &[usize],
-        chol: &SmallCholesky,
+        chol: &SmallCholesky<M>,
     ) -> [f64; MAX_QP] {
         let n = self.n;
         let mut rhs = [0.0; MAX_QP];
@@ -294,11 +297,11 @@ impl<H: Fn(usize, usize) -> f64 + Copy> BoxQp<'_, H> {
 
     /// The solution at `x`: the final free set and its factor must describe the returned point,
     /// so both are recomputed when the free set changed at the last step.
-    fn finish(
+    fn finish<const M: usize>(
         &self,
         x: [f64; MAX_QP],
         mut free: [bool; MAX_QP],
-        (factor, mut factored): (&mut SmallCholesky, bool),
+        (factor, mut factored): (&mut SmallCholesky<M>, bool),
         mut status: QpStatus,
     ) -> QpSolution {
         let grad = self.gradient(&x);
@@ -365,7 +368,7 @@ mod tests {
                         + if i == j { n as f64 } else { 0.0 }
                 };
                 let idx: Vec<usize> = (0..n).collect();
-                let c = SmallCholesky::new(h, &idx).expect("positive definite");
+                let c = SmallCholesky::<MAX_QP>::new(h, &idx).expect("positive definite");
                 let mut many = [[0.0; MAX_QP]; 4];
                 for col in &mut many {
                     for v in &mut col[..n] {
@@ -415,7 +418,7 @@ mod tests {
             }
             if !free.is_empty() {
                 let hf = |a: usize, b: usize| h[a][b];
-                let Some(c) = SmallCholesky::new(hf, &free) else {
+                let Some(c) = SmallCholesky::<MAX_QP>::new(hf, &free) else {
                     continue;
                 };
                 let mut rhs: Vec<f64> = free
@@ -472,7 +475,7 @@ mod tests {
                 lo[1] + rnd().abs() + 0.01,
                 f64::INFINITY,
             ];
-            let mut factor = SmallCholesky::EMPTY;
+            let mut factor = SmallCholesky::<MAX_QP>::EMPTY;
             let sol = solve_box_qp(|i, j| h[i][j], &g, &lo, &hi, &[0.0; 3], &mut factor);
             let v: f64 = (0..3)
                 .map(|i| {
@@ -502,7 +505,7 @@ mod tests {
             n: MAX_QP,
             l: [[f64::NAN; MAX_QP]; MAX_QP],
         };
-        let mut fresh = SmallCholesky::EMPTY;
+        let mut fresh = SmallCholesky::<MAX_QP>::EMPTY;
         let a = solve_box_qp(|i, j| h[i][j], &g, &lo, &hi, &[0.0; 3], &mut stale);
         let b = solve_box_qp(|i, j| h[i][j], &g, &lo, &hi, &[0.0; 3], &mut fresh);
         assert!(a.factored && b.factored);

@@ -184,12 +184,15 @@ impl<'a, const R: usize, const C: usize> SmallDense<'a, R, C> {
     }
 }
 
-/// `Σ_i m_i x_i` over the nonzero `m_i`, in order (the sum [`SparseColumns`] forms).
-fn nonzero_dot<const R: usize>(m: &[f64; R], x: &[f64]) -> f64 {
+/// `Σ_i m_i x_i` over the nonzero `m_i`, in order (the sum [`SparseColumns`] forms). A zero
+/// `m_i` adds −0 instead of being filtered out: `s + (−0) = s` exactly for every `s` (±0, ±∞
+/// and NaN included), so the sum is the filtered one to the bit, without a branch per entry
+/// (the filter cost the two-link reach 15 % of a solve).
+#[inline(always)]
+pub(crate) fn nonzero_dot<const R: usize>(m: &[f64; R], x: &[f64]) -> f64 {
     m.iter()
         .zip(&x[..R])
-        .filter(|(a, _)| **a != 0.0)
-        .map(|(&a, &x)| a * x)
+        .map(|(&a, &x)| if a != 0.0 { a * x } else { -0.0 })
         .sum()
 }
 

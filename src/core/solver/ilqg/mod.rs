@@ -8,7 +8,7 @@
 //! ([`crate::core::solver::moments::expected_cost`]). The deterministic cost alone would reject the very steps the noise
 //! terms of the backward pass ask for.
 
-use super::boxqp::{MAX_QP, QpStatus, SmallCholesky, solve_box_qp};
+use super::boxqp::MAX_QP;
 use super::sparse::SparseLinearization;
 use super::{Bounds, Problem};
 use crate::core::cost::CostDerivatives;
@@ -20,6 +20,8 @@ use std::time::{Duration, Instant};
 
 mod backward;
 mod convergence;
+mod knot;
+mod policy;
 mod rollout;
 mod search;
 
