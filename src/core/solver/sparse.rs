@@ -85,8 +85,8 @@ impl SparseColumns {
 
 /// The products of the backward pass with a Jacobian `M` (A, B or a noise Jacobian) taken by its
 /// nonzeros: every term `m_ij · x` with `m_ij = 0` is skipped and the others are added in
-/// ascending row order, so that [`SparseColumns`] and [`SmallDense`] compute the same numbers
-/// bit for bit.
+/// ascending row order, so that [`SparseColumns`] and the backward pass on the stack (the
+/// `ilqg::knot` module, for the small plants) compute the same numbers bit for bit.
 pub trait ColumnProducts {
     /// `y += α Mᵀ v`.
     fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]);
@@ -162,28 +162,6 @@ impl ColumnProducts for SparseColumns {
     }
 }
 
-/// A Jacobian of a small plant (R × C known at compile time, column-major) taken by its nonzeros
-/// as [`SparseColumns`] takes it, term for term and so with the same roundings, but read in
-/// place: no pattern to build at every knot, no index arrays, and loops of fixed length that the
-/// compiler unrolls. For the two-link arm (4 states) the pattern saves little arithmetic and its
-/// bookkeeping cost more than the products.
-#[derive(Debug, Clone, Copy)]
-pub struct SmallDense<'a, const R: usize, const C: usize>(pub &'a [f64]);
-
-impl<'a, const R: usize, const C: usize> SmallDense<'a, R, C> {
-    /// The view of `m` (R × C).
-    pub fn of(m: &'a DMatrix<f64>) -> Self {
-        debug_assert_eq!((m.nrows(), m.ncols()), (R, C));
-        SmallDense(m.as_slice())
-    }
-
-    fn column(&self, j: usize) -> &'a [f64; R] {
-        self.0[j * R..(j + 1) * R]
-            .try_into()
-            .expect("an R-row column")
-    }
-}
-
 /// `Σ_i m_i x_i` over the nonzero `m_i`, in order (the sum [`SparseColumns`] forms). A zero
 /// `m_i` adds −0 instead of being filtered out: `s + (−0) = s` exactly for every `s` (±0, ±∞
 /// and NaN included), so the sum is the filtered one to the bit, without a branch per entry
@@ -194,70 +172,6 @@ pub(crate) fn nonzero_dot<const R: usize>(m: &[f64; R], x: &[f64]) -> f64 {
         .zip(&x[..R])
         .map(|(&a, &x)| if a != 0.0 { a * x } else { -0.0 })
         .sum()
-}
-
-impl<const R: usize, const C: usize> ColumnProducts for SmallDense<'_, R, C> {
-    fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
-        for (j, yj) in y.iter_mut().enumerate().take(C) {
-            *yj += alpha * nonzero_dot(self.column(j), v);
-        }
-    }
-
-    fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        let p = s.nrows();
-        debug_assert_eq!(s.ncols(), R);
-        debug_assert_eq!((out.nrows(), out.ncols()), (p, C));
-        if p != R {
-            return right_mul_add_rows(self, p, s, out);
-        }
-        let sd = s.as_slice();
-        let od = out.as_mut_slice();
-        for j in 0..C {
-            let col: &mut [f64; R] = (&mut od[j * R..(j + 1) * R]).try_into().expect("R rows");
-            for (i, &a) in self.column(j).iter().enumerate() {
-                if a != 0.0 {
-                    let si: &[f64; R] = sd[i * R..(i + 1) * R].try_into().expect("R rows");
-                    for (o, s) in col.iter_mut().zip(si) {
-                        *o += a * s;
-                    }
-                }
-            }
-        }
-    }
-
-    fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        debug_assert_eq!(x.nrows(), R);
-        debug_assert_eq!((out.nrows(), out.ncols()), (C, x.ncols()));
-        let xd = x.as_slice();
-        let od = out.as_mut_slice();
-        for c in 0..x.ncols() {
-            let xc = &xd[c * R..(c + 1) * R];
-            for (j, o) in od[c * C..(c + 1) * C].iter_mut().enumerate() {
-                *o += alpha * nonzero_dot(self.column(j), xc);
-            }
-        }
-    }
-}
-
-/// [`ColumnProducts::right_mul_add`] of a [`SmallDense`] for an `S` with `p ≠ R` rows.
-fn right_mul_add_rows<const R: usize, const C: usize>(
-    m: &SmallDense<'_, R, C>,
-    p: usize,
-    s: &DMatrix<f64>,
-    out: &mut DMatrix<f64>,
-) {
-    let sd = s.as_slice();
-    let od = out.as_mut_slice();
-    for j in 0..C {
-        let col = &mut od[j * p..(j + 1) * p];
-        for (i, &a) in m.column(j).iter().enumerate() {
-            if a != 0.0 {
-                for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
-                    *o += a * s;
-                }
-            }
-        }
-    }
 }
 
 /// The nonzeros of one knot's `A`, `B` and noise Jacobians `Cx_i`, `Cu_i`.
@@ -335,75 +249,6 @@ mod tests {
                 .zip(want.iter())
                 .all(|(a, b)| (a - b).abs() < 1e-12)
         );
-    }
-
-    /// A small Jacobian read in place gives the pattern's products bit for bit (the backward
-    /// pass's numbers must not depend on which of the two reads a knot), with negative zeros,
-    /// NaN and infinite entries in the Jacobian, infinite entries in the other factor (a zero of
-    /// the Jacobian must skip them, not make a NaN), and an `S` whose row count differs from the
-    /// Jacobian's.
-    #[test]
-    fn small_dense_matches_the_pattern_bit_for_bit() {
-        fn check<const R: usize, const C: usize>(seed: u64) {
-            let mut m = pattern(R, C, seed);
-            // Negative zeros (skipped by both), and a NaN and an infinity (kept by both).
-            for (i, v) in m.iter_mut().enumerate() {
-                if *v == 0.0 && i % 3 == 0 {
-                    *v = -0.0;
-                }
-            }
-            if seed % 5 == 1 {
-                m[(R - 1, 0)] = f64::NAN;
-                m[(0, C - 1)] = f64::INFINITY;
-            }
-            let mut sp = SparseColumns::new(R, C);
-            sp.assign(&m);
-            let small = SmallDense::<R, C>::of(&m);
-            // A NaN is compared as a NaN: IEEE 754 leaves its sign and payload open, and the
-            // compiler may commute an addition, which decides whose NaN propagates.
-            let bit = |v: &f64| if v.is_nan() { u64::MAX } else { v.to_bits() };
-            let bits = |a: &DMatrix<f64>| a.iter().map(bit).collect::<Vec<_>>();
-            // An infinite entry of S, X or v against a zero of M: skipped, the term is no NaN.
-            let infinite = seed % 5 == 2;
-            for p in [R, R + 3] {
-                let mut s = pattern(p, R, seed + 1);
-                if infinite {
-                    s[(0, 0)] = f64::INFINITY;
-                }
-                let (mut a, mut b) = (pattern(p, C, seed + 2), pattern(p, C, seed + 2));
-                sp.right_mul_add(&s, &mut a);
-                small.right_mul_add(&s, &mut b);
-                assert_eq!(bits(&a), bits(&b), "S M, {R}x{C}, p = {p}");
-                sp.right_mul(&s, &mut a);
-                small.right_mul(&s, &mut b);
-                assert_eq!(bits(&a), bits(&b), "S M (fresh), {R}x{C}, p = {p}");
-            }
-            let mut x = pattern(R, 3, seed + 3);
-            if infinite {
-                x[(0, 0)] = f64::INFINITY;
-            }
-            let (mut a, mut b) = (pattern(C, 3, seed + 4), pattern(C, 3, seed + 4));
-            sp.tr_mul_add(0.7, &x, &mut a);
-            small.tr_mul_add(0.7, &x, &mut b);
-            assert_eq!(bits(&a), bits(&b), "Mᵀ X, {R}x{C}");
-            let mut v = pattern(R, 1, seed + 5);
-            if infinite {
-                v[(0, 0)] = f64::INFINITY;
-            }
-            // Longer than M has columns: the entries past C stay as they were in both.
-            let (mut y, mut z) = (vec![0.25; C + 2], vec![0.25; C + 2]);
-            sp.tr_mul_vec_add(-1.0, v.as_slice(), &mut y);
-            small.tr_mul_vec_add(-1.0, v.as_slice(), &mut z);
-            let vbits = |a: &[f64]| a.iter().map(bit).collect::<Vec<_>>();
-            assert_eq!(vbits(&y), vbits(&z), "Mᵀ v, {R}x{C}");
-        }
-        for seed in 0..20 {
-            check::<2, 1>(seed * 7);
-            check::<2, 2>(seed * 7);
-            check::<4, 2>(seed * 7);
-            check::<4, 4>(seed * 7);
-            check::<8, 4>(seed * 7);
-        }
     }
 
     /// Columns longer than one 64-row block of the nonzero mask, refilled with a sparser and

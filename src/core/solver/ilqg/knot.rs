@@ -309,3 +309,87 @@ impl<const NX: usize, const NU: usize> Knot<NX, NU> {
         (lqu, lquul)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::solver::sparse::{ColumnProducts, SparseColumns};
+    use nalgebra::DMatrix;
+
+    fn pattern(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
+        let mut s = seed;
+        DMatrix::from_fn(r, c, |_, _| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let v = ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0;
+            if v.abs() < 0.5 { 0.0 } else { v }
+        })
+    }
+
+    /// The stack products give the pattern's products bit for bit (the backward pass's numbers
+    /// must not depend on which of the two reads a knot), with negative zeros, NaN and infinite
+    /// entries in the Jacobian, and infinite entries in the other factor (a zero of the
+    /// Jacobian must skip them, not make a NaN).
+    #[test]
+    fn stack_products_match_the_pattern_bit_for_bit() {
+        fn check<const R: usize, const C: usize>(seed: u64) {
+            let mut m = pattern(R, C, seed);
+            // Negative zeros (skipped by both), and a NaN and an infinity (kept by both).
+            for (i, v) in m.iter_mut().enumerate() {
+                if *v == 0.0 && i % 3 == 0 {
+                    *v = -0.0;
+                }
+            }
+            if seed % 5 == 1 {
+                m[(R - 1, 0)] = f64::NAN;
+                m[(0, C - 1)] = f64::INFINITY;
+            }
+            let mut sp = SparseColumns::new(R, C);
+            sp.assign(&m);
+            let small = view::<R, C>(&m);
+            // A NaN is compared as a NaN: IEEE 754 leaves its sign and payload open, and the
+            // compiler may commute an addition, which decides whose NaN propagates.
+            let bit = |v: &f64| if v.is_nan() { u64::MAX } else { v.to_bits() };
+            let bits = |a: &[f64]| a.iter().map(bit).collect::<Vec<_>>();
+            // An infinite entry of S, X or v against a zero of M: skipped, the term is no NaN.
+            let infinite = seed % 5 == 2;
+            let mut s = pattern(R, R, seed + 1);
+            if infinite {
+                s[(0, 0)] = f64::INFINITY;
+            }
+            let mut a = pattern(R, C, seed + 2);
+            let mut b = *view::<R, C>(&a);
+            sp.right_mul_add(&s, &mut a);
+            right_mul_add(view(&s), small, &mut b);
+            assert_eq!(bits(a.as_slice()), bits(b.as_flattened()), "S M, {R}x{C}");
+            sp.right_mul(&s, &mut a);
+            let b = right_mul(view(&s), small);
+            assert_eq!(bits(a.as_slice()), bits(b.as_flattened()), "S M, {R}x{C}");
+            let mut x = pattern(R, 3, seed + 3);
+            if infinite {
+                x[(0, 0)] = f64::INFINITY;
+            }
+            let mut a = pattern(C, 3, seed + 4);
+            let mut b = *view::<C, 3>(&a);
+            sp.tr_mul_add(0.7, &x, &mut a);
+            tr_mul_add(0.7, small, view(&x), &mut b);
+            assert_eq!(bits(a.as_slice()), bits(b.as_flattened()), "Mᵀ X, {R}x{C}");
+            let mut v = pattern(R, 1, seed + 5);
+            if infinite {
+                v[(0, 0)] = f64::INFINITY;
+            }
+            let (mut y, mut z) = (vec![0.25; C], [0.25; C]);
+            sp.tr_mul_vec_add(1.0, v.as_slice(), &mut y);
+            tr_mul_vec_add(small, v.as_slice().try_into().unwrap(), &mut z);
+            assert_eq!(bits(&y), bits(&z), "Mᵀ v, {R}x{C}");
+        }
+        for seed in 0..20 {
+            check::<2, 1>(seed * 7);
+            check::<2, 2>(seed * 7);
+            check::<4, 2>(seed * 7);
+            check::<4, 4>(seed * 7);
+            check::<8, 4>(seed * 7);
+        }
+    }
+}
