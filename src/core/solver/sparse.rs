@@ -209,10 +209,11 @@ impl SparseLinearization {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn pattern(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
+    /// A random `r × c` matrix with about half its entries exactly zero.
+    pub(crate) fn pattern(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
         let mut s = seed;
         DMatrix::from_fn(r, c, |_, _| {
             s = s

@@ -313,19 +313,8 @@ impl<const NX: usize, const NU: usize> Knot<NX, NU> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::solver::sparse::tests::pattern;
     use crate::core::solver::sparse::{ColumnProducts, SparseColumns};
-    use nalgebra::DMatrix;
-
-    fn pattern(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
-        let mut s = seed;
-        DMatrix::from_fn(r, c, |_, _| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let v = ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0;
-            if v.abs() < 0.5 { 0.0 } else { v }
-        })
-    }
 
     /// The stack products give the pattern's products bit for bit (the backward pass's numbers
     /// must not depend on which of the two reads a knot), with negative zeros, NaN and infinite
