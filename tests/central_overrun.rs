@@ -9,7 +9,7 @@ use vic::core::policy::Strategy;
 use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::Board;
-use vic::rt::central::{Central, Timing, Track, lockstep, split_latency_ms};
+use vic::rt::central::{Central, Timing, Track, lockstep};
 use vic::rt::transport::CommandSlice;
 
 const PERIOD_NS: u64 = 20_000_000;
@@ -66,14 +66,7 @@ fn central(set: &Setup, p: &PlanFile, latency_ms: f64, x0: &[f64]) -> Central {
         x0,
     )
     .unwrap();
-    let lookahead_ms = 2.0 * PERIOD_NS as f64 * 1e-6;
-    let (sensor, command) = split_latency_ms(latency_ms, lookahead_ms);
-    let timing = Timing {
-        latency_steps: (latency_ms / 10.0).round() as usize,
-        sensor_latency_ns: (sensor * 1e6) as u64,
-        command_latency_ns: (command * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
+    let timing = Timing::split(latency_ms, (latency_ms / 10.0).round() as usize, PERIOD_NS);
     Central::new(track, Strategy::Predictor, timing)
 }
 

@@ -13,7 +13,7 @@ use vic::planning::montecarlo::run_trials;
 use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::Board;
-use vic::rt::central::{Central, Timing, Track, TrialRecord, lockstep, split_latency_ms};
+use vic::rt::central::{Central, Timing, Track, TrialRecord, lockstep};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -52,14 +52,8 @@ fn run_lockstep(
         x0,
     )
     .unwrap();
-    let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
-    let (sensor, command) = split_latency_ms(latency_ms, lookahead_ms);
-    let timing = Timing {
-        latency_steps: (latency_ms / (s.task.dt * 1000.0)).round() as usize,
-        sensor_latency_ns: (sensor * 1e6) as u64,
-        command_latency_ns: (command * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
+    let steps = (latency_ms / (s.task.dt * 1000.0)).round() as usize;
+    let timing = Timing::split(latency_ms, steps, PLANNER_PERIOD_NS);
     let mut central = Central::new(track, strategy, timing);
     let cfg = vic::tools::launch::board_config(s, 1_000_000);
     let mut board = Board::new(s.model.clone(), cfg, x0).expect("board");
@@ -206,14 +200,7 @@ fn lockstep_missing_a_tick(
         set.x0.as_slice(),
     )
     .unwrap();
-    let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
-    let (sensor, command) = split_latency_ms(100.0, lookahead_ms);
-    let timing = Timing {
-        latency_steps: 10,
-        sensor_latency_ns: (sensor * 1e6) as u64,
-        command_latency_ns: (command * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
+    let timing = Timing::split(100.0, 10, PLANNER_PERIOD_NS);
     let mut central = Central::new(track, strategy, timing);
     let period = 1_000_000;
     let mut board = Board::new(

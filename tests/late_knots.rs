@@ -7,7 +7,7 @@ use vic::core::policy::Strategy;
 use vic::planning::plan::{Method, plan, setup};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::Board;
-use vic::rt::central::{Central, Timing, Track, TrialRecord, lockstep_polled, split_latency_ms};
+use vic::rt::central::{Central, Timing, Track, TrialRecord, lockstep_polled};
 
 const PLANNER: u64 = 20_000_000;
 const BOARD: u64 = 1_000_000;
@@ -28,14 +28,7 @@ fn trial(polls: &dyn Fn(u64, u64) -> bool) -> TrialRecord {
         set.x0.as_slice(),
     )
     .expect("track");
-    let lookahead_ms = 2.0 * PLANNER as f64 * 1e-6;
-    let (sensor, command) = split_latency_ms(100.0, lookahead_ms);
-    let timing = Timing {
-        latency_steps: 10,
-        sensor_latency_ns: (sensor * 1e6) as u64,
-        command_latency_ns: (command * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
+    let timing = Timing::split(100.0, 10, PLANNER);
     let mut central = Central::new(track, Strategy::Stiffness, timing);
     let cfg = vic::tools::launch::board_config(&s, BOARD);
     let mut board = Board::new(s.model.clone(), cfg, set.x0.as_slice()).expect("board");

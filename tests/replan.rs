@@ -16,9 +16,7 @@ use vic::planning::montecarlo::{
 use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
 use vic::planning::scenario::Scenario;
 use vic::rt::board::Board;
-use vic::rt::central::{
-    Central, ReplanTiming, Timing, Track, TrialRecord, lockstep, split_latency_ms,
-};
+use vic::rt::central::{Central, ReplanTiming, Timing, Track, TrialRecord, lockstep};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -60,14 +58,7 @@ fn replan_in_lockstep(
     background: bool,
 ) -> (TrialRecord, ReplanTiming) {
     let track = Track::new(policy, set.dynamics.clone(), set.cost.clone(), &set.x0).unwrap();
-    let lookahead_ms = 2.0 * PLANNER_PERIOD_NS as f64 * 1e-6;
-    let (sensor, command) = split_latency_ms(LATENCY_MS, lookahead_ms);
-    let timing = Timing {
-        latency_steps: LATENCY_STEPS,
-        sensor_latency_ns: (sensor * 1e6) as u64,
-        command_latency_ns: (command * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
+    let timing = Timing::split(LATENCY_MS, LATENCY_STEPS, PLANNER_PERIOD_NS);
     let mut central = Central::new(track, Strategy::Replan, timing);
     // On the simulated clock the law is executed whatever a re-solve takes on the real one (a
     // re-solve takes longer than the 20 ms period on a loaded machine, which these tests are

@@ -60,6 +60,22 @@ pub struct Timing {
     pub lookahead_ns: u64,
 }
 
+impl Timing {
+    /// The default timing for a feedback latency of `latency_ms` (`latency_steps` plan steps) and
+    /// a planner ticking every `planner_period_ns`: a lookahead of two planner periods, the rest
+    /// of the latency split between the delay lines by [`split_latency_ms`].
+    pub fn split(latency_ms: f64, latency_steps: usize, planner_period_ns: u64) -> Self {
+        let lookahead_ms = 2.0 * planner_period_ns as f64 * 1e-6;
+        let (sensor_ms, command_ms) = split_latency_ms(latency_ms, lookahead_ms);
+        Timing {
+            latency_steps,
+            sensor_latency_ns: (sensor_ms * 1e6) as u64,
+            command_latency_ns: (command_ms * 1e6) as u64,
+            lookahead_ns: (lookahead_ms * 1e6) as u64,
+        }
+    }
+}
+
 /// A policy with what the board needs besides: the reference it tracks and the start state.
 #[derive(Debug, Clone)]
 pub struct Track {

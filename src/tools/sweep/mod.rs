@@ -475,21 +475,14 @@ fn lockstep_trials(
     point: Point,
     opts: &SweepOptions,
 ) -> Result<Vec<crate::planning::montecarlo::Trial>, SweepError> {
-    use crate::rt::central::{Central, Timing, lockstep, split_latency_ms};
+    use crate::rt::central::{Central, Timing, lockstep};
     let fail = |e: Box<dyn std::error::Error + Send + Sync>| SweepError::Lockstep {
         strategy: point.strategy.name(),
         latency_ms: point.latency_ms,
         source: e,
     };
     let track = crate::tools::launch::track(plan, set).map_err(|e| fail(e.into()))?;
-    let lookahead_ms = 2.0 * CENTRAL_PERIOD_NS as f64 * 1e-6;
-    let (sensor_ms, command_ms) = split_latency_ms(point.latency_ms, lookahead_ms);
-    let timing = Timing {
-        latency_steps: point.latency_steps,
-        sensor_latency_ns: (sensor_ms * 1e6) as u64,
-        command_latency_ns: (command_ms * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
+    let timing = Timing::split(point.latency_ms, point.latency_steps, CENTRAL_PERIOD_NS);
     let mut central = Central::new(track, point.strategy, timing);
     let cfg = crate::tools::launch::board_config(s, BOARD_PERIOD_NS);
     let mut board =
