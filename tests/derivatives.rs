@@ -502,6 +502,69 @@ fn written_out_jacobians_match_the_dual_numbers() {
     }
 }
 
+/// The fused step ([`Dynamics::step_linearized`], what a rollout that will be linearised calls)
+/// is the step and its linearisation computed apart, to the bit: the end state is the chain
+/// rule's last sub-step state, and the solver's plans must not depend on which path a knot took.
+#[test]
+fn the_fused_step_is_the_step_and_its_linearisation_bit_for_bit() {
+    let mut rng = StdRng::seed_from_u64(11);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for model in all_models() {
+        let name = describe(&model);
+        let (nx, nu, nw) = (model.nx(), model.nu(), model.nw());
+        for _ in 0..POINTS {
+            let (x, u) = random_point(&model, &mut rng);
+            let ex = random_exogenous(&mut rng);
+            for (integrator, substeps) in DISCRETISATIONS {
+                let mut d = DiscreteDynamics::euler(model.clone(), 0.01, vec![ex]);
+                d.integrator = integrator;
+                d.substeps = substeps;
+                let what = format!("{name}, {integrator:?} × {substeps}");
+                let (mut apart, mut fused) = (
+                    Linearization::new(nx, nu, nw),
+                    Linearization::new(nx, nu, nw),
+                );
+                d.linearize(0, &x, &u, &mut apart);
+                let mut next = vec![f64::NAN; nx];
+                d.step_linearized(0, &x, &u, &mut next, &mut fused);
+                assert_eq!(
+                    bits(&next),
+                    bits(&euler_step(&d, 0, &x, &u)),
+                    "{what}: step"
+                );
+                assert_eq!(
+                    bits(fused.a.as_slice()),
+                    bits(apart.a.as_slice()),
+                    "{what}: A"
+                );
+                assert_eq!(
+                    bits(fused.b.as_slice()),
+                    bits(apart.b.as_slice()),
+                    "{what}: B"
+                );
+                assert_eq!(
+                    bits(fused.c.as_slice()),
+                    bits(apart.c.as_slice()),
+                    "{what}: C"
+                );
+                assert_eq!(fused.noise, apart.noise, "{what}: noise kind");
+                for i in 0..nw {
+                    assert_eq!(
+                        bits(fused.cx[i].as_slice()),
+                        bits(apart.cx[i].as_slice()),
+                        "{what}: Cx"
+                    );
+                    assert_eq!(
+                        bits(fused.cu[i].as_slice()),
+                        bits(apart.cu[i].as_slice()),
+                        "{what}: Cu"
+                    );
+                }
+            }
+        }
+    }
+}
+
 fn noise_gain(model: &DiscreteDynamics, k: usize, x: &[f64], u: &[f64]) -> DMatrix<f64> {
     let mut g = DMatrix::from_element(model.nx(), model.nw(), f64::NAN);
     model.noise_gain(k, x, u, &mut g);

@@ -66,6 +66,22 @@ pub trait Dynamics: Send + Sync {
     fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>);
     /// Linearisation of the step around (x, u).
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization);
+    /// The step and its linearisation at once: `next` as [`Dynamics::step`] gives it and `lin`
+    /// as [`Dynamics::linearize`] does, bit for bit. A rollout that will be linearised anyway
+    /// calls this, and a plant whose Jacobian computes the step on the way (the chain rule runs
+    /// through the same sub-step states) saves a second evaluation of its drift. Default: the
+    /// two calls.
+    fn step_linearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.step(k, x, u, next);
+        self.linearize(k, x, u, lin);
+    }
     /// Whether one linearisation costs enough (microseconds or more) that the solvers should
     /// linearise the knots of a trajectory in parallel. Default true; cheap models (a few states,
     /// first derivatives only) say false and are linearised in order, without allocating.
@@ -208,6 +224,22 @@ impl Dynamics for DiscreteDynamics {
         self.noise_linearization(x, u, lin, true);
     }
 
+    fn step_linearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        let (a, b) = (lin.a.as_mut_slice(), lin.b.as_mut_slice());
+        if !self.flow_jacobian_by_size(k, x, u, a, b, Some(&mut *next)) {
+            self.flow(k, x, u, next);
+            self.flow_jacobian(k, x, u, a, b);
+        }
+        self.noise_linearization(x, u, lin, true);
+    }
+
     fn parallel_linearization(&self) -> bool {
         // One flow with a vector dual number: well under a microsecond for the paper's limbs.
         false
@@ -309,19 +341,36 @@ impl DiscreteDynamics {
     /// rows so, then adds `h` times the new velocity rows to the position rows. The states of the
     /// sub-steps are [`flow`]'s, bit for bit.
     pub fn flow_jacobian_f64(&self, k: usize, x: &[f64], u: &[f64], a: &mut [f64], b: &mut [f64]) {
+        if !self.flow_jacobian_by_size(k, x, u, a, b, None) {
+            self.flow_jacobian(k, x, u, a, b);
+        }
+    }
+
+    /// [`DiscreteDynamics::flow_jacobian_fixed`] for the paper's plant sizes, and the step's
+    /// end state into `next` if asked; false (nothing written) for any other size.
+    fn flow_jacobian_by_size(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        a: &mut [f64],
+        b: &mut [f64],
+        next: Option<&mut [f64]>,
+    ) -> bool {
         macro_rules! by_size {
             ($(($n:literal, $c:literal))*) => {
                 match (self.nx(), self.nx() + self.nu()) {
-                    $(($n, $c) => self.flow_jacobian_fixed::<$n, $c>(k, x, u, a, b),)*
-                    _ => self.flow_jacobian(k, x, u, a, b),
+                    $(($n, $c) => self.flow_jacobian_fixed::<$n, $c>(k, x, u, a, b, next),)*
+                    _ => return false,
                 }
             };
         }
         by_size!((2, 3)(2, 4)(4, 6)(4, 8)(8, 12));
+        true
     }
 
     /// [`DiscreteDynamics::flow_jacobian_f64`] for `N` states and `C` = `N` + controls columns,
-    /// on the stack.
+    /// on the stack; with `next`, also the step's end state (the sub-steps are [`flow`]'s).
     fn flow_jacobian_fixed<const N: usize, const C: usize>(
         &self,
         k: usize,
@@ -329,6 +378,7 @@ impl DiscreteDynamics {
         u: &[f64],
         a: &mut [f64],
         b: &mut [f64],
+        next: Option<&mut [f64]>,
     ) {
         let ex = self.exo(k);
         let h = self.dt / self.substeps as f64;
@@ -397,6 +447,9 @@ impl DiscreteDynamics {
             for (d, v) in dst.iter_mut().zip(column) {
                 *d = *v;
             }
+        }
+        if let Some(next) = next {
+            next[..N].copy_from_slice(&cur);
         }
     }
 

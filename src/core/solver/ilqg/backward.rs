@@ -106,7 +106,7 @@ impl Ilqg {
         let traj = &self.nominal;
         let mut v = Value::<NX>::terminal(&traj.derivs[horizon]);
         let mut pass = BackwardPass {
-            s0: problem.cost.terminal(traj.x[horizon].as_slice()),
+            s0: traj.terminal,
             dv1: 0.0,
             dv2: 0.0,
         };
@@ -119,9 +119,7 @@ impl Ilqg {
                     .as_mut_slice()
                     .copy_from_slice(v.s_mat.as_flattened());
             }
-            let running = problem
-                .cost
-                .running(k, traj.x[k].as_slice(), traj.u[k].as_slice());
+            let running = traj.running[k];
             let q0 =
                 knot.expand(&v, (&traj.lin[k], &traj.derivs[k]), running, stochastic, mu) + pass.s0;
             let (l, gain) = (self.ff[k].as_mut_slice(), self.gains[k].as_mut_slice());
@@ -156,7 +154,7 @@ impl Ilqg {
         copy(&term.lxx, &mut bw.s_mat);
         copy(&term.lx, &mut bw.s_vec);
         let mut pass = BackwardPass {
-            s0: problem.cost.terminal(traj.x[horizon].as_slice()),
+            s0: traj.terminal,
             dv1: 0.0,
             dv2: 0.0,
         };
@@ -165,9 +163,7 @@ impl Ilqg {
                 // Only the stochastic merit reads them.
                 copy(&bw.s_mat, &mut self.value_hessians[k]);
             }
-            let running = problem
-                .cost
-                .running(k, traj.x[k].as_slice(), traj.u[k].as_slice());
+            let running = traj.running[k];
             let (lin, sp) = (&traj.lin[k], &traj.sparse[k]);
             let q0 = bw.q_function((lin, &traj.derivs[k]), sp, running, stochastic) + pass.s0;
             bw.regularize(&sp.b, lin, mu);

@@ -28,7 +28,7 @@ mod search;
 pub use convergence::Convergence;
 
 use backward::Backward;
-use rollout::{linearize, rollout};
+use rollout::{ensure_linearized, rollout};
 
 /// Regularisation, relative to the mean diagonal of the value Hessian `S_0`, below which the
 /// backward pass's model is trusted for a convergence verdict.
@@ -143,11 +143,18 @@ struct Trajectory {
     x: Vec<DVector<f64>>,
     u: Vec<DVector<f64>>,
     cost: f64,
+    /// The running cost of every knot and the terminal cost, from the rollout (the backward
+    /// pass's constant terms).
+    running: Vec<f64>,
+    terminal: f64,
     lin: Vec<Linearization>,
     /// The nonzeros of `lin`, for the backward pass's products; filled only for the plants
     /// whose Jacobians the backward pass does not read in place ([`backward::reads_in_place`]).
     sparse: Vec<SparseLinearization>,
     derivs: Vec<CostDerivatives>,
+    /// Whether `lin`, `sparse` and `derivs` belong to `x` and `u` (set by [`rollout::linearize`] and
+    /// by a complete fused rollout, cleared when a rollout starts).
+    linearized: bool,
 }
 
 impl Trajectory {
@@ -156,6 +163,8 @@ impl Trajectory {
             x: (0..=horizon).map(|_| DVector::zeros(nx)).collect(),
             u: (0..horizon).map(|_| DVector::zeros(nu)).collect(),
             cost: f64::INFINITY,
+            running: vec![0.0; horizon],
+            terminal: 0.0,
             lin: (0..horizon)
                 .map(|_| Linearization::new(nx, nu, nw))
                 .collect(),
@@ -165,6 +174,7 @@ impl Trajectory {
             derivs: (0..=horizon)
                 .map(|_| CostDerivatives::new(nx, nu))
                 .collect(),
+            linearized: false,
         }
     }
 }
@@ -328,11 +338,20 @@ impl Ilqg {
             self.nominal.u[k].copy_from(&u_init[k]);
             problem.bounds.clamp(self.nominal.u[k].as_mut_slice());
         }
-        self.nominal.x[0].copy_from_slice(&problem.x0);
-        if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0, f64::INFINITY) {
-            return Err(IlqgError::DivergingInitialGuess { step, horizon });
-        }
+        self.replay(problem)?;
         Ok(self.iterate(problem, start))
+    }
+
+    /// Rolls the nominal's controls out open loop from `problem.x0`, linearising on the way.
+    fn replay(&mut self, problem: &Problem) -> Result<(), IlqgError> {
+        self.nominal.x[0].copy_from_slice(&problem.x0);
+        let inf = f64::INFINITY;
+        rollout(problem, &mut self.nominal, None, None, 0.0, inf, true).map_err(|step| {
+            IlqgError::DivergingInitialGuess {
+                step,
+                horizon: self.dims.3,
+            }
+        })
     }
 
     /// Re-solves after the plan has advanced `shift` knots (receding-horizon replanning): the
@@ -356,18 +375,16 @@ impl Ilqg {
         shift_knots(&mut self.nominal.u, s);
         shift_knots(&mut self.gains, s);
         shift_knots(&mut self.nominal.x, s);
+        self.nominal.linearized = false;
         for l in &mut self.ff {
             zero(l);
         }
         self.solved = false;
-        if self.roll_candidate(problem, 0.0, f64::INFINITY) {
+        if self.roll_candidate(problem, 0.0, f64::INFINITY, true) {
             std::mem::swap(&mut self.nominal, &mut self.candidate);
         } else {
             // The old gains do not hold the plant from here: replay the shifted controls.
-            self.nominal.x[0].copy_from_slice(&problem.x0);
-            if let Err(step) = rollout(problem, &mut self.nominal, None, None, 0.0, f64::INFINITY) {
-                return Err(IlqgError::DivergingInitialGuess { step, horizon });
-            }
+            self.replay(problem)?;
         }
         Ok(self.iterate(problem, start))
     }
@@ -398,7 +415,7 @@ impl Ilqg {
         for l in &mut self.ff {
             zero(l);
         }
-        linearize(problem, &mut self.nominal);
+        ensure_linearized(problem, &mut self.nominal);
         let mut reg = Regularization::new(&self.options);
         let mut iterations = 0;
         let mut history = Vec::with_capacity(self.options.max_iterations);
@@ -406,6 +423,11 @@ impl Ilqg {
         let mut stop = StopReason::MaxIterations;
         let mut finish_after_backward = false;
         let mut record = Convergence::untested(&self.options, reg.mu);
+        // Whether to linearise the next full step on the way: while the full steps of a
+        // deterministic solve are accepted (the next one likely is too). Not for stochastic
+        // solves: there a full step after a full step was rejected 3 times in 4 on the iCub
+        // elbow and the VSA arm (μ falls after a full step and the next one overshoots).
+        let mut full_steps = !stochastic;
 
         for _ in 0..self.options.max_iterations {
             let Some(pass) = self.regularized_backward_pass(problem, &mut reg, stochastic) else {
@@ -429,10 +451,12 @@ impl Ilqg {
                 stop = StopReason::SmallImprovement;
                 break;
             }
-            match self.line_search(problem, &pass, merit_now, stochastic) {
+            let step = self.line_search(problem, &pass, merit_now, stochastic, full_steps);
+            full_steps = !stochastic && step.as_ref().is_some_and(|s| s.alpha == 1.0);
+            match step {
                 Some(step) => {
                     std::mem::swap(&mut self.nominal, &mut self.candidate);
-                    linearize(problem, &mut self.nominal);
+                    ensure_linearized(problem, &mut self.nominal);
                     iterations += 1;
                     history.push(step.after);
                     self.notify(iterations, step.after, reg.mu, step.alpha);

@@ -11,6 +11,11 @@ pub(super) type Policy<'a> = (&'a Trajectory, &'a [DVector<f64>], &'a [DMatrix<f
 /// state or cost) returns the step at which it happened; also once the running costs so far
 /// exceed `limit` (pass `∞` for a full rollout; a finite limit only for a cost that is never
 /// negative, whose total can then only be larger).
+///
+/// With `fused` (and a model linearised in order, see [`linearize`]) the knots are linearised on
+/// the way ([`Dynamics::step_linearized`]): a complete rollout leaves `traj` as [`linearize`]
+/// would, without evaluating the drift twice per knot. The callers fuse the rollouts that are
+/// accepted unless the line search backtracks: the first guess and the full step.
 pub(super) fn rollout(
     problem: &Problem,
     traj: &mut Trajectory,
@@ -18,7 +23,11 @@ pub(super) fn rollout(
     bounds: Option<&Bounds>,
     alpha: f64,
     limit: f64,
+    fused: bool,
 ) -> Result<(), usize> {
+    let fused = fused && !problem.dynamics.parallel_linearization();
+    let pattern = fused && !reads_in_place(problem.dynamics.nx(), problem.dynamics.nu());
+    traj.linearized = false;
     let mut cost = 0.0;
     for k in 0..problem.horizon {
         if let Some((nom, ff, gains)) = policy {
@@ -39,26 +48,43 @@ pub(super) fn rollout(
             }
         }
         let (head, tail) = traj.x.split_at_mut(k + 1);
-        problem.dynamics.step(
-            k,
+        let (x, u, next) = (
             head[k].as_slice(),
             traj.u[k].as_slice(),
             tail[0].as_mut_slice(),
         );
-        cost += problem
-            .cost
-            .running(k, head[k].as_slice(), traj.u[k].as_slice());
+        if fused {
+            let lin = &mut traj.lin[k];
+            problem.dynamics.step_linearized(k, x, u, next, lin);
+            if pattern {
+                traj.sparse[k].assign(lin);
+            }
+            problem
+                .cost
+                .running_derivatives(k, x, u, &mut traj.derivs[k]);
+        } else {
+            problem.dynamics.step(k, x, u, next);
+        }
+        let running = problem.cost.running(k, x, u);
+        traj.running[k] = running;
+        cost += running;
         if cost > limit || !tail[0].iter().all(|v| v.is_finite()) {
             return Err(k + 1);
         }
     }
-    cost += problem.cost.terminal(traj.x[problem.horizon].as_slice());
+    let end = traj.x[problem.horizon].as_slice();
+    traj.terminal = problem.cost.terminal(end);
+    cost += traj.terminal;
     traj.cost = cost;
-    if cost.is_finite() {
-        Ok(())
-    } else {
-        Err(problem.horizon)
+    if !cost.is_finite() {
+        return Err(problem.horizon);
     }
+    if fused {
+        let h = problem.horizon;
+        problem.cost.terminal_derivatives(end, &mut traj.derivs[h]);
+        traj.linearized = true;
+    }
+    Ok(())
 }
 
 /// Linearises the dynamics and differentiates the cost along `traj`. Knots are independent: when
@@ -104,4 +130,12 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
     problem
         .cost
         .terminal_derivatives(xs[h].as_slice(), &mut traj.derivs[h]);
+    traj.linearized = true;
+}
+
+/// [`linearize`] unless a fused rollout already did.
+pub(super) fn ensure_linearized(problem: &Problem, traj: &mut Trajectory) {
+    if !traj.linearized {
+        linearize(problem, traj);
+    }
 }

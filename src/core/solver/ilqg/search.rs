@@ -6,8 +6,14 @@ use super::*;
 impl Ilqg {
     /// Rolls the candidate out from `x0` under the nominal plan, its feedforward scaled by
     /// `alpha` and its gains (clamped to the bounds); false if the rollout diverged or its cost
-    /// passed `limit` (see [`rollout`]).
-    pub(super) fn roll_candidate(&mut self, problem: &Problem, alpha: f64, limit: f64) -> bool {
+    /// passed `limit` (see [`rollout`]); `fused` linearises it on the way.
+    pub(super) fn roll_candidate(
+        &mut self,
+        problem: &Problem,
+        alpha: f64,
+        limit: f64,
+        fused: bool,
+    ) -> bool {
         self.candidate.x[0].copy_from_slice(&problem.x0);
         let policy = Some((&self.nominal, &self.ff[..], &self.gains[..]));
         rollout(
@@ -17,6 +23,7 @@ impl Ilqg {
             Some(&problem.bounds),
             alpha,
             limit,
+            fused,
         )
         .is_ok()
     }
@@ -53,20 +60,25 @@ impl Ilqg {
     /// the cost and the cost is never negative, a candidate's rollout stops as soon as its cost
     /// passes the nominal's: it would be rejected anyway, so the steps taken are the same, and
     /// the long steps the early iterations reject cost a fraction of a rollout.
+    ///
+    /// With `fuse_full_step` the full step (α = 1) is linearised on the way ([`rollout`]): the
+    /// caller asks for it while full steps are being accepted, since a rejected trial's
+    /// Jacobians are wasted (they cost about two rollouts of the arm).
     pub(super) fn line_search(
         &mut self,
         problem: &Problem,
         pass: &BackwardPass,
         merit_now: f64,
         stochastic: bool,
+        fuse_full_step: bool,
     ) -> Option<Step> {
         let limit = if !stochastic && problem.cost.nonnegative() {
             merit_now
         } else {
             f64::INFINITY
         };
-        for alpha in ALPHAS {
-            if !self.roll_candidate(problem, alpha, limit) {
+        for (i, alpha) in ALPHAS.into_iter().enumerate() {
+            if !self.roll_candidate(problem, alpha, limit, fuse_full_step && i == 0) {
                 continue;
             }
             let merit_new = self.merit(problem, stochastic, true);
