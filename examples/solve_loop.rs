@@ -2,14 +2,14 @@
 //! builds (`/usr/bin/time -v`, alternated): `cargo run --release --example solve_loop --
 //! config/two_link_reach.toml 3000 [KEY=VALUE ...]`. It times what `benches/solver.rs` times,
 //! not `vic plan` (which adds the scenario's method and, for stochastic plans, a deterministic
-//! first phase): `Ilqg::solve` from the scenario's first guess, or with a feedback delay the
+//! first phase): `Ilqg::try_solve_into` (one reused `Solution`) from the scenario's first guess, or with a feedback delay the
 //! delayed planner (the undelayed tail problem and the delayed gains), cold every time.
 //! Prints the sum of the costs exactly (shortest round-trip form): two builds that compute the
 //! same plans print the same.
 
 use std::path::Path;
 use vic::core::delay::DelayedPlanner;
-use vic::core::solver::Ilqg;
+use vic::core::solver::{Ilqg, Solution};
 use vic::planning::plan;
 use vic::planning::scenario::Scenario;
 
@@ -32,8 +32,12 @@ fn main() {
     let mut sum = 0.0;
     if d == 0 {
         let mut solver = Ilqg::new(&plain, s.solver.options.clone());
+        let mut out = Solution::empty();
         for _ in 0..n {
-            sum += solver.solve(&plain, &setup.u_init).cost;
+            solver
+                .try_solve_into(&plain, &setup.u_init, &mut out)
+                .expect("solves");
+            sum += out.cost;
         }
     } else {
         let delayed = setup.delayed(d);

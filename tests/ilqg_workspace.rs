@@ -71,6 +71,71 @@ fn iterations_do_not_allocate() {
     assert_iterations_do_not_allocate("icub_elbow.toml", &[], (2, 20));
 }
 
+/// A solve into a reused `Solution` allocates nothing at all, and gives what a fresh solve
+/// gives to the bit, whether the reused one held a plan of the same size or of another.
+#[test]
+fn a_solve_into_a_reused_solution_allocates_nothing() {
+    let bits = |v: &[DVector<f64>]| -> Vec<u64> {
+        v.iter()
+            .flat_map(|x| x.iter().map(|v| v.to_bits()))
+            .collect()
+    };
+    for (file, overrides) in [
+        ("two_link_reach.toml", &[][..]),
+        ("two_link_reach.toml", &["actuator.torque_limit=0.25"][..]),
+        ("icub_elbow.toml", &[][..]),
+    ] {
+        // A plan of another size first (the single joint): the reused storage must take the
+        // shape of this problem's.
+        let (s2, setup2) = load("single_joint_delay.toml", &[]);
+        let other = problem(&s2, &setup2);
+        let (s, setup) = load(file, overrides);
+        let problem = problem(&s, &setup);
+        let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+        let fresh = solver.try_solve(&problem, &setup.u_init).expect("solves");
+        let mut out = Ilqg::new(&other, s2.solver.options.clone())
+            .try_solve(&other, &setup2.u_init)
+            .expect("solves");
+        for round in 0..2 {
+            let before = allocations();
+            solver
+                .try_solve_into(&problem, &setup.u_init, &mut out)
+                .expect("solves");
+            let allocated = allocations() - before;
+            if round == 1 {
+                assert_eq!(
+                    allocated, 0,
+                    "{file} {overrides:?}: a solve into a reused solution"
+                );
+            }
+            let what = format!("{file} {overrides:?}, round {round}");
+            assert_eq!(bits(&out.x), bits(&fresh.x), "{what}: x");
+            assert_eq!(bits(&out.u), bits(&fresh.u), "{what}: u");
+            let gains = |g: &[nalgebra::DMatrix<f64>]| -> Vec<u64> {
+                g.iter()
+                    .flat_map(|m| m.iter().map(|v| v.to_bits()))
+                    .collect()
+            };
+            assert_eq!(gains(&out.gains), gains(&fresh.gains), "{what}: gains");
+            assert_eq!(
+                out.gains[0].shape(),
+                fresh.gains[0].shape(),
+                "{what}: gain shape"
+            );
+            assert_eq!(out.cost.to_bits(), fresh.cost.to_bits(), "{what}: cost");
+            assert_eq!(out.history, fresh.history, "{what}: history");
+            assert_eq!((out.iterations, out.stop), (fresh.iterations, fresh.stop));
+            // The same shapes now: the next solve must write every entry in place.
+            out.x
+                .iter_mut()
+                .chain(&mut out.u)
+                .for_each(|v| v.fill(f64::NAN));
+            out.gains.iter_mut().for_each(|m| m.fill(f64::NAN));
+            out.history.push(f64::NAN);
+        }
+    }
+}
+
 #[test]
 fn delayed_iterations_do_not_allocate() {
     let (s, setup) = load("single_joint_delay.toml", &["noise.kind=none"]);
