@@ -39,6 +39,18 @@ pub(super) fn policy<const M: usize>(
     let unbounded = (0..nu).all(|j| lower[j] == f64::NEG_INFINITY && upper[j] == f64::INFINITY);
     // Written in place, never moved (see `SmallCholesky::EMPTY`).
     let mut factor = SmallCholesky::<M>::EMPTY;
+    if unbounded && matches!(nx, 2 | 4 | 8) {
+        let all = [0, 1, 2, 3, 4, 5, 6, 7];
+        if !factor.factorize(h, &all[..nu]) {
+            return false;
+        }
+        match nx {
+            2 => newton_and_gains::<2, 3, M>(&factor, qu, qux_reg, l, gain),
+            4 => newton_and_gains::<4, 5, M>(&factor, qu, qux_reg, l, gain),
+            _ => newton_and_gains::<8, 9, M>(&factor, qu, qux_reg, l, gain),
+        }
+        return true;
+    }
     let (x, free, factored) = if unbounded {
         let all = [0, 1, 2, 3, 4, 5, 6, 7];
         match newton_step(h, qu, &all[..nu], &mut factor) {
@@ -107,6 +119,40 @@ fn free_gains<const N: usize, const M: usize>(
     }
 }
 
+/// Without limits, for the paper's state sizes: the Newton step `l = −Q_uu⁻¹ Q_u` and the gains
+/// `L = −Q_uu⁻¹ Q_ux` (`N` columns) from one substitution of `C` = `N` + 1 right-hand sides
+/// ([`SmallCholesky::solve_many`]: per column the operations of [`newton_step`] and
+/// [`free_gains`], so the same numbers).
+fn newton_and_gains<const N: usize, const C: usize, const M: usize>(
+    factor: &SmallCholesky<M>,
+    qu: &[f64],
+    qux: &[f64],
+    l: &mut [f64],
+    gain: &mut [f64],
+) {
+    debug_assert_eq!(C, N + 1);
+    let nu = qu.len();
+    let mut cols = [[0.0; M]; C];
+    for (a, &g) in qu.iter().enumerate() {
+        cols[0][a] = -g;
+    }
+    // Element loops, not slice copies: a copy of one or two numbers is a call to memcpy.
+    for (col, q) in cols[1..].iter_mut().zip(qux.chunks_exact(nu)) {
+        for (v, q) in col.iter_mut().zip(q) {
+            *v = *q;
+        }
+    }
+    factor.solve_many(&mut cols);
+    for (l, v) in l.iter_mut().zip(&cols[0]) {
+        *l = *v;
+    }
+    for (c, col) in cols[1..].iter().enumerate() {
+        for (g, v) in gain[c * nu..(c + 1) * nu].iter_mut().zip(&col[..nu]) {
+            *g = -v;
+        }
+    }
+}
+
 /// The unconstrained Newton step `x = −H⁻¹ g`, with the Cholesky factor of `H` over the indices
 /// `idx` (all of them) written into `factor`; `None` when `H` is not positive definite.
 fn newton_step<const M: usize>(
@@ -124,4 +170,55 @@ fn newton_step<const M: usize>(
     }
     factor.solve(&mut x[..idx.len()]);
     Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::rngs::StdRng;
+    use rand::{RngExt, SeedableRng};
+
+    /// The Newton step and the gains from one substitution are those of the separate
+    /// substitutions ([`newton_step`], then [`free_gains`]) to the bit, for every control count
+    /// and the paper's state sizes, from well and badly scaled `Q_uu`.
+    #[test]
+    fn one_substitution_gives_the_separate_ones_bit_for_bit() {
+        fn check<const N: usize, const C: usize>(rng: &mut StdRng) {
+            for nu in 1..=MAX_QP {
+                let scale = 10f64.powi(rng.random_range(-6..7));
+                let f: Vec<f64> = (0..nu * nu).map(|_| rng.random_range(-1.0..1.0)).collect();
+                // Q_uu = F Fᵀ + I/10, scaled: positive definite.
+                let mut quu = vec![0.0; nu * nu];
+                for i in 0..nu {
+                    for j in 0..nu {
+                        let dot: f64 = (0..nu).map(|k| f[i * nu + k] * f[j * nu + k]).sum();
+                        quu[j * nu + i] = scale * (dot + if i == j { 0.1 } else { 0.0 });
+                    }
+                }
+                let qu: Vec<f64> = (0..nu).map(|_| rng.random_range(-5.0..5.0)).collect();
+                let qux: Vec<f64> = (0..nu * N).map(|_| rng.random_range(-5.0..5.0)).collect();
+                let h = |i: usize, j: usize| quu[j * nu + i];
+                let all = [0, 1, 2, 3, 4, 5, 6, 7];
+                let mut factor = SmallCholesky::<MAX_QP>::EMPTY;
+                let step = newton_step(h, &qu, &all[..nu], &mut factor).expect("definite");
+                let mut gains = vec![f64::NAN; nu * N];
+                free_gains::<N, MAX_QP>(&factor, &all[..nu], &qux, &mut gains);
+                let (mut l, mut gains_once) = (vec![f64::NAN; nu], vec![f64::NAN; nu * N]);
+                newton_and_gains::<N, C, MAX_QP>(&factor, &qu, &qux, &mut l, &mut gains_once);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&l), bits(&step[..nu]), "l, {nu} controls, {N} states");
+                assert_eq!(
+                    bits(&gains_once),
+                    bits(&gains),
+                    "L, {nu} controls, {N} states"
+                );
+            }
+        }
+        let mut rng = StdRng::seed_from_u64(5);
+        for _ in 0..50 {
+            check::<2, 3>(&mut rng);
+            check::<4, 5>(&mut rng);
+            check::<8, 9>(&mut rng);
+        }
+    }
 }
