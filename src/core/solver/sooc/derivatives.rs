@@ -2,7 +2,7 @@
 //! through the discretised flow: first derivatives (`expand`, every iteration) and the
 //! costate-contracted second derivatives that the Newton model adds (`second_order`).
 
-use super::directional::{flow_second_derivatives, flow_third_contracted};
+use super::directional::{flow_second_and_third, flow_second_derivatives, flow_third_contracted};
 use super::{MomentDynamics, MomentExpansion, costate_matrix, lift, unpack};
 use crate::core::dense::zero;
 use crate::core::dynamics::{DiscreteDynamics, Dynamics, NoiseKind};
@@ -18,6 +18,19 @@ impl MomentDynamics<'_> {
     /// second-order directions with `∂²Φ/∂u_a∂u_b`, which the Newton model adds
     /// ([`flow_second_derivatives`]).
     pub fn expand(&self, k: usize, z: &[f64], u: &[f64], e: &mut MomentExpansion) {
+        self.expand_at(k, z, u, false, e);
+    }
+
+    /// [`MomentDynamics::expand`], for a [`MomentDynamics::second_order`] with the third
+    /// derivatives at the same point next: the flow's third derivatives are taken along their
+    /// directions now, and the second derivatives come from the same flows
+    /// ([`flow_second_and_third`]: bit for bit those of [`MomentDynamics::expand`], without its
+    /// own second-order flows; a sixth of the Newton iteration's flows on the arm).
+    pub fn expand_with_third(&self, k: usize, z: &[f64], u: &[f64], e: &mut MomentExpansion) {
+        self.expand_at(k, z, u, true, e);
+    }
+
+    fn expand_at(&self, k: usize, z: &[f64], u: &[f64], third: bool, e: &mut MomentExpansion) {
         let base = self.base();
         let (n, m) = (base.nx(), base.nu());
         base.linearize(k, &z[..n], u, &mut e.base);
@@ -28,7 +41,11 @@ impl MomentDynamics<'_> {
         e.b.view_mut((0, 0), (n, m)).copy_from(&e.base.b);
         covariance_transition(e);
         let at = At::new(base, k, z, u);
-        flow_second_derivatives(at, e);
+        if third {
+            flow_second_and_third(at, e);
+        } else {
+            flow_second_derivatives(at, e);
+        }
         covariance_sensitivity(at, e);
     }
 

@@ -32,7 +32,39 @@ pub(super) fn flow_second_derivatives(at: At, s: &mut MomentExpansion) {
     let mut dirs = [Direction::default(); MAX_DIRECTIONS];
     let count = second_order_directions(nv, &mut dirs);
     let mut d2 = [[0.0; MAX_NX]; MAX_DIRECTIONS];
-    directional::<2, LANES2>(at, &dirs[..count], &mut d2);
+    directional::<2, LANES2>(at, &dirs[..count], &mut d2, None);
+    // `second_order_directions` lists `e_a + e_b` after the `nv` directions `e_a`.
+    store_second(s, n, nv, &d2, |pair| nv + pair);
+    s.d3_ready = false;
+}
+
+/// [`flow_second_derivatives`] and the directional third derivatives that
+/// [`flow_third_contracted`] contracts (into `s.d3`), from the third-order flows alone: the
+/// directions `e_a` and `e_a + e_b` of the second derivatives are among the third-order ones,
+/// and a [`Taylor`] of order 3 carries the second-order coefficient exactly as one of order 2
+/// does (the same operations, lane by lane), so the second derivatives are
+/// [`flow_second_derivatives`]'s bit for bit and its separate order-2 flows are saved.
+pub(super) fn flow_second_and_third(at: At, s: &mut MomentExpansion) {
+    let n = at.base.nx();
+    let nv = n + at.base.nu();
+    let mut dirs = [Direction::default(); MAX_DIRECTIONS];
+    let count = directions(n, nv, &mut dirs);
+    let mut d2 = [[0.0; MAX_NX]; MAX_DIRECTIONS];
+    directional::<3, LANES>(at, &dirs[..count], &mut s.d3[..count], Some(&mut d2));
+    // `directions` lists `e_a + e_b` (then `e_a − e_b`) after the `nv` directions `e_a`.
+    store_second(s, n, nv, &d2, |pair| nv + 2 * pair);
+    s.d3_ready = true;
+}
+
+/// `dA_j` and `∂²Φ/∂u_a∂u_b` from the second derivatives `d2` along `e_a` (row `a`) and
+/// `e_a + e_b` (row `plus(p)` for the `p`-th pair `a < b` in lexicographic order).
+fn store_second(
+    s: &mut MomentExpansion,
+    n: usize,
+    nv: usize,
+    d2: &[[f64; MAX_NX]],
+    plus: impl Fn(usize) -> usize,
+) {
     let mut put = |a: usize, b: usize, d: &[f64; MAX_NX]| {
         for (r, &v) in d[..n].iter().enumerate() {
             if b < n {
@@ -47,18 +79,25 @@ pub(super) fn flow_second_derivatives(at: At, s: &mut MomentExpansion) {
             }
         }
     };
-    let mut next = nv;
+    let mut pair = 0;
     for a in 0..nv {
         put(a, a, &d2[a]);
         for b in a + 1..nv {
             let mut d = [0.0; MAX_NX];
             for r in 0..n {
-                d[r] = (d2[next][r] - d2[a][r] - d2[b][r]) / 2.0;
+                d[r] = (d2[plus(pair)][r] - d2[a][r] - d2[b][r]) / 2.0;
             }
-            next += 1;
+            pair += 1;
             put(a, b, &d);
         }
     }
+}
+
+/// How many directions [`flow_third_contracted`] takes the flow along for `n` states and `nv`
+/// variables (the length [`crate::core::solver::sooc::MomentExpansion`] sizes `d3` for).
+pub(super) fn third_order_direction_count(n: usize, nv: usize) -> usize {
+    let mut dirs = [Direction::default(); MAX_DIRECTIONS];
+    directions(n, nv, &mut dirs)
 }
 
 /// `s.h3 = 2 Σ_{r,c} T_{rc} ∂³Φ_r/∂x_c∂v_a∂v_b` with `T = s.t2`, from third derivatives of the
@@ -74,14 +113,20 @@ pub(super) fn flow_second_derivatives(at: At, s: &mut MomentExpansion) {
 /// where a triple-nested dual (`Dual<Dual<Dual64>>`, one flow per entry) carries eight numbers
 /// and multiplies with 27 products, a lane carries three derivatives and 11 products. The
 /// entries are combinations of a few directions, so their rounding is that of the largest
-/// term combined (relative 1e-15 of it), not the nested duals' bits.
+/// term combined (relative 1e-15 of it), not the nested duals' bits. The directional
+/// derivatives are those [`flow_second_and_third`] kept in `s.d3` at this point if it ran,
+/// computed here otherwise.
 pub(super) fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
     let n = at.base.nx();
     let nv = n + at.base.nu();
     let mut dirs = [Direction::default(); MAX_DIRECTIONS];
     let count = directions(n, nv, &mut dirs);
-    let mut d3 = [[0.0; MAX_NX]; MAX_DIRECTIONS];
-    directional::<3, LANES>(at, &dirs[..count], &mut d3);
+    if !s.d3_ready {
+        directional::<3, LANES>(at, &dirs[..count], &mut s.d3[..count], None);
+        s.d3_ready = true;
+    }
+    // Moved out for the loop (no allocation), back at the end.
+    let d3 = std::mem::take(&mut s.d3);
     // Back from the directions to the entries, in the order `directions` lists them.
     zero(&mut s.h3);
     let mut next = d3.iter();
@@ -131,6 +176,7 @@ pub(super) fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
             }
         }
     }
+    s.d3 = d3;
 }
 
 /// Directions a [`Taylor`] carries through one flow: enough to fill SIMD registers several
@@ -215,11 +261,13 @@ impl Direction {
 }
 
 /// The `ORDER`-th derivative of the flow along each of `dirs` into `out` (one row per
-/// direction, one entry per state), `L` directions to a flow on one [`Taylor`].
+/// direction, one entry per state), and the second into `second` if given; `L` directions to
+/// a flow on one [`Taylor`].
 fn directional<const ORDER: usize, const L: usize>(
     at: At,
     dirs: &[Direction],
     out: &mut [[f64; MAX_NX]],
+    mut second: Option<&mut [[f64; MAX_NX]]>,
 ) {
     let At { base, k, x, u } = at;
     let (n, m) = (base.nx(), base.nu());
@@ -239,6 +287,11 @@ fn directional<const ORDER: usize, const L: usize>(
             }
             for (r, o) in flow[..n].iter().enumerate() {
                 out[first + l][r] = o.v[ORDER - 1][l];
+            }
+            if let Some(second) = second.as_deref_mut() {
+                for (r, o) in flow[..n].iter().enumerate() {
+                    second[first + l][r] = o.v[1][l];
+                }
             }
         }
     }
@@ -432,6 +485,69 @@ mod tests {
         }
     }
 
+    /// A moment state `z`, control `u` and costate `λ` away from any symmetry: stiffness
+    /// positive, a diagonal-dominant covariance, costates of both signs.
+    fn point(base: &DiscreteDynamics) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let (n, m) = (base.nx(), base.nu());
+        let nz = n + n * (n + 1) / 2;
+        let mut z = vec![0.0; nz];
+        for (i, zi) in z[..n].iter_mut().enumerate() {
+            *zi = 0.3 + 0.17 * i as f64;
+        }
+        let u: Vec<f64> = (0..m).map(|i| 2.0 + 3.0 * i as f64).collect();
+        let mut e = n;
+        for a in 0..n {
+            for b in a..n {
+                z[e] = if a == b {
+                    1e-2
+                } else {
+                    1e-3 * (a + 2 * b) as f64
+                };
+                e += 1;
+            }
+        }
+        let lam: Vec<f64> = (0..nz).map(|i| ((i * 7 % 5) as f64 - 2.0) * 1e3).collect();
+        (z, u, lam)
+    }
+
+    /// The second derivatives from the third-order flows ([`flow_second_and_third`]) are the
+    /// second-order flows' bit for bit, and so are the moment step's first derivatives and the
+    /// contraction that reuses the third derivatives computed with them.
+    #[test]
+    fn expanding_with_the_third_derivatives_changes_no_bit() {
+        for (what, base) in cases() {
+            let moments = MomentDynamics::new(&base);
+            let (z, u, lam) = point(&base);
+            let mut apart = MomentExpansion::for_dynamics(&moments);
+            moments.expand(1, &z, &u, &mut apart);
+            moments.second_order(1, &z, &u, &lam, true, &mut apart);
+            let mut fused = MomentExpansion::for_dynamics(&moments);
+            moments.expand_with_third(1, &z, &u, &mut fused);
+            assert!(
+                fused.d3_ready,
+                "{what}: the third derivatives were not kept"
+            );
+            moments.second_order(1, &z, &u, &lam, true, &mut fused);
+            assert_eq!(apart.a, fused.a, "{what}: ∂z⁺/∂z");
+            assert_eq!(apart.b, fused.b, "{what}: ∂z⁺/∂u");
+            assert_eq!(apart.da, fused.da, "{what}: dA_j");
+            assert_eq!(apart.phi_uu, fused.phi_uu, "{what}: ∂²Φ/∂u∂u");
+            assert_eq!(
+                apart.h3, fused.h3,
+                "{what}: the contracted third derivatives"
+            );
+            assert!(apart.h3.abs().max() > 0.0, "{what}: vacuous");
+            // A plain expansion elsewhere drops them: the next contraction computes its own.
+            let mut x2 = z.clone();
+            x2[0] += 0.1;
+            moments.expand(1, &x2, &u, &mut fused);
+            assert!(
+                !fused.d3_ready,
+                "{what}: third derivatives of another point kept"
+            );
+        }
+    }
+
     /// The contracted third derivatives from univariate Taylor polynomials agree with the
     /// triple-nested duals (one flow per entry, every entry its own derivative arithmetic) on
     /// the three actuators of the two-link arm in the divergent field and on the single joint,
@@ -439,27 +555,8 @@ mod tests {
     #[test]
     fn taylor_third_derivatives_match_nested_duals() {
         for (what, base) in cases() {
-            let (n, m) = (base.nx(), base.nu());
             let moments = MomentDynamics::new(&base);
-            // A state and control away from any symmetry; stiffness positive.
-            let x: Vec<f64> = (0..n).map(|i| 0.3 + 0.17 * i as f64).collect();
-            let u: Vec<f64> = (0..m).map(|i| 2.0 + 3.0 * i as f64).collect();
-            let nz = n + n * (n + 1) / 2;
-            let mut z = vec![0.0; nz];
-            z[..n].copy_from_slice(&x);
-            // Covariance: a diagonal-dominant vech; costate: arbitrary signs.
-            let mut e = n;
-            for a in 0..n {
-                for b in a..n {
-                    z[e] = if a == b {
-                        1e-2
-                    } else {
-                        1e-3 * (a + 2 * b) as f64
-                    };
-                    e += 1;
-                }
-            }
-            let lam: Vec<f64> = (0..nz).map(|i| ((i * 7 % 5) as f64 - 2.0) * 1e3).collect();
+            let (z, u, lam) = point(&base);
             let mut s = MomentExpansion::for_dynamics(&moments);
             moments.expand(1, &z, &u, &mut s);
             moments.second_order(1, &z, &u, &lam, true, &mut s);

@@ -1,6 +1,7 @@
 //! The derivatives of the moment step at one knot and their contraction with the costate of the
 //! next knot: the curvature term that turns the Gauss–Newton model into Newton's.
 
+use super::directional::third_order_direction_count;
 use super::{MomentDynamics, costate_matrix, vech_len};
 use crate::core::dense::zero;
 use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
@@ -37,6 +38,11 @@ pub struct MomentExpansion {
     pub(super) h3: DMatrix<f64>,
     /// The costate `h3` was contracted with (checked by [`MomentExpansion::curvature`]).
     pub(super) h3_costate: Vec<f64>,
+    /// The flow's third derivatives along the directions `h3` is recovered from (one row per
+    /// direction), valid at the expansion's point when `d3_ready`: computed by
+    /// [`MomentDynamics::expand_with_third`] or by the first contraction, reused by the next.
+    pub(super) d3: Vec<[f64; MAX_NX]>,
+    pub(super) d3_ready: bool,
     /// Whether the noise gain is nonlinear in the state (torque noise through `M⁻¹(q)`): then
     /// `d2c`, `d2cx` hold its second and third derivatives.
     pub(super) curved_model: bool,
@@ -87,6 +93,8 @@ impl MomentExpansion {
         MomentExpansion {
             h3: z(nv, nv),
             h3_costate: vec![0.0; nz],
+            d3: vec![[0.0; MAX_NX]; third_order_direction_count(n, nv)],
+            d3_ready: false,
             curved_model: curved,
             d2c: (0..pairs).map(|_| z(n, p)).collect(),
             d2cx: (0..pairs)

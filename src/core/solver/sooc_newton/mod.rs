@@ -431,13 +431,15 @@ impl SoocSolver {
     /// Brings the model up to date with the trajectory: first derivatives and costates after
     /// a step, the Newton curvature when this iteration tries Newton. Whether it does.
     fn prepare_model(&mut self, problem: &SoocProblem, model: &mut ModelState) -> bool {
+        let try_newton = model.gauss_newton_run.is_multiple_of(NEWTON_RETRY);
         if model.needs_expansion {
-            self.expand(problem);
+            // The exact Newton model comes next: its third-order flows give the first
+            // expansion's second derivatives as well.
+            self.expand(problem, try_newton && model.third);
             self.costates();
             model.needs_expansion = false;
             model.has_second_order = false;
         }
-        let try_newton = model.gauss_newton_run.is_multiple_of(NEWTON_RETRY);
         if try_newton && !model.has_second_order {
             self.expand_second_order(problem, model.third);
             model.has_second_order = true;
@@ -509,8 +511,9 @@ impl SoocSolver {
     }
 
     /// First derivatives of the moment step and the cost derivatives at every knot (in
-    /// parallel: the knots are independent).
-    fn expand(&mut self, problem: &SoocProblem) {
+    /// parallel: the knots are independent); with `third`, the flow's third derivatives for
+    /// the Newton model that follows ([`MomentDynamics::expand_with_third`]).
+    fn expand(&mut self, problem: &SoocProblem, third: bool) {
         let h = self.horizon;
         let (z, u) = (&self.z, &self.u);
         self.expansions
@@ -518,9 +521,12 @@ impl SoocSolver {
             .zip(self.derivs[..h].par_iter_mut())
             .enumerate()
             .for_each(|(k, (e, d))| {
-                problem
-                    .dynamics
-                    .expand(k, z[k].as_slice(), u[k].as_slice(), e);
+                let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
+                if third {
+                    problem.dynamics.expand_with_third(k, zk, uk, e);
+                } else {
+                    problem.dynamics.expand(k, zk, uk, e);
+                }
                 problem
                     .cost
                     .running_derivatives(k, z[k].as_slice(), u[k].as_slice(), d);
