@@ -221,7 +221,7 @@ impl Dynamics for DiscreteDynamics {
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         // DMatrix is column-major: its slices have flow_jacobian's layout.
         self.flow_jacobian_f64(k, x, u, lin.a.as_mut_slice(), lin.b.as_mut_slice());
-        self.noise_linearization(x, u, lin, true);
+        self.noise_linearization(x, u, lin);
     }
 
     fn step_linearized(
@@ -237,7 +237,7 @@ impl Dynamics for DiscreteDynamics {
             self.flow(k, x, u, next);
             self.flow_jacobian(k, x, u, a, b);
         }
-        self.noise_linearization(x, u, lin, true);
+        self.noise_linearization(x, u, lin);
     }
 
     fn parallel_linearization(&self) -> bool {
@@ -247,16 +247,9 @@ impl Dynamics for DiscreteDynamics {
 }
 
 impl DiscreteDynamics {
-    /// The noise part of the linearisation: `c_i`, `Cx_i` and (if `with_cu`) `Cu_i`, and whether
-    /// the noise depends on the state or controls at all. SOOC's covariance step, which needs no
-    /// `Cu`, calls it with `with_cu = false`.
-    pub(crate) fn noise_linearization(
-        &self,
-        x: &[f64],
-        u: &[f64],
-        lin: &mut Linearization,
-        with_cu: bool,
-    ) {
+    /// The noise part of the linearisation: `c_i`, `Cx_i`, `Cu_i`, and whether the noise
+    /// depends on the state or controls at all.
+    fn noise_linearization(&self, x: &[f64], u: &[f64], lin: &mut Linearization) {
         let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
         if nw == 0 {
             lin.noise = NoiseKind::None;
@@ -283,9 +276,7 @@ impl DiscreteDynamics {
                 for r in 0..nx {
                     let v = dgu[j * block + ch * nx + r];
                     dependent |= v != 0.0;
-                    if with_cu {
-                        lin.cu[ch][(r, j)] = v;
-                    }
+                    lin.cu[ch][(r, j)] = v;
                 }
             }
         }

@@ -1,11 +1,10 @@
 //! The mean-and-covariance step of the open-loop plant (the covariance propagation
 //! `P⁺ = A P Aᵀ + Σ_i (c_i c_iᵀ + Cx_i P Cx_iᵀ)` of the module documentation).
 
-use super::{MomentExpansion, lift, pack, unpack, vech_len};
+use super::{MomentExpansion, pack, unpack, vech_len};
 use crate::core::dense::zero;
 use crate::core::dynamics::{DiscreteDynamics, Dynamics, Linearization, NoiseKind};
 use nalgebra::DMatrix;
-use num_dual::Dual64;
 use std::sync::Mutex;
 
 /// Scratch matrices for one evaluation of the moment dynamics.
@@ -85,30 +84,6 @@ fn add_sandwich(
     }
 }
 
-/// The parts of the plant's linearisation that the covariance step needs: `A`, `c_i`, `Cx_i`
-/// (not `B`: m fewer dual flow evaluations per step of every line-search rollout). Computed as
-/// [`DiscreteDynamics`]'s `linearize` computes them, so the values are the same.
-fn state_linearization(
-    base: &DiscreteDynamics,
-    k: usize,
-    x: &[f64],
-    u: &[f64],
-    lin: &mut Linearization,
-) {
-    let (n, m) = (base.nx(), base.nu());
-    let (mut xd, ud) = lift::<Dual64>(x, u);
-    let mut out = [Dual64::from(0.0); crate::core::scalar::MAX_NX];
-    for j in 0..n {
-        xd[j].eps = 1.0;
-        base.flow(k, &xd[..n], &ud[..m], &mut out[..n]);
-        xd[j].eps = 0.0;
-        for r in 0..n {
-            lin.a[(r, j)] = out[r].eps;
-        }
-    }
-    base.noise_linearization(x, u, lin, false);
-}
-
 impl Dynamics for MomentDynamics<'_> {
     fn nx(&self) -> usize {
         let n = self.base.nx();
@@ -125,8 +100,10 @@ impl Dynamics for MomentDynamics<'_> {
         let n = self.base.nx();
         let mut guard = self.scratch.lock().expect("scratch lock");
         let s = &mut *guard;
-        self.base.step(k, &z[..n], u, &mut next[..n]);
-        state_linearization(self.base, k, &z[..n], u, &mut s.lin);
+        // The mean's step and `A` from one pass through the sub-steps (the chain rule runs
+        // through the step's own states), `A` being the one the expansion at this point uses.
+        self.base
+            .step_linearized(k, &z[..n], u, &mut next[..n], &mut s.lin);
         unpack(n, &z[n..], &mut s.p);
         zero(&mut s.next);
         add_sandwich(&mut s.next, 1.0, &s.lin.a, &s.p, &s.lin.a, &mut s.t1);
