@@ -135,9 +135,30 @@ impl DiscreteDynamics {
         &self.exogenous[k.min(self.exogenous.len() - 1)]
     }
 
-    /// The deterministic step `Φ_Δ(x, u)` in any scalar type (so it can be differentiated).
+    /// The deterministic step `Φ_Δ(x, u)` in any scalar type (so it can be differentiated), in
+    /// AVX2's 256-bit registers where [`crate::core::wide`] allows it (the same numbers to the
+    /// bit; SOOC's Taylor-polynomial flows, most of its time, gain the most).
     pub fn flow<S: Scalar>(&self, k: usize, x: &[S], u: &[S], next: &mut [S]) {
-        flow(
+        #[cfg(target_arch = "x86_64")]
+        if crate::core::wide::enabled() {
+            // SAFETY: `enabled` is true only where the CPU reported AVX2.
+            return unsafe { self.flow_avx2(k, x, u, next) };
+        }
+        self.flow_inlined(k, x, u, next);
+    }
+
+    /// [`DiscreteDynamics::flow`] compiled for AVX2 (see [`crate::core::wide`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn flow_avx2<S: Scalar>(&self, k: usize, x: &[S], u: &[S], next: &mut [S]) {
+        self.flow_inlined(k, x, u, next);
+    }
+
+    /// The step, inlined into both callers so that each compiles the drift for its own
+    /// instruction set.
+    #[inline(always)]
+    fn flow_inlined<S: Scalar>(&self, k: usize, x: &[S], u: &[S], next: &mut [S]) {
+        flow_body(
             &self.model,
             self.exo(k),
             self.dt,
@@ -154,6 +175,22 @@ impl DiscreteDynamics {
 /// held. The one integrator of the project: the planner, the Monte Carlo and the board use it.
 #[allow(clippy::too_many_arguments)]
 pub fn flow<S: Scalar>(
+    model: &ArmModel,
+    ex: &Exogenous,
+    dt: f64,
+    substeps: usize,
+    integrator: Integrator,
+    x: &[S],
+    u: &[S],
+    next: &mut [S],
+) {
+    flow_body(model, ex, dt, substeps, integrator, x, u, next);
+}
+
+/// [`flow`]'s body, inlined where it is compiled for a particular instruction set.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn flow_body<S: Scalar>(
     model: &ArmModel,
     ex: &Exogenous,
     dt: f64,
@@ -351,7 +388,7 @@ impl DiscreteDynamics {
         macro_rules! by_size {
             ($(($n:literal, $c:literal))*) => {
                 match (self.nx(), self.nx() + self.nu()) {
-                    $(($n, $c) => self.flow_jacobian_fixed::<$n, $c>(k, x, u, a, b, next),)*
+                    $(($n, $c) => self.flow_jacobian_sized::<$n, $c>(k, x, u, a, b, next),)*
                     _ => return false,
                 }
             };
@@ -360,8 +397,45 @@ impl DiscreteDynamics {
         true
     }
 
+    /// [`DiscreteDynamics::flow_jacobian_fixed`] in AVX2's 256-bit registers where
+    /// [`crate::core::wide`] allows it (the same numbers to the bit), else portably.
+    fn flow_jacobian_sized<const N: usize, const C: usize>(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        a: &mut [f64],
+        b: &mut [f64],
+        next: Option<&mut [f64]>,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::core::wide::enabled() {
+            // SAFETY: `enabled` is true only where the CPU reported AVX2.
+            return unsafe { self.flow_jacobian_avx2::<N, C>(k, x, u, a, b, next) };
+        }
+        self.flow_jacobian_fixed::<N, C>(k, x, u, a, b, next)
+    }
+
+    /// [`DiscreteDynamics::flow_jacobian_fixed`] compiled for AVX2 (see [`crate::core::wide`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn flow_jacobian_avx2<const N: usize, const C: usize>(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        a: &mut [f64],
+        b: &mut [f64],
+        next: Option<&mut [f64]>,
+    ) {
+        self.flow_jacobian_fixed::<N, C>(k, x, u, a, b, next)
+    }
+
     /// [`DiscreteDynamics::flow_jacobian_f64`] for `N` states and `C` = `N` + controls columns,
     /// on the stack; with `next`, also the step's end state (the sub-steps are [`flow`]'s).
+    /// Inlined into its two callers, so that each compiles it (and the drift's Jacobian) for
+    /// its own instruction set.
+    #[inline(always)]
     fn flow_jacobian_fixed<const N: usize, const C: usize>(
         &self,
         k: usize,

@@ -16,3 +16,4 @@ pub mod rng;
 pub mod scalar;
 pub mod solver;
 pub mod taylor;
+pub mod wide;

@@ -132,6 +132,8 @@ impl Plant {
     }
 
     /// [`Plant::mass_matrix`] from the configuration's [`Angles`].
+    /// Inlined: see [`crate::core::model::ArmModel::f`].
+    #[inline(always)]
     pub fn mass_matrix_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
         match self {
             Plant::SingleJoint(p) => [[c(p.inertia), S::zero()], [S::zero(), S::one()]],
@@ -150,6 +152,8 @@ impl Plant {
     }
 
     /// [`Plant::bias_torque`] from the configuration's [`Angles`].
+    /// Inlined: see [`crate::core::model::ArmModel::f`].
+    #[inline(always)]
     pub fn bias_torque_at<S: Scalar>(&self, a: &Angles<S>, qd: &[S], out: &mut [S]) {
         match self {
             Plant::SingleJoint(p) => {
@@ -264,6 +268,8 @@ impl Plant {
     }
 
     /// Solves `m a = rhs` for a mass matrix `m` of a plant with `dof` joints.
+    /// Inlined: see [`crate::core::model::ArmModel::f`].
+    #[inline(always)]
     pub fn solve_with<S: Scalar>(m: &[[S; 2]; 2], dof: usize, rhs: &[S], out: &mut [S]) {
         if dof == 1 {
             out[0] = rhs[0] / m[0][0];

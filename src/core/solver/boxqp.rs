@@ -61,6 +61,7 @@ impl<const M: usize> SmallCholesky<M> {
     /// whose substitutions are independent of one another. The ILQG policy solves all the state
     /// columns of its gains this way, from slices, rather than one checked-index gather and
     /// solve per column (measured: the reach 0.86 of the time).
+    #[inline(always)]
     pub fn solve_many<const N: usize>(&self, b: &mut [[f64; M]; N]) {
         let n = self.n;
         for i in 0..n {

@@ -79,11 +79,11 @@ impl Ilqg {
         stochastic: bool,
     ) -> Option<BackwardPass> {
         match (self.dims.0, self.dims.1) {
-            (2, 1) => self.backward_fixed::<2, 1>(problem, mu, stochastic),
-            (2, 2) => self.backward_fixed::<2, 2>(problem, mu, stochastic),
-            (4, 2) => self.backward_fixed::<4, 2>(problem, mu, stochastic),
-            (4, 4) => self.backward_fixed::<4, 4>(problem, mu, stochastic),
-            (8, 4) => self.backward_fixed::<8, 4>(problem, mu, stochastic),
+            (2, 1) => self.backward_sized::<2, 1>(problem, mu, stochastic),
+            (2, 2) => self.backward_sized::<2, 2>(problem, mu, stochastic),
+            (4, 2) => self.backward_sized::<4, 2>(problem, mu, stochastic),
+            (4, 4) => self.backward_sized::<4, 4>(problem, mu, stochastic),
+            (8, 4) => self.backward_sized::<8, 4>(problem, mu, stochastic),
             (nx, nu) => {
                 // The pattern is not built for the sizes read in place: reading it there would
                 // see zero Jacobians. A size added to one list must be added to the other.
@@ -93,9 +93,40 @@ impl Ilqg {
         }
     }
 
+    /// [`Ilqg::backward_fixed`] in AVX2's 256-bit registers where [`crate::core::wide`] allows
+    /// it (the same numbers to the bit), else in the portable build's 128-bit ones.
+    fn backward_sized<const NX: usize, const NU: usize>(
+        &mut self,
+        problem: &Problem,
+        mu: f64,
+        stochastic: bool,
+    ) -> Option<BackwardPass> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::core::wide::enabled() {
+            // SAFETY: `enabled` is true only where the CPU reported AVX2.
+            return unsafe { self.backward_avx2::<NX, NU>(problem, mu, stochastic) };
+        }
+        self.backward_fixed::<NX, NU>(problem, mu, stochastic)
+    }
+
+    /// [`Ilqg::backward_fixed`] compiled for AVX2 (see [`crate::core::wide`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn backward_avx2<const NX: usize, const NU: usize>(
+        &mut self,
+        problem: &Problem,
+        mu: f64,
+        stochastic: bool,
+    ) -> Option<BackwardPass> {
+        self.backward_fixed::<NX, NU>(problem, mu, stochastic)
+    }
+
     /// [`Ilqg::backward_pass`] on the stack for an `NX`-state, `NU`-control plant. The value
     /// function stays in registers and stack arrays from knot to knot; `bw.s_mat` and `bw.s_vec`
     /// receive it at the end, where the dynamic path leaves them (for [`Ilqg::value_scale`]).
+    /// Inlined into its two callers, so that each compiles it (and the knot's operations) for
+    /// its own instruction set.
+    #[inline(always)]
     fn backward_fixed<const NX: usize, const NU: usize>(
         &mut self,
         problem: &Problem,
@@ -459,7 +490,26 @@ mod tests {
             })
         }
 
+        /// [`Case::fixed`] compiled for AVX2, as the backward pass runs it where the CPU has it.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        fn fixed_avx2<const NX: usize, const NU: usize>(&self) -> Option<Vec<u64>> {
+            self.fixed::<NX, NU>()
+        }
+
+        /// The knot on the stack for the CPU `wide` says, if it has AVX2 (else portably).
+        fn fixed_on<const NX: usize, const NU: usize>(&self, wide: bool) -> Option<Vec<u64>> {
+            #[cfg(target_arch = "x86_64")]
+            if wide && crate::core::wide::available() {
+                // SAFETY: the CPU reported AVX2.
+                return unsafe { self.fixed_avx2::<NX, NU>() };
+            }
+            let _ = wide;
+            self.fixed::<NX, NU>()
+        }
+
         /// The same knot on the stack ([`super::super::knot`]).
+        #[inline(always)]
         fn fixed<const NX: usize, const NU: usize>(&self) -> Option<Vec<u64>> {
             let mut v = Value::<NX> {
                 s_mat: [[0.0; NX]; NX],
@@ -495,7 +545,8 @@ mod tests {
     /// The stack path ([`super::super::knot`]) against the dynamic path by nonzero patterns, on
     /// random knots with exact zeros of both signs and values far apart in scale, with and
     /// without noise of each kind, μ and limits: the same numbers to the bit, so the choice of
-    /// path cannot change a plan.
+    /// path cannot change a plan. The stack path both portable and compiled for AVX2 (where the
+    /// CPU has it: [`crate::core::wide`]).
     #[test]
     fn the_fixed_knot_matches_the_dynamic_one_bit_for_bit() {
         let mut seed = 7;
@@ -503,18 +554,20 @@ mod tests {
             let mut solved = 0;
             for _ in 0..400 {
                 let case = Case::new(nx, nu, &mut seed);
-                let fixed = match (nx, nu) {
-                    (2, 1) => case.fixed::<2, 1>(),
-                    (2, 2) => case.fixed::<2, 2>(),
-                    (4, 2) => case.fixed::<4, 2>(),
-                    (4, 4) => case.fixed::<4, 4>(),
-                    _ => case.fixed::<8, 4>(),
-                };
                 let dynamic = case.dynamic();
-                assert_eq!(fixed.is_some(), dynamic.is_some(), "{nx}x{nu}");
-                if let (Some(f), Some(d)) = (fixed, dynamic) {
-                    assert_eq!(f, d, "{nx}x{nu}");
-                    solved += 1;
+                for wide in [false, true] {
+                    let fixed = match (nx, nu) {
+                        (2, 1) => case.fixed_on::<2, 1>(wide),
+                        (2, 2) => case.fixed_on::<2, 2>(wide),
+                        (4, 2) => case.fixed_on::<4, 2>(wide),
+                        (4, 4) => case.fixed_on::<4, 4>(wide),
+                        _ => case.fixed_on::<8, 4>(wide),
+                    };
+                    assert_eq!(fixed.is_some(), dynamic.is_some(), "{nx}x{nu}, wide {wide}");
+                    if let (Some(f), Some(d)) = (fixed, &dynamic) {
+                        assert_eq!(&f, d, "{nx}x{nu}, wide {wide}");
+                        solved += usize::from(wide);
+                    }
                 }
             }
             // The comparison reached the value update often enough to mean something.

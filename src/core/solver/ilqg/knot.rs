@@ -169,6 +169,7 @@ impl<const NX: usize, const NU: usize> Knot<NX, NU> {
     /// The Q-function from the value `v` of the next knot (`Backward::q_function`), and its
     /// regularisation by μ (`Backward::regularize`); returns the constant term `running + ½ Σ
     /// c_iᵀ S c_i` (without `s₀`).
+    #[inline(always)]
     pub(super) fn expand(
         &mut self,
         v: &Value<NX>,
@@ -223,6 +224,7 @@ impl<const NX: usize, const NU: usize> Knot<NX, NU> {
 
     /// The knot's policy from the box QP ([`policy`]) into `l` and `gain` (NU × NX); false when
     /// `Q_uu` is not positive definite.
+    #[inline(always)]
     pub(super) fn policy(
         &self,
         bounds: &Bounds,
@@ -244,6 +246,7 @@ impl<const NX: usize, const NU: usize> Knot<NX, NU> {
     /// The value of this knot under the policy `(l, L)` (`Backward::value_update`, Tassa 2012):
     /// `s = Q_x + Lᵀ (Q_uu l + Q_u) + Q_uxᵀ l`, `S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L`,
     /// symmetrised. Returns `(lᵀ Q_u, lᵀ Q_uu l)`.
+    #[inline(always)]
     pub(super) fn value_update(&self, l: &[f64], gain: &[f64], v: &mut Value<NX>) -> (f64, f64) {
         let dot = |a: &[f64], b: &[f64]| {
             let mut r = 0.0;

@@ -123,6 +123,7 @@ fn free_gains<const N: usize, const M: usize>(
 /// `L = −Q_uu⁻¹ Q_ux` (`N` columns) from one substitution of `C` = `N` + 1 right-hand sides
 /// ([`SmallCholesky::solve_many`]: per column the operations of [`newton_step`] and
 /// [`free_gains`], so the same numbers).
+#[inline(always)]
 fn newton_and_gains<const N: usize, const C: usize, const M: usize>(
     factor: &SmallCholesky<M>,
     qu: &[f64],
