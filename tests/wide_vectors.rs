@@ -1,7 +1,9 @@
 //! The solvers' kernels compiled for AVX2 (chosen at run time, `vic::core::wide`) compute the
 //! portable kernels' numbers to the bit: on every scenario of `config/`, the ILQG plan (and with a
 //! feedback delay the delayed planner's) is solved with the wide kernels forbidden and then
-//! allowed, and every state, control, gain, cost and the iteration count must agree bit for bit.
+//! allowed, and every state, control, gain, cost and the iteration count must agree bit for bit;
+//! so must the SOOC plans (whose Taylor-polynomial flows the AVX2 step carries) of the iCub elbow
+//! and the arm in the divergent field (the VSA arms' take half a minute).
 //! A rounding that differed in one knot would show: the stochastic plans' optima are flat, and a
 //! changed rounding moves their costs in the third digit (see `tests/ilqg_phases.rs`).
 //!
@@ -28,7 +30,18 @@ fn bits(s: &Solution) -> Vec<u64> {
         .collect()
 }
 
-/// The plan of the scenario `file` as `bits`, with the wide kernels allowed or not.
+/// The SOOC plan (`vic plan --method sooc`) of the scenario `file` as `bits`, with the wide
+/// kernels allowed or not.
+fn solve_sooc(file: &Path, allow_wide: bool) -> Vec<u64> {
+    wide::set_enabled(allow_wide);
+    let s = Scenario::load(file, &[]).expect("scenario loads");
+    let setup = plan::setup(&s).expect("scenario sets up");
+    let plain = setup.problem(s.task.steps);
+    let (solution, _) = plan::plan_sooc(&s, &setup, &plain, &None).expect("plans");
+    bits(&solution)
+}
+
+/// The ILQG plan of the scenario `file` as `bits`, with the wide kernels allowed or not.
 fn solve(file: &Path, allow_wide: bool) -> Vec<u64> {
     wide::set_enabled(allow_wide);
     let s = Scenario::load(file, &[]).expect("scenario loads");
@@ -63,17 +76,34 @@ fn the_wide_kernels_compute_the_portable_ones_bits() {
         .collect();
     files.sort();
     assert!(files.len() >= 10, "the scenarios of config/");
-    for file in &files {
+    let sooc = ["icub_elbow.toml", "two_link_divergent.toml"];
+    let runs = files
+        .iter()
+        .map(|f| (f.clone(), "ILQG", solve as fn(&Path, bool) -> Vec<u64>))
+        .chain(sooc.map(|f| {
+            (
+                dir.join(f),
+                "SOOC",
+                solve_sooc as fn(&Path, bool) -> Vec<u64>,
+            )
+        }));
+    for (file, method, solve) in runs {
+        let file = &file;
         let portable = solve(file, false);
         let wide = solve(file, true);
         assert_eq!(
             portable.len(),
             wide.len(),
-            "{}: plan sizes differ",
+            "{} ({method}): plan sizes differ",
             file.display()
         );
         let first = portable.iter().zip(&wide).position(|(p, w)| p != w);
-        assert_eq!(first, None, "{}: first differing number", file.display());
+        assert_eq!(
+            first,
+            None,
+            "{} ({method}): first differing number",
+            file.display()
+        );
     }
     wide::set_enabled(true);
 }
