@@ -18,6 +18,8 @@ pub enum Field {
 
 impl Field {
     /// Force on the hand at position `hand` moving with velocity `hand_velocity`.
+    /// Inlined: see [`crate::core::model::ArmModel::f`].
+    #[inline(always)]
     pub fn force<S: Scalar>(&self, hand: [S; 2], hand_velocity: [S; 2]) -> [S; 2] {
         match *self {
             Field::None => [S::zero(), S::zero()],

@@ -221,6 +221,8 @@ impl Plant {
     }
 
     /// [`Plant::hand_position`] from the configuration's [`Angles`].
+    /// Inlined: see [`crate::core::model::ArmModel::f`].
+    #[inline(always)]
     pub fn hand_position_at<S: Scalar>(&self, a: &Angles<S>) -> [S; 2] {
         match self {
             Plant::SingleJoint(p) => [a.c1 * p.length, a.s1 * p.length],
@@ -234,6 +236,8 @@ impl Plant {
     }
 
     /// [`Plant::jacobian`] from the configuration's [`Angles`].
+    /// Inlined: see [`crate::core::model::ArmModel::f`].
+    #[inline(always)]
     pub fn jacobian_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
         match self {
             Plant::SingleJoint(p) => [[-a.s1 * p.length, S::zero()], [a.c1 * p.length, S::zero()]],
