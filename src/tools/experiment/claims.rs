@@ -168,9 +168,10 @@ pub(super) fn notes(figure: Figure) -> &'static str {
              Eq. 14's weights stiffness is almost free (w_st = 1e-4 against w_p = 1e6), so the \
              open-loop optimum uses stiffness with or without the field: the field does not raise \
              the planned stiffness in our model (see the SOOC closing note), although it is what \
-             makes the torque-only arm diverge; (4) the VSA plans come from a noise continuation \
-             (σ/10, σ/3, σ) and are local optima of a hard problem whose motor states integrate \
-             the noise."
+             makes the torque-only arm diverge; (4) the VSA plans are local optima of a hard problem \
+             whose motor states integrate the noise; the one with B is solved at the full noise \
+             from the deterministic plan, the one with B/10 by a noise continuation (σ/10, σ/3, \
+             σ), and it does not converge."
         }
         Figure::Fig2 => {
             "Columns 1 and 3 are the same SOOC plan: an open-loop plan uses no feedback, so the \
