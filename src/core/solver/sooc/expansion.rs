@@ -64,6 +64,8 @@ pub struct MomentExpansion {
     pub(super) t3: DMatrix<f64>,
     pub(super) next: DMatrix<f64>,
     y: Vec<DMatrix<f64>>,
+    /// `Λ dc_j` (n×p each), scratch of `noise_bilinear`.
+    lam_dc: Vec<DMatrix<f64>>,
     hvv: DMatrix<f64>,
     hpv: DMatrix<f64>,
 }
@@ -119,6 +121,7 @@ impl MomentExpansion {
             t3: z(n, n),
             next: z(n, n),
             y: (0..nv).map(|_| z(n, n)).collect(),
+            lam_dc: (0..nv).map(|_| z(n, p)).collect(),
             hvv: z(nv, nv),
             hpv: z(vech_len(n), nv),
         }
@@ -245,16 +248,24 @@ impl MomentExpansion {
     /// `2 tr(Λ dCx_{i,a} P dCx_{i,b}ᵀ)`.
     fn noise_bilinear(&mut self) {
         let (n, nw, nv) = (self.n, self.nw, self.n + self.m);
+        // `Λ dc_b` once per b, not once per pair (the same sums in the same order).
+        for b in 0..nv {
+            for i in 0..nw {
+                for r in 0..n {
+                    let mut t = 0.0;
+                    for c in 0..n {
+                        t += self.lam[(r, c)] * self.dc[b][(c, i)];
+                    }
+                    self.lam_dc[b][(r, i)] = t;
+                }
+            }
+        }
         for a in 0..nv {
             for b in a..nv {
                 let mut s = 0.0;
                 for i in 0..nw {
                     for r in 0..n {
-                        let mut t = 0.0;
-                        for c in 0..n {
-                            t += self.lam[(r, c)] * self.dc[b][(c, i)];
-                        }
-                        s += self.dc[a][(r, i)] * t;
+                        s += self.dc[a][(r, i)] * self.lam_dc[b][(r, i)];
                     }
                 }
                 self.add_symmetric(a, b, 2.0 * s);

@@ -3,7 +3,7 @@
 //! QP (Tassa, Mansard & Todorov 2014), the gains and the value update.
 
 use super::SoocSolver;
-use crate::core::dense::zero;
+use crate::core::dense::{TransposedProduct, zero};
 use crate::core::solver::Bounds;
 use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, SmallCholesky, solve_box_qp};
 use nalgebra::{DMatrix, DVector, SMatrix};
@@ -64,6 +64,8 @@ pub(super) struct Backward {
     s: DMatrix<f64>,
     sa: DMatrix<f64>,
     sb: DMatrix<f64>,
+    /// The products `aᵀ b` (nalgebra's `gemm_tr` to the bit, faster).
+    tp: TransposedProduct,
 }
 
 impl Backward {
@@ -84,6 +86,7 @@ impl Backward {
             s: zm(nz, nz),
             sa: zm(nz, nz),
             sb: zm(nz, m),
+            tp: TransposedProduct::new(nz, nz),
         }
     }
 
@@ -99,12 +102,12 @@ impl Backward {
             }
         }
         let dv = (ff.dot(&self.qu), 0.5 * quu_k);
-        self.kt_quu.gemm_tr(1.0, gain, &self.quu, 0.0);
+        self.tp.apply(&mut self.kt_quu, gain, &self.quu, false);
         self.t_mz.copy_from(&self.quz);
         self.t_mz.gemm(1.0, &self.quu, gain, 1.0);
         self.v.copy_from(&self.qzz);
-        self.v.gemm_tr(1.0, gain, &self.t_mz, 1.0);
-        self.v.gemm_tr(1.0, &self.quz, gain, 1.0);
+        self.tp.apply(&mut self.v, gain, &self.t_mz, true);
+        self.tp.apply(&mut self.v, &self.quz, gain, true);
         self.vv.copy_from(&self.qz);
         self.vv.gemv(1.0, &self.kt_quu, ff, 1.0);
         self.vv.gemv_tr(1.0, gain, &self.qu, 1.0);
@@ -177,7 +180,7 @@ impl SoocSolver {
         bw.sa.gemm(1.0, &bw.s, &e.a, 0.0);
         bw.s.copy_from(&d.lxx);
         bw.s += &c.hzz;
-        bw.s.gemm_tr(1.0, &e.a, &bw.sa, 1.0);
+        bw.tp.apply(&mut bw.s, &e.a, &bw.sa, true);
     }
 
     /// `Q` at knot `k` from the value `(V, v)` of knot `k + 1`: the Gauss–Newton terms plus, for
@@ -193,17 +196,17 @@ impl SoocSolver {
         if newton {
             bw.qzz += &c.hzz;
         }
-        bw.qzz.gemm_tr(1.0, &e.a, &bw.va, 1.0);
+        bw.tp.apply(&mut bw.qzz, &e.a, &bw.va, true);
         bw.quz.copy_from(&d.lux);
         if newton {
             bw.quz += &c.huz;
         }
-        bw.quz.gemm_tr(1.0, &e.b, &bw.va, 1.0);
+        bw.tp.apply(&mut bw.quz, &e.b, &bw.va, true);
         bw.quu.copy_from(&d.luu);
         if newton {
             bw.quu += &c.huu;
         }
-        bw.quu.gemm_tr(1.0, &e.b, &bw.vb, 1.0);
+        bw.tp.apply(&mut bw.quu, &e.b, &bw.vb, true);
         bw.qz.copy_from(&d.lx);
         bw.qz.gemv_tr(1.0, &e.a, &bw.vv, 1.0);
         bw.qu.copy_from(&d.lu);
