@@ -208,13 +208,19 @@ fn covariance_sensitivity(at: At, s: &mut MomentExpansion) {
 /// gain's state Jacobian varies (then `s.curved_noise`).
 fn noise_sensitivity(s: &mut MomentExpansion, j: usize, i: usize, g: &[Dual64], dgx: &[Dual64]) {
     let (n, block) = (s.n, s.n * s.nw);
+    let mut moved = false;
     for r in 0..n {
         s.dc[j][(r, i)] = g[i * n + r].eps;
+        moved |= s.dc[j][(r, i)] != 0.0;
     }
-    for r in 0..n {
-        for c in 0..n {
-            s.next[(r, c)] +=
-                s.dc[j][(r, i)] * s.base.c[(c, i)] + s.base.c[(r, i)] * s.dc[j][(c, i)];
+    // A channel that `v_j` does not move adds only zeros to `next`, which starts at +0 and so
+    // can never be −0: skipping it changes no bit (with state noise, every channel but one).
+    if moved {
+        for r in 0..n {
+            for c in 0..n {
+                s.next[(r, c)] +=
+                    s.dc[j][(r, i)] * s.base.c[(c, i)] + s.base.c[(r, i)] * s.dc[j][(c, i)];
+            }
         }
     }
     if s.base.noise != NoiseKind::Dependent {

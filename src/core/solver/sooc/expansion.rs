@@ -249,8 +249,14 @@ impl MomentExpansion {
     fn noise_bilinear(&mut self) {
         let (n, nw, nv) = (self.n, self.nw, self.n + self.m);
         // `Λ dc_b` once per b, not once per pair (the same sums in the same order).
+        // A zero column of `dc_b` gives +0 here where the sums gave ±0, which the sums below
+        // (starting at +0) add without a change.
         for b in 0..nv {
             for i in 0..nw {
+                if (0..n).all(|c| self.dc[b][(c, i)] == 0.0) {
+                    self.lam_dc[b].column_mut(i).fill(0.0);
+                    continue;
+                }
                 for r in 0..n {
                     let mut t = 0.0;
                     for c in 0..n {
