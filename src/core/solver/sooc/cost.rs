@@ -93,4 +93,66 @@ impl Cost for MomentCost<'_> {
             .copy_from_slice(&self.terminal_weights);
         d.lxx.view_mut((0, 0), (n, n)).copy_from(&inner.lxx);
     }
+
+    fn nonnegative(&self) -> bool {
+        // The mean's cost is the tracking cost's; the covariance's, `Σ w_ab P_ab` over
+        // `vech P`, is a sum of `w_aa P_aa ≥ 0` when every weight on the diagonal is ≥ 0 and
+        // every other is 0 (`P` is a covariance: its diagonal is never negative).
+        let n = self.n;
+        let claim = |w: &[f64]| {
+            vech_pairs(n)
+                .iter()
+                .zip(w)
+                .all(|(&(a, b), &w)| if a == b { w >= 0.0 } else { w == 0.0 })
+        };
+        self.inner.nonnegative()
+            && self.running_weights.iter().all(|w| claim(w))
+            && claim(&self.terminal_weights)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::model::Exogenous;
+
+    fn tracking(w_p: f64) -> TrackingCost {
+        TrackingCost {
+            dof: 2,
+            nx: 4,
+            control_weights: vec![1e-2, 1e-2, 1e-4, 1e-4],
+            w_p,
+            w_v: 1e5,
+            dt: 0.01,
+            reference: vec![Exogenous::default()],
+        }
+    }
+
+    /// The claim the line search stops rollouts on: made for the paper's cost, and then every
+    /// moment state with a covariance costs ≥ 0; not made for a negative weight.
+    #[test]
+    fn the_expected_cost_claims_to_be_nonnegative_only_when_it_is() {
+        let inner = tracking(1e6);
+        let cost = MomentCost::new(&inner, 3);
+        assert!(cost.nonnegative());
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..1000 {
+            // A covariance L Lᵀ, packed as vech.
+            let l = DMatrix::from_fn(4, 4, |_, _| next());
+            let p = &l * l.transpose();
+            let mut z: Vec<f64> = (0..4).map(|_| next()).collect();
+            z.extend(vech_pairs(4).into_iter().map(|(a, b)| p[(a, b)]));
+            let u: Vec<f64> = (0..4).map(|_| 100.0 * next()).collect();
+            assert!(cost.running(1, &z, &u) >= 0.0);
+            assert!(cost.terminal(&z) >= 0.0);
+        }
+        let negative = tracking(-1.0);
+        assert!(!MomentCost::new(&negative, 3).nonnegative());
+    }
 }
