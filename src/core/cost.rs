@@ -94,6 +94,8 @@ impl Cost for TrackingCost {
             .sum()
     }
 
+    /// `d` may be larger than the state (a moment state, its mean first): the entries beyond
+    /// the state are zeros, the derivatives of the mean's part of the expected cost.
     fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
         let r = self.target(k);
         let n = self.dof;
@@ -121,6 +123,7 @@ impl Cost for TrackingCost {
             && self.control_weights.iter().all(|w| *w >= 0.0)
     }
 
+    /// `d` may be larger than the state, as for [`Cost::running_derivatives`].
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
         let r = self.reference.last().expect("reference is not empty");
         let n = self.dof;

@@ -2,7 +2,6 @@
 
 use super::vech_pairs;
 use crate::core::cost::{Cost, CostDerivatives, TrackingCost};
-use crate::core::dense::zero;
 use nalgebra::DMatrix;
 
 /// The expected cost of the open-loop plant in moment form: `ℓ(m, u) + ½ tr(ℓ_xx P)` per step and
@@ -13,6 +12,9 @@ pub struct MomentCost<'a> {
     /// `vech` weights of `½ tr(ℓ_xx P)` (running) and `½ tr(g_xx P)` (final), per knot.
     running_weights: Vec<Vec<f64>>,
     terminal_weights: Vec<f64>,
+    /// Every term is ≥ 0 ([`Cost::nonnegative`]), decided once here: the line search asks at
+    /// every iteration.
+    nonnegative: bool,
 }
 
 impl<'a> MomentCost<'a> {
@@ -34,7 +36,7 @@ impl<'a> MomentCost<'a> {
                 })
                 .collect()
         };
-        let running_weights = (0..horizon)
+        let running_weights: Vec<Vec<f64>> = (0..horizon)
             .map(|k| {
                 inner.running_derivatives(k, &x, &u, &mut d);
                 weights(&d.lxx)
@@ -42,11 +44,25 @@ impl<'a> MomentCost<'a> {
             .collect();
         inner.terminal_derivatives(&x, &mut d);
         let terminal_weights = weights(&d.lxx);
+        // The mean's cost is the tracking cost's; the covariance's, `Σ w_ab P_ab` over
+        // `vech P`, is a sum of `w_aa P_aa ≥ 0` when every weight on the diagonal is ≥ 0 and
+        // every other is 0 (`P` is a covariance: its diagonal is never negative).
+        let pairs = vech_pairs(n);
+        let claim = |w: &[f64]| {
+            pairs
+                .iter()
+                .zip(w)
+                .all(|(&(a, b), &w)| if a == b { w >= 0.0 } else { w == 0.0 })
+        };
+        let nonnegative = inner.nonnegative()
+            && running_weights.iter().all(|w| claim(w))
+            && claim(&terminal_weights);
         MomentCost {
             inner,
             n,
             running_weights,
             terminal_weights,
+            nonnegative,
         }
     }
 
@@ -67,47 +83,23 @@ impl Cost for MomentCost<'_> {
     }
 
     fn running_derivatives(&self, k: usize, z: &[f64], u: &[f64], d: &mut CostDerivatives) {
+        // The tracking cost writes the mean's block and zeros the rest of `d` (it takes a `d`
+        // larger than its state): no scratch, so an iteration allocates nothing here.
         let n = self.n;
-        let mut inner = CostDerivatives::new(n, u.len());
-        self.inner.running_derivatives(k, &z[..n], u, &mut inner);
-        zero(&mut d.lx);
-        zero(&mut d.lxx);
-        zero(&mut d.lux);
-        d.lx.rows_mut(0, n).copy_from(&inner.lx);
+        self.inner.running_derivatives(k, &z[..n], u, d);
         d.lx.rows_mut(n, z.len() - n)
             .copy_from_slice(&self.running_weights[k]);
-        d.lxx.view_mut((0, 0), (n, n)).copy_from(&inner.lxx);
-        d.lux.view_mut((0, 0), (u.len(), n)).copy_from(&inner.lux);
-        d.lu.copy_from(&inner.lu);
-        d.luu.copy_from(&inner.luu);
     }
 
     fn terminal_derivatives(&self, z: &[f64], d: &mut CostDerivatives) {
         let n = self.n;
-        let mut inner = CostDerivatives::new(n, d.lu.len());
-        self.inner.terminal_derivatives(&z[..n], &mut inner);
-        zero(&mut d.lx);
-        zero(&mut d.lxx);
-        d.lx.rows_mut(0, n).copy_from(&inner.lx);
+        self.inner.terminal_derivatives(&z[..n], d);
         d.lx.rows_mut(n, z.len() - n)
             .copy_from_slice(&self.terminal_weights);
-        d.lxx.view_mut((0, 0), (n, n)).copy_from(&inner.lxx);
     }
 
     fn nonnegative(&self) -> bool {
-        // The mean's cost is the tracking cost's; the covariance's, `Σ w_ab P_ab` over
-        // `vech P`, is a sum of `w_aa P_aa ≥ 0` when every weight on the diagonal is ≥ 0 and
-        // every other is 0 (`P` is a covariance: its diagonal is never negative).
-        let n = self.n;
-        let claim = |w: &[f64]| {
-            vech_pairs(n)
-                .iter()
-                .zip(w)
-                .all(|(&(a, b), &w)| if a == b { w >= 0.0 } else { w == 0.0 })
-        };
-        self.inner.nonnegative()
-            && self.running_weights.iter().all(|w| claim(w))
-            && claim(&self.terminal_weights)
+        self.nonnegative
     }
 }
 

@@ -118,8 +118,10 @@ pub struct SoocProblem<'a> {
 pub type Observer = std::sync::Arc<dyn Fn(&crate::core::solver::ilqg::Progress) + Send + Sync>;
 
 /// The solver with its preallocated workspace, sized for one problem size; reuse it across solves
-/// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`] allocates nothing per
-/// iteration).
+/// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`]). A solve allocates its
+/// solution; its iterations allocate nothing of their own, but nalgebra hands the arms' products
+/// larger than 5×5 to matrixmultiply, which allocates packing buffers per call (test
+/// `sooc_workspace`).
 pub struct SoocSolver {
     pub options: SoocOptions,
     /// Told of every accepted step (iteration, `J`, relative μ, step length): progress for
@@ -270,7 +272,11 @@ impl SoocSolver {
             third: self.options.flow_third_derivatives
                 && self.options.third_derivatives_below == f64::INFINITY,
         };
-        let mut tally = Tally::default();
+        // Sized once: the iterations themselves allocate nothing.
+        let mut tally = Tally {
+            history: Vec::with_capacity(self.options.max_iterations),
+            ..Tally::default()
+        };
         let (stop, optimality) = loop {
             // The Newton model costs the flow's third derivatives. While it keeps failing (far
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
