@@ -78,14 +78,11 @@ fn assert_iterations_do_not_allocate(file: &str, caps: (usize, usize)) {
     );
 }
 
-/// The single joint (the iCub elbow). Not yet the arms: nalgebra hands products larger than 5×5
-/// to matrixmultiply, which allocates its packing buffers at every call: the backward pass's
-/// `V A` (14×14) on the impedance arm, about one allocation per knot and pass, and the moment
-/// step's 8×8 products on the VSA arm, about 60 per knot and iteration (measured with this
-/// test). A kernel of our own would not allocate but rounds differently, and the solver's path
-/// is sensitive to rounding (measured: 47 → 51 Newton steps on the divergent arm, 306 → 374 on
-/// the torque-only one, the same optima to 1e-10).
+/// The single joint, the impedance arm and the VSA arm (products larger than 5×5 by
+/// `core::dense::multiply`: nalgebra's matrixmultiply allocated its packing buffers per call).
 #[test]
 fn iterations_do_not_allocate() {
     assert_iterations_do_not_allocate("icub_elbow.toml", (2, 8));
+    assert_iterations_do_not_allocate("two_link_divergent.toml", (2, 5));
+    assert_iterations_do_not_allocate("two_link_vsa_divergent.toml", (1, 3));
 }

@@ -167,6 +167,151 @@ fn product(c: &mut DMatrix<f64>, a: &DMatrix<f64>, blocks: &[f64], accumulate: b
     }
 }
 
+/// nalgebra multiplies matrices this small in every dimension with its own loops, and larger ones
+/// with matrixmultiply (`blas_uninit.rs`, "threshold determined empirically").
+const SMALL_DIM: usize = 5;
+
+/// `c = a b` (`accumulate` false) or `c += a b` (true), without allocating.
+///
+/// Why: nalgebra hands a product larger than 5×5 in every dimension to matrixmultiply, which
+/// allocates its packing buffers at every call; in the SOOC iteration that was an allocation per
+/// knot and backward pass on the impedance arm (`V A`) and about sixty per knot on the VSA arm
+/// (its moment step's 8×8 products). Here each entry is matrixmultiply's own sum on CPUs with
+/// FMA (the kernel it picks there): the products added one after another by fused
+/// multiply-adds from +0 in the order of `k`, then, to accumulate, one addition to `c`. So the
+/// plans keep their bits where matrixmultiply ran its FMA kernel; where it ran its plain AVX
+/// kernel (no FMA) this kernel is not used: without AVX2 and FMA (or with the wide kernels
+/// forbidden, [`crate::core::wide`]) the product is nalgebra's, allocation included. Smaller
+/// products (any dimension ≤ 5) are nalgebra's, as before.
+pub fn multiply(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, accumulate: bool) {
+    let (m, k) = a.shape();
+    let n = b.ncols();
+    assert_eq!(b.nrows(), k, "a b: a's columns differ from b's rows");
+    assert_eq!(c.shape(), (m, n), "a b: c has the wrong shape");
+    if m <= SMALL_DIM || n <= SMALL_DIM || k <= SMALL_DIM {
+        c.gemm(1.0, a, b, if accumulate { 1.0 } else { 0.0 });
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if crate::core::wide::enabled() && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU reported AVX2 and FMA.
+        unsafe { fused_product(c, a, b, accumulate) };
+        return;
+    }
+    // Without FMA (or with the wide kernels forbidden) matrixmultiply's own kernels are faster
+    // than a `mul_add` call per term, and round as they always did.
+    c.gemm(1.0, a, b, if accumulate { 1.0 } else { 0.0 });
+}
+
+/// Rows and columns of `c` [`fused_product`] computes at once: eight independent chains of
+/// fused multiply-adds in registers (two 256-bit registers of rows times four columns; four
+/// rows, one register, at the bottom edge).
+#[cfg(target_arch = "x86_64")]
+const BLOCK_ROWS: usize = 8;
+#[cfg(target_arch = "x86_64")]
+const BLOCK_COLS: usize = 4;
+
+/// The kernel of [`multiply`]: blocks of [`BLOCK_ROWS`] × [`BLOCK_COLS`] entries of `c`, each
+/// entry its own sum over `k` in order (so the blocking changes no rounding).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn fused_product(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, accumulate: bool) {
+    let (m, k) = a.shape();
+    let n = b.ncols();
+    let (av, bv, cv) = (a.as_slice(), b.as_slice(), c.as_mut_slice());
+    let mut j0 = 0;
+    while j0 < n {
+        let cols = BLOCK_COLS.min(n - j0);
+        let mut i0 = 0;
+        while i0 < m {
+            // Eight rows, or four (one register), or what is left.
+            let rows = match m - i0 {
+                r if r >= BLOCK_ROWS => BLOCK_ROWS,
+                r if r >= 4 => 4,
+                r => r,
+            };
+            let mut acc = [[0.0f64; BLOCK_ROWS]; BLOCK_COLS];
+            match rows {
+                BLOCK_ROWS => block_fma::<2>(&mut acc, av, bv, (m, k), (i0, j0), cols),
+                4 => block_fma::<1>(&mut acc, av, bv, (m, k), (i0, j0), cols),
+                _ => partial_block(&mut acc, av, bv, (m, k), (i0, j0), (rows, cols)),
+            }
+            for (l, acc_l) in acc.iter().enumerate().take(cols) {
+                let out = &mut cv[(j0 + l) * m + i0..(j0 + l) * m + i0 + rows];
+                if accumulate {
+                    for (o, &s) in out.iter_mut().zip(acc_l) {
+                        *o += s;
+                    }
+                } else {
+                    out.copy_from_slice(&acc_l[..rows]);
+                }
+            }
+            i0 += rows;
+        }
+        j0 += cols;
+    }
+}
+
+/// The last rows (fewer than four) of [`fused_product`] entry by entry (`mul_add`, one FMA
+/// instruction here, the same single rounding as the vector one).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn partial_block(
+    acc: &mut [[f64; BLOCK_ROWS]; BLOCK_COLS],
+    av: &[f64],
+    bv: &[f64],
+    (m, k): (usize, usize),
+    (i0, j0): (usize, usize),
+    (rows, cols): (usize, usize),
+) {
+    for p in 0..k {
+        let col = &av[p * m + i0..p * m + i0 + rows];
+        for (l, acc_l) in acc.iter_mut().enumerate().take(cols) {
+            let bpj = bv[(j0 + l) * k + p];
+            for (s, &x) in acc_l.iter_mut().zip(col) {
+                *s = x.mul_add(bpj, *s);
+            }
+        }
+    }
+}
+
+/// A block of `4 R` rows (`R` 256-bit registers per column) and `cols` ≤ 4 columns of
+/// [`fused_product`] in registers: per `k`, `R` loads of `a`'s column, a broadcast of `b` per
+/// column, `R` fused multiply-adds per column.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn block_fma<const R: usize>(
+    acc: &mut [[f64; BLOCK_ROWS]; BLOCK_COLS],
+    av: &[f64],
+    bv: &[f64],
+    (m, k): (usize, usize),
+    (i0, j0): (usize, usize),
+    cols: usize,
+) {
+    use std::arch::x86_64::*;
+    assert!(R <= 2 && i0 + 4 * R <= m && av.len() >= m * k && bv.len() >= (j0 + cols) * k);
+    let mut reg = [[_mm256_setzero_pd(); 2]; BLOCK_COLS];
+    for p in 0..k {
+        let mut a = [_mm256_setzero_pd(); 2];
+        for (r, ar) in a.iter_mut().enumerate().take(R) {
+            // SAFETY: rows i0 + 4r .. i0 + 4r + 4 of column p of `a` lie in `av` (asserted).
+            *ar = unsafe { _mm256_loadu_pd(av.as_ptr().add(p * m + i0 + 4 * r)) };
+        }
+        for (l, reg_l) in reg.iter_mut().enumerate().take(cols) {
+            let bpj = _mm256_set1_pd(bv[(j0 + l) * k + p]);
+            for r in 0..R {
+                reg_l[r] = _mm256_fmadd_pd(a[r], bpj, reg_l[r]);
+            }
+        }
+    }
+    for (acc_l, reg_l) in acc.iter_mut().zip(&reg).take(cols) {
+        for r in 0..R {
+            // SAFETY: each row of `acc` holds eight doubles, r ≤ 1.
+            unsafe { _mm256_storeu_pd(acc_l.as_mut_ptr().add(4 * r), reg_l[r]) };
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -183,6 +328,59 @@ mod tests {
             let u = (state >> 11) as f64 / (1u64 << 53) as f64;
             (u - 0.4) * 10f64.powi(((state >> 7) % 7) as i32 - 3)
         })
+    }
+
+    /// Bit for bit nalgebra's `gemm` (β = 0 and 1) where it calls matrixmultiply and that runs
+    /// its FMA kernel (this test's machines; elsewhere within a rounding per sum), and nalgebra's
+    /// own below 6×6; and no allocation (`tests/sooc_workspace.rs` counts).
+    #[test]
+    fn multiply_has_matrixmultiplys_bits() {
+        let fma = {
+            #[cfg(target_arch = "x86_64")]
+            {
+                std::arch::is_x86_feature_detected!("fma")
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            {
+                false
+            }
+        };
+        let shapes = [
+            (8, 8, 8),
+            (14, 14, 14),
+            (44, 44, 44),
+            (44, 8, 44),
+            (6, 6, 6),
+            (9, 7, 13),
+            (4, 4, 4),
+            (14, 14, 4),
+            (65, 8, 8),
+            (7, 9, 6),
+            (15, 6, 11),
+            (12, 6, 7),
+        ];
+        for &(m, k, n) in &shapes {
+            for wide in [false, true] {
+                crate::core::wide::set_enabled(wide);
+                for accumulate in [false, true] {
+                    let a = awkward(m, k, 1 + m as u64);
+                    let b = awkward(k, n, 2 + n as u64);
+                    let c0 = awkward(m, n, 3);
+                    let mut want = c0.clone();
+                    want.gemm(1.0, &a, &b, if accumulate { 1.0 } else { 0.0 });
+                    let mut got = c0.clone();
+                    multiply(&mut got, &a, &b, accumulate);
+                    for (g, w) in got.iter().zip(want.iter()) {
+                        if fma {
+                            assert_eq!(g.to_bits(), w.to_bits(), "{m}x{k}x{n} acc {accumulate}");
+                        } else {
+                            assert!((g - w).abs() <= 1e-13 * w.abs().max(1e-300), "{g} {w}");
+                        }
+                    }
+                }
+            }
+        }
+        crate::core::wide::set_enabled(true);
     }
 
     /// Every shape the solvers use and the edges of the kernel's blocks: fewer than eight rows,

@@ -4,7 +4,7 @@
 
 use super::directional::{flow_second_and_third, flow_second_derivatives, flow_third_contracted};
 use super::{MomentDynamics, MomentExpansion, costate_matrix, lift, unpack};
-use crate::core::dense::zero;
+use crate::core::dense::{multiply, zero};
 use crate::core::dynamics::{DiscreteDynamics, Dynamics, NoiseKind};
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
 use nalgebra::DMatrix;
@@ -74,8 +74,8 @@ impl MomentDynamics<'_> {
         s.h3_costate.copy_from_slice(lam_next);
         // T = Λ A P, the weight of ∂A/∂v_a∂v_b in 2 tr(Λ ∂²A P Aᵀ) = 2 Σ ∂²A ∘ (Λ A P).
         costate_matrix(n, &lam_next[n..], &mut s.lam);
-        s.t1.gemm(1.0, &s.lam, &s.base.a, 0.0);
-        s.t2.gemm(1.0, &s.t1, &s.p, 0.0);
+        multiply(&mut s.t1, &s.lam, &s.base.a, false);
+        multiply(&mut s.t2, &s.t1, &s.p, false);
         let at = At::new(base, k, z, u);
         if third {
             flow_third_contracted(at, s);
@@ -167,7 +167,7 @@ fn covariance_sensitivity(at: At, s: &mut MomentExpansion) {
     let (n, m, nw) = (base.nx(), base.nu(), base.nw());
     let noisy = s.base.noise != NoiseKind::None;
     // P Aᵀ = (A P)ᵀ, P being symmetric.
-    s.t1.gemm(1.0, &s.base.a, &s.p, 0.0);
+    multiply(&mut s.t1, &s.base.a, &s.p, false);
     s.t1.transpose_to(&mut s.atl);
     let (mut xd, mut ud) = lift::<Dual64>(x, u);
     let zero = Dual64::from(0.0);
@@ -176,7 +176,7 @@ fn covariance_sensitivity(at: At, s: &mut MomentExpansion) {
     let mut dgu = [zero; MAX_NU * MAX_NX * MAX_NW];
     s.curved_noise = false;
     for j in 0..n + m {
-        s.t1.gemm(1.0, &s.da[j], &s.atl, 0.0);
+        multiply(&mut s.t1, &s.da[j], &s.atl, false);
         crate::core::dense::zero(&mut s.next);
         if noisy {
             let v = if j < n { &mut xd[j] } else { &mut ud[j - n] };
@@ -237,9 +237,9 @@ fn noise_sensitivity(s: &mut MomentExpansion, j: usize, i: usize, g: &[Dual64], 
     if any {
         s.curved_noise = true;
         // P Cx_iᵀ = (Cx_i P)ᵀ
-        s.t2.gemm(1.0, &s.base.cx[i], &s.p, 0.0);
+        multiply(&mut s.t2, &s.base.cx[i], &s.p, false);
         s.t2.transpose_to(&mut s.t3);
-        s.t1.gemm(1.0, &s.dcx[j][i], &s.t3, 1.0);
+        multiply(&mut s.t1, &s.dcx[j][i], &s.t3, true);
     }
 }
 

@@ -3,7 +3,7 @@
 
 use super::directional::third_order_direction_count;
 use super::{MomentDynamics, costate_matrix, vech_len};
-use crate::core::dense::zero;
+use crate::core::dense::{multiply, zero};
 use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
 use crate::core::model::Noise;
 use crate::core::scalar::{MAX_NU, MAX_NX};
@@ -198,8 +198,8 @@ impl MomentExpansion {
     fn covariance_bilinear(&mut self) {
         let nv = self.n + self.m;
         for a in 0..nv {
-            self.t1.gemm(1.0, &self.lam, &self.da[a], 0.0);
-            self.y[a].gemm(1.0, &self.t1, &self.p, 0.0);
+            multiply(&mut self.t1, &self.lam, &self.da[a], false);
+            multiply(&mut self.y[a], &self.t1, &self.p, false);
         }
         for a in 0..nv {
             for b in a..nv {
@@ -222,8 +222,8 @@ impl MomentExpansion {
     fn noise_gain_curvature(&mut self) {
         let (n, nw, nv) = (self.n, self.nw, self.n + self.m);
         for i in 0..nw {
-            self.t1.gemm(1.0, &self.lam, &self.base.cx[i], 0.0);
-            self.t2.gemm(1.0, &self.t1, &self.p, 0.0);
+            multiply(&mut self.t1, &self.lam, &self.base.cx[i], false);
+            multiply(&mut self.t2, &self.t1, &self.p, false);
             for r in 0..n {
                 let mut s = 0.0;
                 for c in 0..n {
@@ -282,8 +282,8 @@ impl MomentExpansion {
         }
         for i in 0..nw {
             for a in 0..nv {
-                self.t1.gemm(1.0, &self.lam, &self.dcx[a][i], 0.0);
-                self.y[a].gemm(1.0, &self.t1, &self.p, 0.0);
+                multiply(&mut self.t1, &self.lam, &self.dcx[a][i], false);
+                multiply(&mut self.y[a], &self.t1, &self.p, false);
             }
             for a in 0..nv {
                 for b in a..nv {
@@ -299,11 +299,11 @@ impl MomentExpansion {
         let (n, nw, nv) = (self.n, self.nw, self.n + self.m);
         self.atl.gemm_tr(1.0, &self.base.a, &self.lam, 0.0);
         for a in 0..nv {
-            self.t1.gemm(1.0, &self.atl, &self.da[a], 0.0);
+            multiply(&mut self.t1, &self.atl, &self.da[a], false);
             if self.curved_noise {
                 for i in 0..nw {
                     self.t2.gemm_tr(1.0, &self.base.cx[i], &self.lam, 0.0);
-                    self.t1.gemm(1.0, &self.t2, &self.dcx[a][i], 1.0);
+                    multiply(&mut self.t1, &self.t2, &self.dcx[a][i], true);
                 }
             }
             let mut e = 0;

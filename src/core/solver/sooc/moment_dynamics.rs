@@ -2,7 +2,7 @@
 //! `P⁺ = A P Aᵀ + Σ_i (c_i c_iᵀ + Cx_i P Cx_iᵀ)` of the module documentation).
 
 use super::{MomentExpansion, pack, unpack, vech_len};
-use crate::core::dense::zero;
+use crate::core::dense::{multiply, zero};
 use crate::core::dynamics::{DiscreteDynamics, Dynamics, Linearization, NoiseKind};
 use nalgebra::DMatrix;
 use std::sync::Mutex;
@@ -70,7 +70,7 @@ fn add_sandwich(
     r: &DMatrix<f64>,
     tmp: &mut DMatrix<f64>,
 ) {
-    tmp.gemm(1.0, l, mid, 0.0);
+    multiply(tmp, l, mid, false);
     // out += a · tmp · rᵀ
     let n = out.nrows();
     for i in 0..n {

@@ -3,7 +3,7 @@
 //! QP (Tassa, Mansard & Todorov 2014), the gains and the value update.
 
 use super::SoocSolver;
-use crate::core::dense::{TransposedProduct, zero};
+use crate::core::dense::{TransposedProduct, multiply, zero};
 use crate::core::solver::Bounds;
 use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, SmallCholesky, solve_box_qp};
 use nalgebra::{DMatrix, DVector, SMatrix};
@@ -104,7 +104,7 @@ impl Backward {
         let dv = (ff.dot(&self.qu), 0.5 * quu_k);
         self.tp.apply(&mut self.kt_quu, gain, &self.quu, false);
         self.t_mz.copy_from(&self.quz);
-        self.t_mz.gemm(1.0, &self.quu, gain, 1.0);
+        multiply(&mut self.t_mz, &self.quu, gain, true);
         self.v.copy_from(&self.qzz);
         self.tp.apply(&mut self.v, gain, &self.t_mz, true);
         self.tp.apply(&mut self.v, &self.quz, gain, true);
@@ -172,12 +172,12 @@ impl SoocSolver {
         let e = &self.expansions[k];
         let c = &self.curvatures[k];
         let d = &self.derivs[k];
-        bw.sb.gemm(1.0, &bw.s, &e.b, 0.0);
+        multiply(&mut bw.sb, &bw.s, &e.b, false);
         let diag = &mut self.hess_diag[k];
         for j in 0..diag.len() {
             diag[j] = d.luu[(j, j)] + c.huu[(j, j)] + e.b.column(j).dot(&bw.sb.column(j));
         }
-        bw.sa.gemm(1.0, &bw.s, &e.a, 0.0);
+        multiply(&mut bw.sa, &bw.s, &e.a, false);
         bw.s.copy_from(&d.lxx);
         bw.s += &c.hzz;
         bw.tp.apply(&mut bw.s, &e.a, &bw.sa, true);
@@ -190,8 +190,8 @@ impl SoocSolver {
         let e = &self.expansions[k];
         let c = &self.curvatures[k];
         let d = &self.derivs[k];
-        bw.va.gemm(1.0, &bw.v, &e.a, 0.0);
-        bw.vb.gemm(1.0, &bw.v, &e.b, 0.0);
+        multiply(&mut bw.va, &bw.v, &e.a, false);
+        multiply(&mut bw.vb, &bw.v, &e.b, false);
         bw.qzz.copy_from(&d.lxx);
         if newton {
             bw.qzz += &c.hzz;

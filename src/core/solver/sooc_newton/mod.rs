@@ -119,9 +119,7 @@ pub type Observer = std::sync::Arc<dyn Fn(&crate::core::solver::ilqg::Progress) 
 
 /// The solver with its preallocated workspace, sized for one problem size; reuse it across solves
 /// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`]). A solve allocates its
-/// solution; its iterations allocate nothing of their own, but nalgebra hands the arms' products
-/// larger than 5×5 to matrixmultiply, which allocates packing buffers per call (test
-/// `sooc_workspace`).
+/// solution; its iterations allocate nothing (test `sooc_workspace`).
 pub struct SoocSolver {
     pub options: SoocOptions,
     /// Told of every accepted step (iteration, `J`, relative μ, step length): progress for
