@@ -107,6 +107,8 @@ impl Cost for MomentCost<'_> {
 mod tests {
     use super::*;
     use crate::core::model::Exogenous;
+    use rand::rngs::StdRng;
+    use rand::{RngExt, SeedableRng};
 
     fn tracking(w_p: f64) -> TrackingCost {
         TrackingCost {
@@ -127,13 +129,8 @@ mod tests {
         let inner = tracking(1e6);
         let cost = MomentCost::new(&inner, 3);
         assert!(cost.nonnegative());
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = StdRng::seed_from_u64(11);
+        let mut next = || rng.random::<f64>() - 0.5;
         for _ in 0..1000 {
             // A covariance L Lᵀ, packed as vech.
             let l = DMatrix::from_fn(4, 4, |_, _| next());

@@ -111,19 +111,15 @@ fn acceptance_limit(cost: f64, expected: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::rngs::StdRng;
+    use rand::{RngExt, SeedableRng};
 
     /// Every total above the limit is rejected, so a rollout stopped there loses nothing; and the
     /// limit is not looser than the margin needs (a total a little below it is accepted).
     #[test]
     fn a_rollout_stopped_above_the_limit_would_have_been_rejected() {
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = || {
-            // xorshift: a fixed sequence, no dependency for one test.
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = StdRng::seed_from_u64(7);
+        let mut next = || rng.random::<f64>();
         let mut tight = 0;
         for _ in 0..100_000 {
             let cost = 10f64.powf(12.0 * next() - 4.0);
