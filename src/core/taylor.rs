@@ -218,8 +218,80 @@ impl<const K: usize, const ORDER: usize> Scalar for Taylor<K, ORDER> {
     }
     #[inline(always)]
     fn sin_cos(self) -> (Self, Self) {
-        let (s, c) = self.re.sin_cos();
+        let (s, c) = memo::sin_cos(self.re);
         (self.chain(s, c, -s, -c), self.chain(c, -s, -c, s))
+    }
+}
+
+/// The sine and cosine of the real parts, remembered per thread.
+///
+/// The SOOC model takes a knot's flow along its directions in several passes (15 third-order
+/// flows of eight lanes per knot on the two-link arm), and every pass computes the same real
+/// part bit for bit: the same angles at every sub-step, hence the same `sin_cos` calls. libm's
+/// `sincos` (which also saves and restores the rounding mode at each call) was 7 % of a SOOC
+/// plan, almost all of it recomputing what the first pass already had. A small direct-mapped
+/// table keyed by the angle's bits returns the same two numbers `f64::sin_cos` would (it is
+/// what computed them), so the derivatives are unchanged to the bit; a collision only costs
+/// the call it would have cost anyway. Per thread, so no lock and no sharing between rayon's
+/// workers.
+mod memo {
+    use std::cell::RefCell;
+
+    /// Entries of the table: a knot of the two-link arm needs 30 angles (three per sub-step).
+    const SLOTS: usize = 64;
+
+    #[derive(Clone, Copy)]
+    struct Entry {
+        bits: u64,
+        sin: f64,
+        cos: f64,
+    }
+
+    thread_local! {
+        /// Empty slots hold a NaN's bits with NaN values: the lookup of that very NaN returns NaNs,
+        /// as `f64::sin_cos` does.
+        static TABLE: RefCell<[Entry; SLOTS]> = const {
+            RefCell::new([Entry { bits: 0x7ff8_0000_0000_0000, sin: f64::NAN, cos: f64::NAN }; SLOTS])
+        };
+    }
+
+    /// `x.sin_cos()`, from the table when `x` was looked up last in its slot.
+    #[inline(always)]
+    pub(super) fn sin_cos(x: f64) -> (f64, f64) {
+        let bits = x.to_bits();
+        // Fibonacci hashing of the bits (angles along a trajectory differ in their low bits).
+        let slot = ((bits ^ (bits >> 32)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 58) as usize;
+        TABLE.with(|table| {
+            let mut table = table.borrow_mut();
+            let e = &mut table[slot % SLOTS];
+            if e.bits != bits {
+                let (sin, cos) = x.sin_cos();
+                *e = Entry { bits, sin, cos };
+            }
+            (e.sin, e.cos)
+        })
+    }
+
+    #[cfg(test)]
+    mod tests {
+        /// The table returns `f64::sin_cos`'s bits, on a hit, a miss and a collision alike.
+        #[test]
+        fn remembered_values_are_the_computed_ones() {
+            let angles: Vec<f64> = (0..500).map(|i| -7.0 + 0.0287 * i as f64).collect();
+            for _ in 0..3 {
+                for &x in &angles {
+                    let (s, c) = super::sin_cos(x);
+                    let (s0, c0) = x.sin_cos();
+                    assert_eq!(
+                        (s.to_bits(), c.to_bits()),
+                        (s0.to_bits(), c0.to_bits()),
+                        "{x}"
+                    );
+                }
+            }
+            let (s, c) = super::sin_cos(f64::NAN);
+            assert!(s.is_nan() && c.is_nan());
+        }
     }
 }
 
