@@ -536,6 +536,38 @@ fn steps_without_the_third_derivatives_far_from_the_optimum_reach_an_optimum_as_
     assert_an_optimum_as_good("third derivatives below 1 %", setup, &mixed, exact);
 }
 
+#[test]
+fn steps_on_kept_third_derivatives_reach_an_optimum_as_good() {
+    // Every other Newton step keeping the previous point's third derivatives (a Hessian off by
+    // O(|step|)) must not change what the solve ends on (`assert_an_optimum_as_good`), nor what
+    // `Converged` means: a step on kept derivatives never declares it, the last step is exact.
+    let (s, setup, exact) = divergent();
+    let warm = with_stiffness(s, setup, &setup.u_init, s.initial_stiffness);
+    let options = SoocOptions {
+        keep_third_derivatives: true,
+        ..SoocOptions::default()
+    };
+    let kept = solve_with(setup, &warm, options);
+    eprintln!(
+        "kept third derivatives: {:?}, {} Newton steps ({} on kept ones), J = {:.12e} (exact {} \
+         steps, {:.12e})",
+        kept.stop,
+        kept.iterations,
+        kept.kept_third,
+        kept.expected_cost,
+        exact.iterations,
+        exact.expected_cost
+    );
+    assert!(
+        kept.kept_third > 0,
+        "no step kept the third derivatives: the test is vacuous"
+    );
+    // At most every other step: each kept one follows one that took them anew.
+    assert!(2 * kept.kept_third <= kept.iterations + 1);
+    assert_eq!(exact.kept_third, 0);
+    assert_an_optimum_as_good("kept third derivatives", setup, &kept, exact);
+}
+
 /// The predicted expected cost of the converged plan against a seeded Monte Carlo of the
 /// stochastic plant executed open loop (4000 trials): the prediction must lie in the 99.9 %
 /// confidence interval of the Monte Carlo mean.

@@ -250,6 +250,8 @@ pub(super) struct RawSolver {
     /// SOOC: the relative gain per step below which the Newton model adds the flow's third
     /// derivatives (absent: always).
     pub third_derivatives_below: Option<f64>,
+    /// SOOC: every other Newton step keeps the previous point's third derivatives.
+    pub keep_third_derivatives: bool,
 }
 
 impl Default for RawSolver {
@@ -268,6 +270,7 @@ impl Default for RawSolver {
             noise_continuation: vec![1.0],
             indefinite: Indefinite::default(),
             third_derivatives_below: None,
+            keep_third_derivatives: false,
         }
     }
 }

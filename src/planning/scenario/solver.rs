@@ -24,6 +24,9 @@ pub struct SolverSection {
     /// gains more than this fraction of the expected cost (`None`, the default: always in; see
     /// [`crate::core::solver::sooc_newton::SoocOptions::third_derivatives_below`]).
     pub third_derivatives_below: Option<f64>,
+    /// SOOC: every other Newton step keeps the previous point's third derivatives (default
+    /// false; see [`crate::core::solver::sooc_newton::SoocOptions::keep_third_derivatives`]).
+    pub keep_third_derivatives: bool,
 }
 
 impl Default for SolverSection {
@@ -35,6 +38,7 @@ impl Default for SolverSection {
             noise_continuation: raw.noise_continuation,
             indefinite: raw.indefinite,
             third_derivatives_below: raw.third_derivatives_below,
+            keep_third_derivatives: raw.keep_third_derivatives,
         }
     }
 }
@@ -50,6 +54,7 @@ impl SolverSection {
             third_derivatives_below: self
                 .third_derivatives_below
                 .unwrap_or(SoocOptions::default().third_derivatives_below),
+            keep_third_derivatives: self.keep_third_derivatives,
             ..SoocOptions::default()
         }
     }
@@ -104,6 +109,7 @@ impl RawSolver {
             noise_continuation: self.noise_continuation,
             indefinite: self.indefinite,
             third_derivatives_below: self.third_derivatives_below,
+            keep_third_derivatives: self.keep_third_derivatives,
         })
     }
 }

@@ -293,9 +293,8 @@ give.
 **Replanning and feedback on top of stiffness.** `replan` re-solves the stiffness plan every \
 20 ms from the present predicted over the latency. On the arm in the divergent field it ends \
 closer to the target than the stiffness plan at every latency (2.8–4.3 mm against 5.3 mm) and \
-never loses a trial; its expected cost is lower than the stiffness plan's up to 100 ms (24 % \
-lower with no latency) and within 5 % of it beyond (1 % higher at 150 ms, 4 % at 300 ms; 20 \
-trials a point). What it does is buy stiffness: its re-solves command 34–39 N m/rad on \
+never loses a trial; its expected cost is lower than the stiffness plan's up to 200 ms (25 % \
+lower with no latency, 1 % at 200 ms) and 5 % higher at 300 ms (20 trials a point). What it does is buy stiffness: its re-solves command 34–39 N m/rad on \
 average where the plan made in advance holds 24 (the column \"mean stiffness\" is what the \
 trials commanded), as a controller that sees the field push the hand off its path, late, \
 should. Its final error even shrinks at the longest latencies, where its first re-solve comes \

@@ -30,6 +30,17 @@ impl MomentDynamics<'_> {
         self.expand_at(k, z, u, true, e);
     }
 
+    /// [`MomentDynamics::expand`] at a new point, keeping the flow's third derivatives that
+    /// [`MomentDynamics::expand_with_third`] took at the previous one for the next
+    /// [`MomentDynamics::second_order`] (see
+    /// [`crate::core::solver::sooc_newton::SoocOptions::keep_third_derivatives`]): the second
+    /// derivatives are those of the new point, by their own order-2 flows.
+    pub fn expand_keeping_third(&self, k: usize, z: &[f64], u: &[f64], e: &mut MomentExpansion) {
+        let kept = e.d3_ready;
+        self.expand_at(k, z, u, false, e);
+        e.d3_ready = kept;
+    }
+
     fn expand_at(&self, k: usize, z: &[f64], u: &[f64], third: bool, e: &mut MomentExpansion) {
         let base = self.base();
         let (n, m) = (base.nx(), base.nu());

@@ -71,6 +71,12 @@ pub struct MomentExpansion {
 }
 
 impl MomentExpansion {
+    /// Drops third derivatives kept from an earlier point: the next
+    /// [`MomentDynamics::second_order`](super::MomentDynamics::second_order) takes them anew.
+    pub fn forget_third(&mut self) {
+        self.d3_ready = false;
+    }
+
     /// An expansion for a plant of `n` states, `m` controls and `p` noise channels whose noise
     /// gain is linear in the state (the second derivatives of the noise gain are not stored).
     pub fn new(n: usize, m: usize, p: usize) -> Self {

@@ -78,6 +78,9 @@ pub struct SoocSolution {
     /// Accepted steps taken while the model left the flow's third derivatives out
     /// ([`SoocOptions::third_derivatives_below`]; 0 by default).
     pub without_third: usize,
+    /// Accepted steps taken with the previous point's third derivatives
+    /// ([`SoocOptions::keep_third_derivatives`]; 0 by default).
+    pub kept_third: usize,
 }
 
 /// Errors of a solve: the problem does not fit the workspace, or cannot be started.
@@ -269,6 +272,8 @@ impl SoocSolver {
             gauss_newton_run: 0,
             third: self.options.flow_third_derivatives
                 && self.options.third_derivatives_below == f64::INFINITY,
+            kept: false,
+            fresh: false,
         };
         // Sized once: the iterations themselves allocate nothing.
         let mut tally = Tally {
@@ -285,7 +290,7 @@ impl SoocSolver {
             self.newton_model = newton;
             // Only the Newton model itself (no stage convexified) predicts what a Newton step
             // gains; the Gauss–Newton model's prediction says nothing about optimality.
-            let full = model.third || !self.options.flow_third_derivatives;
+            let full = (model.third && !model.kept) || !self.options.flow_third_derivatives;
             let exact = step.filter(|s| newton && s.convexified == 0 && full);
             let pg = self.projected_gradient_tested(
                 problem.bounds,
@@ -315,6 +320,7 @@ impl SoocSolver {
             }
             let phase = Phase {
                 full,
+                kept: model.kept,
                 predicted: (dv1, dv2),
                 predicted_decrease: optimality.predicted_decrease,
             };
@@ -335,6 +341,7 @@ impl SoocSolver {
             history: tally.history,
             convexified: tally.convexified,
             without_third: tally.without_third,
+            kept_third: tally.kept_third,
         })
     }
 
@@ -362,7 +369,8 @@ impl SoocSolver {
                 }
                 *cost = c;
                 tally.iterations += 1;
-                tally.without_third += usize::from(!phase.full);
+                tally.without_third += usize::from(!phase.full && !phase.kept);
+                tally.kept_third += usize::from(phase.kept);
                 tally.history.push(c);
                 self.notify(tally.iterations, c, damping.mu, alpha);
                 model.needs_expansion = true;
@@ -378,8 +386,14 @@ impl SoocSolver {
                 if phase.full {
                     return Some(SoocStop::RegularizationLimit);
                 }
-                // The model without the third derivatives found no descent at any μ: the exact
-                // one, from a fresh μ.
+                // The model without the third derivatives, or with those of the previous point,
+                // found no descent at any μ: the exact one, from a fresh μ.
+                if model.kept {
+                    model.kept = false;
+                    for e in &mut self.expansions {
+                        e.forget_third();
+                    }
+                }
                 model.third = true;
                 model.has_second_order = false;
                 *damping = Damping { mu: 0.0, step: 1.0 };
@@ -439,7 +453,15 @@ impl SoocSolver {
         if model.needs_expansion {
             // The exact Newton model comes next: its third-order flows give the first
             // expansion's second derivatives as well.
-            self.expand(problem, try_newton && model.third);
+            let third = try_newton && model.third;
+            // Keep the previous point's third derivatives when that point took them anew.
+            model.kept = third && self.options.keep_third_derivatives && model.fresh;
+            if model.kept {
+                self.expand_keeping_third(problem);
+            } else {
+                self.expand(problem, third);
+            }
+            model.fresh = third && !model.kept;
             self.costates();
             model.needs_expansion = false;
             model.has_second_order = false;
@@ -518,6 +540,29 @@ impl SoocSolver {
     /// parallel: the knots are independent); with `third`, the flow's third derivatives for
     /// the Newton model that follows ([`MomentDynamics::expand_with_third`]).
     fn expand(&mut self, problem: &SoocProblem, third: bool) {
+        self.expand_by(problem, |k, zk, uk, e| {
+            if third {
+                problem.dynamics.expand_with_third(k, zk, uk, e);
+            } else {
+                problem.dynamics.expand(k, zk, uk, e);
+            }
+        });
+    }
+
+    /// [`SoocSolver::expand`] without third derivatives, keeping those of the previous point
+    /// ([`MomentDynamics::expand_keeping_third`]).
+    fn expand_keeping_third(&mut self, problem: &SoocProblem) {
+        self.expand_by(problem, |k, zk, uk, e| {
+            problem.dynamics.expand_keeping_third(k, zk, uk, e)
+        });
+    }
+
+    /// The expansion of every knot by `expand_knot`, and the cost's derivatives.
+    fn expand_by(
+        &mut self,
+        problem: &SoocProblem,
+        expand_knot: impl Fn(usize, &[f64], &[f64], &mut MomentExpansion) + Sync,
+    ) {
         let h = self.horizon;
         let (z, u) = (&self.z, &self.u);
         self.expansions
@@ -526,11 +571,7 @@ impl SoocSolver {
             .enumerate()
             .for_each(|(k, (e, d))| {
                 let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
-                if third {
-                    problem.dynamics.expand_with_third(k, zk, uk, e);
-                } else {
-                    problem.dynamics.expand(k, zk, uk, e);
-                }
+                expand_knot(k, zk, uk, e);
                 problem
                     .cost
                     .running_derivatives(k, z[k].as_slice(), u[k].as_slice(), d);
@@ -592,6 +633,11 @@ struct ModelState {
     gauss_newton_run: usize,
     /// The Newton model includes the flow's third derivatives (the exact Hessian).
     third: bool,
+    /// The current expansion's third derivatives are the previous point's
+    /// ([`SoocOptions::keep_third_derivatives`]): the model is not the exact Hessian.
+    kept: bool,
+    /// The current expansion took the third derivatives anew.
+    fresh: bool,
 }
 
 /// What the accepted steps of a solve add up to.
@@ -604,6 +650,8 @@ struct Tally {
     convexified: usize,
     /// Accepted steps taken without the flow's third derivatives.
     without_third: usize,
+    /// Accepted steps taken with the previous point's third derivatives.
+    kept_third: usize,
 }
 
 /// What the line search of one iteration needs from its backward pass.
@@ -611,6 +659,8 @@ struct Tally {
 struct Phase {
     /// The model has the flow's third derivatives (or does without them by option).
     full: bool,
+    /// ... those of the previous point.
+    kept: bool,
     /// The model's first- and second-order predicted changes of `J` for a full step.
     predicted: (f64, f64),
     /// The model's predicted decrease relative to `J` (infinite without the exact model).

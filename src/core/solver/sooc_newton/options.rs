@@ -37,6 +37,16 @@ pub struct SoocOptions {
     /// about a third of the cost; near it only the exact Hessian converges fast, and only a pass with
     /// it tests the predicted decrease (so `Converged` still means the exact model's).
     pub third_derivatives_below: f64,
+    /// With the third derivatives in the model: every other Newton step keeps those of the
+    /// previous point instead of taking them anew (default false). They are most of a Newton
+    /// step's cost (their 15 flows of eight lanes per knot against the second derivatives' three
+    /// on the arm); the part of the Hessian they give is then off by O(|step|), so the model
+    /// is exact only up to the step's own size and converges superlinearly, not quadratically.
+    /// A step on kept derivatives is never an exact one: it cannot declare convergence, and when
+    /// it finds no descent at any μ the derivatives are taken anew. Measured per scenario
+    /// (`docs/BENCHMARKS.md`): it pays on the arms in the divergent field (fewer or as many steps,
+    /// a third of them cheap) and not where the third derivatives are in from the first step.
+    pub keep_third_derivatives: bool,
     /// What a backward pass does with a stage whose Newton `Q_uu` is not positive definite
     /// (default [`Indefinite::Regularize`]).
     pub indefinite: Indefinite,
@@ -52,6 +62,7 @@ impl Default for SoocOptions {
             mu_max: 1e10,
             flow_third_derivatives: true,
             third_derivatives_below: f64::INFINITY,
+            keep_third_derivatives: false,
             indefinite: Indefinite::Regularize,
         }
     }
