@@ -26,7 +26,7 @@
 use super::Bounds;
 use super::boxqp::MAX_QP;
 use super::sooc::{MomentCost, MomentDynamics, MomentExpansion};
-use crate::core::cost::{Cost, CostDerivatives};
+use crate::core::cost::CostDerivatives;
 use crate::core::dense::zero;
 use crate::core::dynamics::Dynamics;
 use nalgebra::{DMatrix, DVector};
@@ -34,6 +34,7 @@ use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
 mod backward;
+mod expand;
 mod forward;
 mod optimality;
 mod options;
@@ -534,51 +535,6 @@ impl SoocSolver {
                 problem.dynamics.second_order(k, zk, uk, lam_next, third, e);
                 e.curvature(lam_next, &mut c.hzz, &mut c.huz, &mut c.huu);
             });
-    }
-
-    /// First derivatives of the moment step and the cost derivatives at every knot (in
-    /// parallel: the knots are independent); with `third`, the flow's third derivatives for
-    /// the Newton model that follows ([`MomentDynamics::expand_with_third`]).
-    fn expand(&mut self, problem: &SoocProblem, third: bool) {
-        self.expand_by(problem, |k, zk, uk, e| {
-            if third {
-                problem.dynamics.expand_with_third(k, zk, uk, e);
-            } else {
-                problem.dynamics.expand(k, zk, uk, e);
-            }
-        });
-    }
-
-    /// [`SoocSolver::expand`] without third derivatives, keeping those of the previous point
-    /// ([`MomentDynamics::expand_keeping_third`]).
-    fn expand_keeping_third(&mut self, problem: &SoocProblem) {
-        self.expand_by(problem, |k, zk, uk, e| {
-            problem.dynamics.expand_keeping_third(k, zk, uk, e)
-        });
-    }
-
-    /// The expansion of every knot by `expand_knot`, and the cost's derivatives.
-    fn expand_by(
-        &mut self,
-        problem: &SoocProblem,
-        expand_knot: impl Fn(usize, &[f64], &[f64], &mut MomentExpansion) + Sync,
-    ) {
-        let h = self.horizon;
-        let (z, u) = (&self.z, &self.u);
-        self.expansions
-            .par_iter_mut()
-            .zip(self.derivs[..h].par_iter_mut())
-            .enumerate()
-            .for_each(|(k, (e, d))| {
-                let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
-                expand_knot(k, zk, uk, e);
-                problem
-                    .cost
-                    .running_derivatives(k, z[k].as_slice(), u[k].as_slice(), d);
-            });
-        problem
-            .cost
-            .terminal_derivatives(self.z[h].as_slice(), &mut self.derivs[h]);
     }
 
     /// The costates `λ_N = ∇g`, `λ_k = ℓ_z + Aᵀ λ_{k+1}`, and the exact gradient

@@ -1,0 +1,55 @@
+//! The expansion of every knot for an iteration: the moment step's first derivatives (and,
+//! for the Newton model, its second and third) and the cost's derivatives, in parallel.
+
+use super::SoocProblem;
+use super::SoocSolver;
+use crate::core::cost::Cost;
+use crate::core::solver::sooc::MomentExpansion;
+use rayon::prelude::*;
+
+impl SoocSolver {
+    /// First derivatives of the moment step and the cost derivatives at every knot (in
+    /// parallel: the knots are independent); with `third`, the flow's third derivatives for
+    /// the Newton model that follows ([`MomentDynamics::expand_with_third`](crate::core::solver::sooc::MomentDynamics::expand_with_third)).
+    pub(super) fn expand(&mut self, problem: &SoocProblem, third: bool) {
+        self.expand_by(problem, |k, zk, uk, e| {
+            if third {
+                problem.dynamics.expand_with_third(k, zk, uk, e);
+            } else {
+                problem.dynamics.expand(k, zk, uk, e);
+            }
+        });
+    }
+
+    /// [`SoocSolver::expand`] without third derivatives, keeping those of the previous point
+    /// ([`MomentDynamics::expand_keeping_third`](crate::core::solver::sooc::MomentDynamics::expand_keeping_third)).
+    pub(super) fn expand_keeping_third(&mut self, problem: &SoocProblem) {
+        self.expand_by(problem, |k, zk, uk, e| {
+            problem.dynamics.expand_keeping_third(k, zk, uk, e)
+        });
+    }
+
+    /// The expansion of every knot by `expand_knot`, and the cost's derivatives.
+    fn expand_by(
+        &mut self,
+        problem: &SoocProblem,
+        expand_knot: impl Fn(usize, &[f64], &[f64], &mut MomentExpansion) + Sync,
+    ) {
+        let h = self.horizon;
+        let (z, u) = (&self.z, &self.u);
+        self.expansions
+            .par_iter_mut()
+            .zip(self.derivs[..h].par_iter_mut())
+            .enumerate()
+            .for_each(|(k, (e, d))| {
+                let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
+                expand_knot(k, zk, uk, e);
+                problem
+                    .cost
+                    .running_derivatives(k, z[k].as_slice(), u[k].as_slice(), d);
+            });
+        problem
+            .cost
+            .terminal_derivatives(self.z[h].as_slice(), &mut self.derivs[h]);
+    }
+}
