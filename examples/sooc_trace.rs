@@ -91,7 +91,16 @@ fn main() {
             p.iteration, p.merit, p.mu, p.alpha
         )
     }));
-    let sol = solver.solve(&problem, warm).expect("re-solves");
+    // REPEAT=N: the warm re-solve N more times, silently, for a profiler.
+    let repeat: usize = std::env::var("REPEAT")
+        .ok()
+        .and_then(|r| r.parse().ok())
+        .unwrap_or(0);
+    let mut sol = solver.solve(&problem, warm).expect("re-solves");
+    solver.observer = None;
+    for _ in 0..repeat {
+        sol = solver.solve(&problem, warm).expect("re-solves");
+    }
     println!(
         "warm after {shift} knots: {:?}, {} iterations ({} without third derivatives), {:.1} ms, \
          J = {:.12e}, {:?}",

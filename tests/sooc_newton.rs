@@ -234,7 +234,7 @@ use vic::core::solver::sooc_newton::{
     Indefinite, SoocOptions, SoocProblem, SoocSolution, SoocSolver, SoocStop,
 };
 use vic::planning::montecarlo::run_trials;
-use vic::planning::plan::{Setup, predict_open_loop, setup};
+use vic::planning::plan::{self, Setup, predict_open_loop, setup};
 use vic::planning::scenario::Scenario;
 
 fn scenario(stem: &str) -> (Scenario, Setup) {
@@ -566,6 +566,50 @@ fn steps_on_kept_third_derivatives_reach_an_optimum_as_good() {
     assert!(2 * kept.kept_third <= kept.iterations + 1);
     assert_eq!(exact.kept_third, 0);
     assert_an_optimum_as_good("kept third derivatives", setup, &kept, exact);
+}
+
+#[test]
+fn a_start_near_the_optimum_takes_the_exact_model_from_the_first_step() {
+    // The plan's tail re-solved over the remaining movement one period later (what the central
+    // controller solves) starts near its optimum, where the Gauss–Newton model is worst: with
+    // the scenario's economies (`third_derivatives_below`, kept third derivatives) the re-solve
+    // must take exact steps only, as many as a solve with the exact model always, and end
+    // where that ends.
+    let (s, setup) = scenario("two_link_divergent");
+    let thrifty = s.solver.sooc_options();
+    assert!(thrifty.third_derivatives_below < 1.0 && thrifty.keep_third_derivatives);
+    let (plan, _) =
+        plan::plan_sooc(&s, &setup, &setup.problem(s.task.steps), &None).expect("plans");
+    let planned = Setup {
+        u_init: plan.u.clone(),
+        ..setup.clone()
+    };
+    let rest = planned.remaining(2, plan.x[2].as_slice());
+    let near = solve_with(&rest, &rest.u_init, thrifty.clone());
+    let exact = solve_from(&rest, &rest.u_init);
+    eprintln!(
+        "remaining movement: {:?} in {} steps ({} without third derivatives, {} on kept ones), \
+         J = {:.12e}; exact model always: {} steps, J = {:.12e}",
+        near.stop,
+        near.iterations,
+        near.without_third,
+        near.kept_third,
+        near.expected_cost,
+        exact.iterations,
+        exact.expected_cost
+    );
+    assert_eq!(near.stop, SoocStop::Converged);
+    assert_eq!(near.without_third, 0);
+    assert_eq!(near.kept_third, 0);
+    assert_eq!(near.iterations, exact.iterations);
+    assert!((near.expected_cost - exact.expected_cost).abs() <= 1e-12 * exact.expected_cost);
+    // A cold start is far from it: the same options take Gauss–Newton steps there.
+    let start = with_stiffness(&s, &rest, &rest.u_init, s.initial_stiffness);
+    let cold = solve_with(&rest, &start, thrifty);
+    assert!(
+        cold.without_third > 0,
+        "the cold start took no Gauss–Newton step"
+    );
 }
 
 /// The predicted expected cost of the converged plan against a seeded Monte Carlo of the

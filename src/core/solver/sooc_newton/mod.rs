@@ -38,6 +38,7 @@ mod expand;
 mod forward;
 mod optimality;
 mod options;
+mod state;
 
 pub use backward::Indefinite;
 use backward::{Backstep, Backward, Curvature};
@@ -45,6 +46,7 @@ use forward::rollout;
 pub use optimality::Optimality;
 use optimality::control_scales;
 pub use options::{SoocOptions, SoocStop};
+use state::{Damping, ModelState, Phase, Tally};
 
 /// Relative regularisation above which an iteration gives up on the Newton model and takes a
 /// Gauss–Newton step instead.
@@ -55,6 +57,11 @@ const NEWTON_RETRY: usize = 4;
 
 /// Relative predicted decrease at the level of floating-point round-off of `J`.
 const ROUND_OFF: f64 = 1e-13;
+
+/// Kept third derivatives ([`SoocOptions::keep_third_derivatives`]) only after an exact step
+/// that predicted more than this many times the decrease tolerance: after a smaller one the
+/// next point is likely the optimum, and only an exact model there can say so.
+const KEEP_FACTOR: f64 = 1e3;
 
 /// A solution of the open-loop moment problem.
 #[derive(Debug, Clone)]
@@ -275,6 +282,8 @@ impl SoocSolver {
                 && self.options.third_derivatives_below == f64::INFINITY,
             kept: false,
             fresh: false,
+            first: true,
+            last_predicted: f64::INFINITY,
         };
         // Sized once: the iterations themselves allocate nothing.
         let mut tally = Tally {
@@ -285,7 +294,7 @@ impl SoocSolver {
             // The Newton model costs the flow's third derivatives. While it keeps failing (far
             // from the optimum), try it only every few iterations and take Gauss–Newton steps
             // in between.
-            let try_newton = self.prepare_model(problem, &mut model);
+            let try_newton = self.prepare_model(problem, &mut model, (&scale, cost));
             let (step, newton) =
                 self.regularized_backward(problem.bounds, &mut damping, try_newton);
             self.newton_model = newton;
@@ -369,6 +378,7 @@ impl SoocSolver {
                     model.third = true;
                 }
                 *cost = c;
+                model.last_predicted = phase.predicted_decrease;
                 tally.iterations += 1;
                 tally.without_third += usize::from(!phase.full && !phase.kept);
                 tally.kept_third += usize::from(phase.kept);
@@ -449,14 +459,22 @@ impl SoocSolver {
 
     /// Brings the model up to date with the trajectory: first derivatives and costates after
     /// a step, the Newton curvature when this iteration tries Newton. Whether it does.
-    fn prepare_model(&mut self, problem: &SoocProblem, model: &mut ModelState) -> bool {
+    fn prepare_model(
+        &mut self,
+        problem: &SoocProblem,
+        model: &mut ModelState,
+        (scale, cost): (&[f64], f64),
+    ) -> bool {
         let try_newton = model.gauss_newton_run.is_multiple_of(NEWTON_RETRY);
         if model.needs_expansion {
             // The exact Newton model comes next: its third-order flows give the first
             // expansion's second derivatives as well.
             let third = try_newton && model.third;
             // Keep the previous point's third derivatives when that point took them anew.
-            model.kept = third && self.options.keep_third_derivatives && model.fresh;
+            model.kept = third
+                && self.options.keep_third_derivatives
+                && model.fresh
+                && model.last_predicted > KEEP_FACTOR * self.options.decrease_tolerance;
             if model.kept {
                 self.expand_keeping_third(problem);
             } else {
@@ -466,6 +484,16 @@ impl SoocSolver {
             self.costates();
             model.needs_expansion = false;
             model.has_second_order = false;
+            if std::mem::take(&mut model.first)
+                && !model.third
+                && self.near_optimum(problem, scale, cost)
+            {
+                // A warm start at (nearly) an optimum: the exact model from the first step,
+                // where the Gauss–Newton one is worst (its third derivatives anew, by their
+                // own flows, in the second-order pass).
+                model.third = true;
+                model.fresh = true;
+            }
         }
         if try_newton && !model.has_second_order {
             self.expand_second_order(problem, model.third);
@@ -552,73 +580,4 @@ impl SoocSolver {
             self.grad[k].gemv_tr(1.0, &e.b, next, 1.0);
         }
     }
-}
-
-/// Levenberg–Marquardt regularisation μ (relative to each control's Gauss–Newton curvature) with
-/// Tassa's multiplicative schedule.
-struct Damping {
-    mu: f64,
-    step: f64,
-}
-
-impl Damping {
-    /// After a long accepted step: μ falls, to exactly 0 below `mu_min`.
-    fn decrease(&mut self, options: &SoocOptions) {
-        self.step = (self.step / 2.0).min(0.5);
-        self.mu *= self.step;
-        if self.mu < options.mu_min {
-            self.mu = 0.0;
-        }
-    }
-
-    /// After a rejected step: μ rises; false when it passed `mu_max`.
-    fn increase(&mut self, options: &SoocOptions) -> bool {
-        self.step = (self.step * 2.0).max(2.0);
-        self.mu = (self.mu * self.step).max(options.mu_min.max(1e-3));
-        self.mu <= options.mu_max
-    }
-}
-
-/// Which model the iterations have.
-struct ModelState {
-    /// The trajectory moved since the last expansion.
-    needs_expansion: bool,
-    /// The Newton curvature of the current expansion is computed.
-    has_second_order: bool,
-    /// Iterations in a row that fell back to Gauss–Newton.
-    gauss_newton_run: usize,
-    /// The Newton model includes the flow's third derivatives (the exact Hessian).
-    third: bool,
-    /// The current expansion's third derivatives are the previous point's
-    /// ([`SoocOptions::keep_third_derivatives`]): the model is not the exact Hessian.
-    kept: bool,
-    /// The current expansion took the third derivatives anew.
-    fresh: bool,
-}
-
-/// What the accepted steps of a solve add up to.
-#[derive(Default)]
-struct Tally {
-    iterations: usize,
-    /// Cost after each accepted step.
-    history: Vec<f64>,
-    /// Stages convexified, over all backward passes.
-    convexified: usize,
-    /// Accepted steps taken without the flow's third derivatives.
-    without_third: usize,
-    /// Accepted steps taken with the previous point's third derivatives.
-    kept_third: usize,
-}
-
-/// What the line search of one iteration needs from its backward pass.
-#[derive(Clone, Copy)]
-struct Phase {
-    /// The model has the flow's third derivatives (or does without them by option).
-    full: bool,
-    /// ... those of the previous point.
-    kept: bool,
-    /// The model's first- and second-order predicted changes of `J` for a full step.
-    predicted: (f64, f64),
-    /// The model's predicted decrease relative to `J` (infinite without the exact model).
-    predicted_decrease: f64,
 }

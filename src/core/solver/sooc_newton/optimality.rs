@@ -60,6 +60,23 @@ impl SoocSolver {
         relative(self.projected_gradient(bounds, scale, Some(cost)))
     }
 
+    /// Whether the start of a solve is near enough to an optimum for the exact model from the
+    /// first step ([`super::SoocOptions::third_derivatives_below`]): its projected gradient,
+    /// relative to `J` and uncapped (the first-order change of `J` from moving one control by
+    /// its scale), below that fraction. A cold start from the deterministic optimum is far
+    /// (0.17 on the divergent arm); the plan's tail, re-solved over the remaining movement one
+    /// period later, is not (6e-6).
+    pub(super) fn near_optimum(
+        &self,
+        problem: &super::SoocProblem,
+        scale: &[f64],
+        cost: f64,
+    ) -> bool {
+        self.options.flow_third_derivatives
+            && self.projected_gradient(problem.bounds, scale, None) / cost.abs().max(1e-300)
+                < self.options.third_derivatives_below
+    }
+
     /// `max_{k,j} s_{k,j} |Π(∇J)_{k,j}|`, `Π` zeroing the components that push out of the box
     /// at a bound. With the cost `J` (after [`Self::hessian_diagonal_pass`]), each scale is
     /// capped by the control's own curvature: [`curvature_capped`].

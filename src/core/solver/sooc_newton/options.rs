@@ -35,7 +35,10 @@ pub struct SoocOptions {
     /// step gained more than this fraction of `J`, and adds them for good once a step gains
     /// less (default ∞: always). Far from the optimum the model without them steps as well at
     /// about a third of the cost; near it only the exact Hessian converges fast, and only a pass with
-    /// it tests the predicted decrease (so `Converged` still means the exact model's).
+    /// it tests the predicted decrease (so `Converged` still means the exact model's). Before the
+    /// first step, the start's projected gradient relative to `J` stands in for the gain: a warm
+    /// start below this fraction (the plan's tail over the remaining movement) has the exact
+    /// model from the first step, where the Gauss–Newton one is worst.
     pub third_derivatives_below: f64,
     /// With the third derivatives in the model: every other Newton step keeps those of the
     /// previous point instead of taking them anew (default false). They are most of a Newton
@@ -43,7 +46,9 @@ pub struct SoocOptions {
     /// on the arm); the part of the Hessian they give is then off by O(|step|), so the model
     /// is exact only up to the step's own size and converges superlinearly, not quadratically.
     /// A step on kept derivatives is never an exact one: it cannot declare convergence, and when
-    /// it finds no descent at any μ the derivatives are taken anew. Measured per scenario
+    /// it finds no descent at any μ the derivatives are taken anew. They are not kept after an
+    /// exact step that predicted less than a thousand times `decrease_tolerance`: the next point
+    /// is then likely the optimum, which only a fresh exact model can certify. Measured per scenario
     /// (`docs/BENCHMARKS.md`): it pays on the arms in the divergent field (fewer or as many steps,
     /// a third of them cheap) and not where the third derivatives are in from the first step.
     pub keep_third_derivatives: bool,
