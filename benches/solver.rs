@@ -277,6 +277,46 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
         b.iter(|| black_box(solver.solve(&problem, tail)))
     });
 
+    // The same re-solve by `resolve_remaining` on the workspace that solved the whole movement,
+    // its last point the plan (each sample's workspace prepared untimed): from the plan's own
+    // mean it meets that point again at every knot and carries the flow's third derivatives
+    // there, to the same bits.
+    let whole_moments = MomentDynamics::new(&setup.dynamics);
+    let whole_cost = MomentCost::new(&setup.cost, s.task.steps);
+    let whole = SoocProblem {
+        dynamics: &whole_moments,
+        cost: &whole_cost,
+        x0: &setup.x0,
+        bounds: &setup.bounds,
+        horizon: s.task.steps,
+    };
+    let at_plan = || {
+        let mut w = SoocSolver::new(&whole_moments, s.task.steps, s.solver.sooc_options());
+        w.solve(&whole, &cold.u).expect("solves at the plan");
+        w
+    };
+    let sol = at_plan()
+        .resolve_remaining(&problem, shift)
+        .expect("re-solves");
+    eprintln!(
+        "two_link_divergent_sooc_remaining_carried: {:?}, {} iterations, {} knots carried, \
+         {:.1} ms (single run)",
+        sol.stop,
+        sol.iterations,
+        sol.carried_third,
+        sol.solve_time.as_secs_f64() * 1e3
+    );
+    group.bench_function("two_link_divergent_sooc_remaining_carried", |b| {
+        b.iter_batched(
+            at_plan,
+            |mut w| {
+                let sol = w.resolve_remaining(&problem, shift);
+                (w, black_box(sol))
+            },
+            criterion::BatchSize::PerIteration,
+        )
+    });
+
     // The live replanner's own re-solve at that knot (`Replanner::replan_from` with its 50 Hz
     // defaults: at most 3 Newton steps, no third derivatives): what a central period must fit.
     let file = plan::plan(&s, Method::Sooc, None).expect("plans");

@@ -49,7 +49,9 @@ fn main() {
 
     // SHRINK=1: the remaining movement (horizon N - SHIFT), as the central controller's
     // replanner re-solves; SHRINK=moments: the same from the plan's whole moment state at that
-    // knot (mean and covariance), where the plan's tail is already optimal.
+    // knot (mean and covariance), where the plan's tail is already optimal; SHRINK=carry: the
+    // same as SHRINK=1 by `resolve_remaining` on the workspace that solved the whole movement
+    // (each REPEAT re-solves the whole movement from the plan first, untimed).
     let shrink = std::env::var("SHRINK").ok();
     // The plan as the warm start, moved along with everything else.
     let planned = plan::Setup {
@@ -84,7 +86,35 @@ fn main() {
         bounds: &next.bounds,
         horizon,
     };
-    let mut solver = SoocSolver::new(&moments, horizon, s.solver.sooc_options());
+    let full_moments = MomentDynamics::new(&setup.dynamics);
+    let full_cost = MomentCost::new(&setup.cost, s.task.steps);
+    let full = SoocProblem {
+        dynamics: &full_moments,
+        cost: &full_cost,
+        x0: &setup.x0,
+        bounds: &setup.bounds,
+        horizon: s.task.steps,
+    };
+    let carry = shrink.as_deref() == Some("carry");
+    let mut solver = if carry {
+        SoocSolver::new(&full_moments, s.task.steps, s.solver.sooc_options())
+    } else {
+        SoocSolver::new(&moments, horizon, s.solver.sooc_options())
+    };
+    let solve = |solver: &mut SoocSolver| {
+        if carry {
+            let whole = solver
+                .solve(&full, &cold.u)
+                .expect("solves the whole movement");
+            assert_eq!(
+                whole.iterations, 0,
+                "the plan is the whole movement's optimum"
+            );
+            solver.resolve_remaining(&problem, shift)
+        } else {
+            solver.solve(&problem, warm)
+        }
+    };
     solver.observer = Some(Arc::new(|p| {
         println!(
             "  step {:3}  J = {:.12e}  mu = {:.3e}  alpha = {:.4}",
@@ -96,17 +126,18 @@ fn main() {
         .ok()
         .and_then(|r| r.parse().ok())
         .unwrap_or(0);
-    let mut sol = solver.solve(&problem, warm).expect("re-solves");
+    let mut sol = solve(&mut solver).expect("re-solves");
     solver.observer = None;
     for _ in 0..repeat {
-        sol = solver.solve(&problem, warm).expect("re-solves");
+        sol = solve(&mut solver).expect("re-solves");
     }
     println!(
-        "warm after {shift} knots: {:?}, {} iterations ({} without third derivatives), {:.1} ms, \
-         J = {:.12e}, {:?}",
+        "warm after {shift} knots: {:?}, {} iterations ({} without third derivatives, {} knots' \
+         carried), {:.1} ms, J = {:.12e}, {:?}",
         sol.stop,
         sol.iterations,
         sol.without_third,
+        sol.carried_third,
         sol.solve_time.as_secs_f64() * 1e3,
         sol.expected_cost,
         sol.optimality

@@ -86,3 +86,95 @@ fn iterations_do_not_allocate() {
     assert_iterations_do_not_allocate("two_link_divergent.toml", (2, 5));
     assert_iterations_do_not_allocate("two_link_vsa_divergent.toml", (1, 3));
 }
+
+/// `resolve_remaining` on the workspace that solved the whole movement gives, to the bit, what a
+/// new workspace's solve of the remaining movement gives: from the plan's own mean at knot 2 it
+/// takes every knot's flow third derivatives from the previous solve (their points are the
+/// same to the bit), from any other state none. It allocates no more than that solve, and a
+/// call that does not fit leaves the workspace as it was.
+#[test]
+fn a_re_solve_of_the_remaining_movement_carries_only_exact_third_derivatives() {
+    let (s, setup) = load("two_link_divergent.toml");
+    let options = s.solver.sooc_options();
+    let horizon = s.task.steps;
+    let (plan, _) = plan::plan_sooc(&s, &setup, &setup.problem(horizon), &None).expect("plans");
+    let moments = MomentDynamics::new(&setup.dynamics);
+    let cost = MomentCost::new(&setup.cost, horizon);
+    let whole = SoocProblem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: &setup.x0,
+        bounds: &setup.bounds,
+        horizon,
+    };
+    let planned = Setup {
+        u_init: plan.u.clone(),
+        ..setup.clone()
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
+    let at_plan = plan.x[2].as_slice().to_vec();
+    let mut beside = at_plan.clone();
+    beside[2] += 1e-6;
+    for (x2, carried) in [(at_plan, horizon - 2), (beside, 0)] {
+        let rest = planned.remaining(2, &x2);
+        let rest_moments = MomentDynamics::new(&rest.dynamics);
+        let rest_cost = MomentCost::new(&rest.cost, horizon - 2);
+        let problem = SoocProblem {
+            dynamics: &rest_moments,
+            cost: &rest_cost,
+            x0: &rest.x0,
+            bounds: &rest.bounds,
+            horizon: horizon - 2,
+        };
+        let mut solver = SoocSolver::new(&moments, horizon, options.clone());
+        assert!(
+            solver.resolve_remaining(&problem, 2).is_err(),
+            "nothing solved yet"
+        );
+        let again = solver.solve(&whole, &plan.u).expect("solves");
+        assert_eq!(
+            again.iterations, 0,
+            "the plan is the optimum: {:?}",
+            again.stop
+        );
+        assert!(
+            solver.resolve_remaining(&problem, 3).is_err(),
+            "98 knots are not 97"
+        );
+        let (resolved, resolve_allocations) = pool.install(|| {
+            let before = allocations();
+            let sol = solver.resolve_remaining(&problem, 2).expect("re-solves");
+            (sol, allocations() - before)
+        });
+        let mut new = SoocSolver::new(&rest_moments, horizon - 2, options.clone());
+        let (fresh, fresh_allocations) = pool.install(|| {
+            let before = allocations();
+            let sol = new.solve(&problem, &rest.u_init).expect("solves");
+            (sol, allocations() - before)
+        });
+        eprintln!(
+            "remaining movement: {:?} in {} steps, {} knots carried, {:.1} ms (a new \
+             workspace: {:.1} ms); allocations {resolve_allocations} / {fresh_allocations}",
+            resolved.stop,
+            resolved.iterations,
+            resolved.carried_third,
+            resolved.solve_time.as_secs_f64() * 1e3,
+            fresh.solve_time.as_secs_f64() * 1e3,
+        );
+        assert_eq!(resolved.carried_third, carried);
+        assert_eq!(fresh.carried_third, 0);
+        assert_eq!(resolved.iterations, fresh.iterations);
+        assert_eq!(resolved.stop, fresh.stop);
+        assert_eq!(
+            resolved.expected_cost.to_bits(),
+            fresh.expected_cost.to_bits()
+        );
+        for (a, b) in resolved.u.iter().zip(&fresh.u) {
+            assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()));
+        }
+        assert!(resolve_allocations <= fresh_allocations);
+    }
+}

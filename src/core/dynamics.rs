@@ -131,7 +131,7 @@ impl DiscreteDynamics {
         }
     }
 
-    fn exo(&self, k: usize) -> &Exogenous {
+    pub(crate) fn exo(&self, k: usize) -> &Exogenous {
         &self.exogenous[k.min(self.exogenous.len() - 1)]
     }
 

@@ -3,6 +3,7 @@
 //! costate-contracted second derivatives that the Newton model adds (`second_order`).
 
 use super::directional::{flow_second_and_third, flow_second_derivatives, flow_third_contracted};
+use super::expansion::FlowPoint;
 use super::{MomentDynamics, MomentExpansion, costate_matrix, lift, unpack};
 use crate::core::dense::{multiply, zero};
 use crate::core::dynamics::{DiscreteDynamics, Dynamics, NoiseKind};
@@ -39,6 +40,32 @@ impl MomentDynamics<'_> {
         let kept = e.d3_ready;
         self.expand_at(k, z, u, false, e);
         e.d3_ready = kept;
+    }
+
+    /// [`MomentDynamics::expand`] (with `third`, [`MomentDynamics::expand_with_third`]) where
+    /// `e` may hold the flow's third derivatives of the very same point from an earlier solve:
+    /// a re-solve over the remaining movement
+    /// ([`crate::core::solver::sooc_newton::SoocSolver::resolve_remaining`]) from the plan's own
+    /// mean meets, at every knot, the point its previous solve ended at. Those are kept, and
+    /// the point's second derivatives come from their own order-2 flows; they are taken anew
+    /// wherever the point differs in any bit (the mean state, the controls, the knot's
+    /// exogenous input, the time step). The same numbers to the bit either way. Whether they
+    /// were kept.
+    pub fn expand_reusing_third(
+        &self,
+        k: usize,
+        z: &[f64],
+        u: &[f64],
+        third: bool,
+        e: &mut MomentExpansion,
+    ) -> bool {
+        let here = At::new(self.base(), k, z, u).point();
+        let same = e.d3_ready && e.d3_at == here;
+        self.expand_at(k, z, u, third && !same, e);
+        if same {
+            e.d3_ready = true;
+        }
+        same
     }
 
     fn expand_at(&self, k: usize, z: &[f64], u: &[f64], third: bool, e: &mut MomentExpansion) {
@@ -111,6 +138,11 @@ pub(super) struct At<'a> {
 }
 
 impl<'a> At<'a> {
+    /// The flow's inputs at this point, bit for bit.
+    pub(super) fn point(&self) -> FlowPoint {
+        FlowPoint::of(self.base, self.k, self.x, self.u)
+    }
+
     pub(super) fn new(base: &'a DiscreteDynamics, k: usize, z: &'a [f64], u: &'a [f64]) -> Self {
         At {
             base,

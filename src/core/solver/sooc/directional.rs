@@ -54,6 +54,7 @@ pub(super) fn flow_second_and_third(at: At, s: &mut MomentExpansion) {
     // `directions` lists `e_a + e_b` (then `e_a − e_b`) after the `nv` directions `e_a`.
     store_second(s, n, nv, &d2, |pair| nv + 2 * pair);
     s.d3_ready = true;
+    s.d3_at = at.point();
 }
 
 /// `dA_j` and `∂²Φ/∂u_a∂u_b` from the second derivatives `d2` along `e_a` (row `a`) and
@@ -124,6 +125,7 @@ pub(super) fn flow_third_contracted(at: At, s: &mut MomentExpansion) {
     if !s.d3_ready {
         directional::<3, LANES>(at, &dirs[..count], &mut s.d3[..count], None);
         s.d3_ready = true;
+        s.d3_at = at.point();
     }
     // Moved out for the loop (no allocation), back at the end.
     let d3 = std::mem::take(&mut s.d3);

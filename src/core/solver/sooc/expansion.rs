@@ -4,7 +4,7 @@
 use super::directional::third_order_direction_count;
 use super::{MomentDynamics, costate_matrix, vech_len};
 use crate::core::dense::{multiply, zero};
-use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
+use crate::core::dynamics::{DiscreteDynamics, Dynamics, Linearization, NoiseKind};
 use crate::core::model::Noise;
 use crate::core::scalar::{MAX_NU, MAX_NX};
 use nalgebra::DMatrix;
@@ -43,6 +43,9 @@ pub struct MomentExpansion {
     /// [`MomentDynamics::expand_with_third`] or by the first contraction, reused by the next.
     pub(super) d3: Vec<[f64; MAX_NX]>,
     pub(super) d3_ready: bool,
+    /// Where `d3` was taken, bit for bit ([`FlowPoint`]): what lets a re-solve over the
+    /// remaining movement reuse it ([`MomentDynamics::expand_reusing_third`]).
+    pub(super) d3_at: FlowPoint,
     /// Whether the noise gain is nonlinear in the state (torque noise through `M⁻¹(q)`): then
     /// `d2c`, `d2cx` hold its second and third derivatives.
     pub(super) curved_model: bool,
@@ -68,6 +71,39 @@ pub struct MomentExpansion {
     lam_dc: Vec<DMatrix<f64>>,
     hvv: DMatrix<f64>,
     hpv: DMatrix<f64>,
+}
+
+/// The inputs of one knot's flow, bit for bit: the mean state, the controls, the exogenous
+/// input of the knot (reference and external torque), the time step and the sub-steps. Equal
+/// points give equal directional derivatives, to the bit, for the same plant model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct FlowPoint([u64; FLOW_POINT_LEN]);
+
+/// Entries of a [`FlowPoint`]: state, controls, the six exogenous values, `dt`, sub-steps.
+const FLOW_POINT_LEN: usize = MAX_NX + MAX_NU + 8;
+
+impl FlowPoint {
+    /// No point (NaN bits, which no flow is taken at).
+    pub(super) const NONE: FlowPoint = FlowPoint([u64::MAX; FLOW_POINT_LEN]);
+
+    /// The point `(x, u)` of knot `k` of `base`.
+    pub(super) fn of(base: &DiscreteDynamics, k: usize, x: &[f64], u: &[f64]) -> Self {
+        let mut bits = [0u64; FLOW_POINT_LEN];
+        let ex = base.exo(k);
+        let exogenous = ex.q_d.iter().chain(&ex.qd_d).chain(&ex.tau_ext);
+        let values = x[..base.nx()]
+            .iter()
+            .chain(&u[..base.nu()])
+            .chain(exogenous);
+        for (b, v) in bits.iter_mut().zip(values) {
+            *b = v.to_bits();
+        }
+        // Past the state and controls the slots of absent entries stay 0 in both points, so
+        // the tail can hold dt and the sub-steps at fixed places.
+        bits[FLOW_POINT_LEN - 2] = base.dt.to_bits();
+        bits[FLOW_POINT_LEN - 1] = base.substeps as u64;
+        FlowPoint(bits)
+    }
 }
 
 impl MomentExpansion {
@@ -103,6 +139,7 @@ impl MomentExpansion {
             h3_costate: vec![0.0; nz],
             d3: vec![[0.0; MAX_NX]; third_order_direction_count(n, nv)],
             d3_ready: false,
+            d3_at: FlowPoint::NONE,
             curved_model: curved,
             d2c: (0..pairs).map(|_| z(n, p)).collect(),
             d2cx: (0..pairs)

@@ -6,6 +6,7 @@ use super::SoocSolver;
 use crate::core::cost::Cost;
 use crate::core::solver::sooc::MomentExpansion;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 impl SoocSolver {
     /// First derivatives of the moment step and the cost derivatives at every knot (in
@@ -27,6 +28,20 @@ impl SoocSolver {
         self.expand_by(problem, |k, zk, uk, e| {
             problem.dynamics.expand_keeping_third(k, zk, uk, e)
         });
+    }
+
+    /// [`SoocSolver::expand`] where the expansions may hold the flow's third derivatives of
+    /// their points from the previous solve
+    /// ([`MomentDynamics::expand_reusing_third`](crate::core::solver::sooc::MomentDynamics::expand_reusing_third)):
+    /// at how many knots they did.
+    pub(super) fn expand_reusing_third(&mut self, problem: &SoocProblem, third: bool) -> usize {
+        let reused = AtomicUsize::new(0);
+        self.expand_by(problem, |k, zk, uk, e| {
+            if problem.dynamics.expand_reusing_third(k, zk, uk, third, e) {
+                reused.fetch_add(1, Ordering::Relaxed);
+            }
+        });
+        reused.into_inner()
     }
 
     /// The expansion of every knot by `expand_knot`, and the cost's derivatives.

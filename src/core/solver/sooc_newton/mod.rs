@@ -38,6 +38,7 @@ mod expand;
 mod forward;
 mod optimality;
 mod options;
+mod resolve;
 mod state;
 
 pub use backward::Indefinite;
@@ -89,6 +90,10 @@ pub struct SoocSolution {
     /// Accepted steps taken with the previous point's third derivatives
     /// ([`SoocOptions::keep_third_derivatives`]; 0 by default).
     pub kept_third: usize,
+    /// Knots whose flow third derivatives a re-solve over the remaining movement took from the
+    /// previous solve, its start being that solve's end point there
+    /// ([`SoocSolver::resolve_remaining`]; 0 otherwise).
+    pub carried_third: usize,
 }
 
 /// Errors of a solve: the problem does not fit the workspace, or cannot be started.
@@ -160,6 +165,9 @@ pub struct SoocSolver {
     dz: DVector<f64>,
     /// Whether `u` holds a solution that [`SoocSolver::resolve_shifted`] may shift.
     solved: bool,
+    /// The next solve's first expansion may find the flow's third derivatives of its points
+    /// in the workspace ([`SoocSolver::resolve_remaining`]).
+    carry_third: bool,
 }
 
 impl SoocSolver {
@@ -192,6 +200,7 @@ impl SoocSolver {
             bw: Backward::new(nz, m),
             dz: DVector::zeros(nz),
             solved: false,
+            carry_third: false,
         }
     }
 
@@ -200,7 +209,7 @@ impl SoocSolver {
         Self::new(problem.dynamics, problem.horizon, options)
     }
 
-    fn check(&self, problem: &SoocProblem) -> Result<(), SoocError> {
+    pub(super) fn check(&self, problem: &SoocProblem) -> Result<(), SoocError> {
         let got = (problem.dynamics.n(), problem.dynamics.nu(), problem.horizon);
         let want = (self.n, self.nu, self.horizon);
         if got != want {
@@ -243,32 +252,10 @@ impl SoocSolver {
         self.run(problem)
     }
 
-    /// Re-solves for a receding horizon: the previous solution shifted by `shift` knots (the last
-    /// control repeated) warm-starts `problem`, whose initial state and reference are the new
-    /// ones. The workspace is reused; the problem must have the previous one's size.
-    pub fn resolve_shifted(
-        &mut self,
-        problem: &SoocProblem,
-        shift: usize,
-    ) -> Result<SoocSolution, SoocError> {
-        self.check(problem)?;
-        if !self.solved {
-            return Err(SoocError::NoPreviousSolution);
-        }
-        let h = self.horizon;
-        let s = shift.min(h.saturating_sub(1));
-        self.u.rotate_left(s);
-        for k in h - s..h {
-            let (head, tail) = self.u.split_at_mut(k);
-            tail[0].copy_from(&head[k - 1]);
-        }
-        self.run(problem)
-    }
-
     /// The solver proper, from the controls in `self.u`: per iteration the model (first
     /// derivatives, costates, and the Newton curvature when tried), the convergence test on the
     /// exact gradient, the regularised backward pass and the line search on the true `J`.
-    fn run(&mut self, problem: &SoocProblem) -> Result<SoocSolution, SoocError> {
+    pub(super) fn run(&mut self, problem: &SoocProblem) -> Result<SoocSolution, SoocError> {
         let start = Instant::now();
         self.solved = false;
         let mut cost = self.start(problem)?;
@@ -284,6 +271,8 @@ impl SoocSolver {
             fresh: false,
             first: true,
             last_predicted: f64::INFINITY,
+            carry: std::mem::take(&mut self.carry_third),
+            carried: 0,
         };
         // Sized once: the iterations themselves allocate nothing.
         let mut tally = Tally {
@@ -352,6 +341,7 @@ impl SoocSolver {
             convexified: tally.convexified,
             without_third: tally.without_third,
             kept_third: tally.kept_third,
+            carried_third: model.carried,
         })
     }
 
@@ -477,6 +467,8 @@ impl SoocSolver {
                 && model.last_predicted > KEEP_FACTOR * self.options.decrease_tolerance;
             if model.kept {
                 self.expand_keeping_third(problem);
+            } else if std::mem::take(&mut model.carry) {
+                model.carried = self.expand_reusing_third(problem, third);
             } else {
                 self.expand(problem, third);
             }

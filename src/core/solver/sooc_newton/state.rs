@@ -49,6 +49,10 @@ pub(super) struct ModelState {
     pub(super) kept: bool,
     /// The current expansion took the third derivatives anew.
     pub(super) fresh: bool,
+    /// The first expansion may find its points' third derivatives in the workspace
+    /// ([`super::SoocSolver::resolve_remaining`]), and at how many knots it did.
+    pub(super) carry: bool,
+    pub(super) carried: usize,
 }
 
 /// What the accepted steps of a solve add up to.

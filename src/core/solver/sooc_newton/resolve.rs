@@ -1,0 +1,89 @@
+//! Re-solves for the central controller's replanning, on the workspace of the previous solve:
+//! over a horizon of the same length ([`SoocSolver::resolve_shifted`]) or over the rest of the
+//! movement ([`SoocSolver::resolve_remaining`]).
+
+use super::{SoocError, SoocProblem, SoocSolution, SoocSolver};
+use crate::core::dense::zero;
+use crate::core::dynamics::Dynamics;
+
+impl SoocSolver {
+    /// Re-solves for a receding horizon: the previous solution shifted by `shift` knots (the last
+    /// control repeated) warm-starts `problem`, whose initial state and reference are the new
+    /// ones. The workspace is reused; the problem must have the previous one's size.
+    pub fn resolve_shifted(
+        &mut self,
+        problem: &SoocProblem,
+        shift: usize,
+    ) -> Result<SoocSolution, SoocError> {
+        self.check(problem)?;
+        if !self.solved {
+            return Err(SoocError::NoPreviousSolution);
+        }
+        let h = self.horizon;
+        let s = shift.min(h.saturating_sub(1));
+        self.u.rotate_left(s);
+        for k in h - s..h {
+            let (head, tail) = self.u.split_at_mut(k);
+            tail[0].copy_from(&head[k - 1]);
+        }
+        self.run(problem)
+    }
+
+    /// Re-solves the rest of the movement `advanced` knots later: `problem` is the previous one
+    /// from knot `advanced` on (`planning::setup::Setup::remaining`: the same plant, the
+    /// reference and the exogenous inputs from that knot, `advanced` knots fewer) from a new
+    /// initial state, warm-started with the previous solution's tail. The workspace shrinks
+    /// with the horizon (nothing is allocated; later calls continue from the shorter horizon).
+    ///
+    /// What it carries over besides the controls: the flow's third derivatives at the previous
+    /// solution. Where the new start is the previous plan's own mean at that knot (a
+    /// re-solve that believes the plan), the rollout meets the previous end point bit for bit
+    /// at every knot, and the exact Newton model needs no third-order flows there for its first
+    /// step; wherever a point differs they are taken anew
+    /// ([`crate::core::solver::sooc::MomentDynamics::expand_reusing_third`]). The result is
+    /// that of [`SoocSolver::solve`] from the same controls, to the bit.
+    pub fn resolve_remaining(
+        &mut self,
+        problem: &SoocProblem,
+        advanced: usize,
+    ) -> Result<SoocSolution, SoocError> {
+        if !self.solved {
+            return Err(SoocError::NoPreviousSolution);
+        }
+        let remaining = self.horizon.saturating_sub(advanced);
+        let got = (problem.dynamics.n(), problem.dynamics.nu(), problem.horizon);
+        let want = (self.n, self.nu, remaining);
+        if advanced == 0 || remaining == 0 || got != want {
+            return Err(SoocError::SizeMismatch { got, want });
+        }
+        // Every check before the workspace changes: a refused call leaves it as it was.
+        let whole = std::mem::replace(&mut self.horizon, remaining);
+        if let Err(e) = self.check(problem) {
+            self.horizon = whole;
+            return Err(e);
+        }
+        // Knot k of the rest is knot k + advanced of the previous problem.
+        fn advance<T>(v: &mut Vec<T>, by: usize) {
+            v.drain(..by);
+        }
+        advance(&mut self.z, advanced);
+        advance(&mut self.u, advanced);
+        advance(&mut self.cand_z, advanced);
+        advance(&mut self.cand_u, advanced);
+        advance(&mut self.expansions, advanced);
+        advance(&mut self.curvatures, advanced);
+        advance(&mut self.derivs, advanced);
+        advance(&mut self.lam, advanced);
+        advance(&mut self.grad, advanced);
+        advance(&mut self.ff, advanced);
+        advance(&mut self.gains, advanced);
+        advance(&mut self.hess_diag, advanced);
+        // The stage QPs start from 0 as in a new workspace (their last steps would be starts
+        // of their own, rounding the result differently).
+        for f in &mut self.ff {
+            zero(f);
+        }
+        self.carry_third = true;
+        self.run(problem)
+    }
+}
