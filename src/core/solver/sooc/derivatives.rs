@@ -46,11 +46,12 @@ impl MomentDynamics<'_> {
     /// `e` may hold the flow's third derivatives of the very same point from an earlier solve:
     /// a re-solve over the remaining movement
     /// ([`crate::core::solver::sooc_newton::SoocSolver::resolve_remaining`]) from the plan's own
-    /// mean meets, at every knot, the point its previous solve ended at. Those are kept, and
-    /// the point's second derivatives come from their own order-2 flows; they are taken anew
-    /// wherever the point differs in any bit (the mean state, the controls, the knot's
-    /// exogenous input, the time step). The same numbers to the bit either way. Whether they
-    /// were kept.
+    /// mean meets, at every knot, the point its previous solve ended at. Those are kept, and so
+    /// are the flow's first and second derivatives if `e` took them there too (then only what
+    /// the covariance at the knot changes is computed); whatever was taken elsewhere is taken
+    /// anew, a point differing in any bit (the mean state, the controls, the knot's exogenous
+    /// input, the time step). The same numbers to the bit either way. Whether the third
+    /// derivatives were kept.
     pub fn expand_reusing_third(
         &self,
         k: usize,
@@ -60,29 +61,52 @@ impl MomentDynamics<'_> {
         e: &mut MomentExpansion,
     ) -> bool {
         let here = At::new(self.base(), k, z, u).point();
-        let same = e.d3_ready && e.d3_at == here;
-        self.expand_at(k, z, u, third && !same, e);
-        if same {
-            e.d3_ready = true;
+        let same_third = e.d3_ready && e.d3_at == here;
+        if e.flow_at == here {
+            // The flow's first and second derivatives are this point's as well: only what the
+            // covariance at the knot changes is computed (`P` is not part of the point).
+            self.expand_with(k, z, u, None, e);
+            e.d3_ready = same_third;
+        } else {
+            self.expand_at(k, z, u, third && !same_third, e);
+            e.d3_ready |= same_third;
         }
-        same
+        same_third
     }
 
     fn expand_at(&self, k: usize, z: &[f64], u: &[f64], third: bool, e: &mut MomentExpansion) {
+        self.expand_with(k, z, u, Some(third), e);
+    }
+
+    /// The expansion at `(z, u)`; `flow`: the flow's derivatives are taken (with the third ones
+    /// if `Some(true)`), or with `None` are those `e` holds, taken at this very point.
+    fn expand_with(
+        &self,
+        k: usize,
+        z: &[f64],
+        u: &[f64],
+        flow: Option<bool>,
+        e: &mut MomentExpansion,
+    ) {
         let base = self.base();
         let (n, m) = (base.nx(), base.nu());
-        base.linearize(k, &z[..n], u, &mut e.base);
+        let at = At::new(base, k, z, u);
+        if flow.is_some() {
+            base.linearize(k, &z[..n], u, &mut e.base);
+        }
         unpack(n, &z[n..], &mut e.p);
         zero(&mut e.a);
         zero(&mut e.b);
         e.a.view_mut((0, 0), (n, n)).copy_from(&e.base.a);
         e.b.view_mut((0, 0), (n, m)).copy_from(&e.base.b);
         covariance_transition(e);
-        let at = At::new(base, k, z, u);
-        if third {
-            flow_second_and_third(at, e);
-        } else {
-            flow_second_derivatives(at, e);
+        match flow {
+            Some(true) => flow_second_and_third(at, e),
+            Some(false) => flow_second_derivatives(at, e),
+            None => {}
+        }
+        if flow.is_some() {
+            e.flow_at = at.point();
         }
         covariance_sensitivity(at, e);
     }

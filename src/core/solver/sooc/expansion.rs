@@ -46,6 +46,8 @@ pub struct MomentExpansion {
     /// Where `d3` was taken, bit for bit ([`FlowPoint`]): what lets a re-solve over the
     /// remaining movement reuse it ([`MomentDynamics::expand_reusing_third`]).
     pub(super) d3_at: FlowPoint,
+    /// Where the flow's first and second derivatives (`base`, `da`, `phi_uu`) were taken.
+    pub(super) flow_at: FlowPoint,
     /// Whether the noise gain is nonlinear in the state (torque noise through `M⁻¹(q)`): then
     /// `d2c`, `d2cx` hold its second and third derivatives.
     pub(super) curved_model: bool,
@@ -140,6 +142,7 @@ impl MomentExpansion {
             d3: vec![[0.0; MAX_NX]; third_order_direction_count(n, nv)],
             d3_ready: false,
             d3_at: FlowPoint::NONE,
+            flow_at: FlowPoint::NONE,
             curved_model: curved,
             d2c: (0..pairs).map(|_| z(n, p)).collect(),
             d2cx: (0..pairs)
