@@ -35,13 +35,16 @@ impl SoocSolver {
     /// initial state, warm-started with the previous solution's tail. The workspace shrinks
     /// with the horizon (nothing is allocated; later calls continue from the shorter horizon).
     ///
-    /// What it carries over besides the controls: the flow's third derivatives at the previous
-    /// solution. Where the new start is the previous plan's own mean at that knot (a
-    /// re-solve that believes the plan), the rollout meets the previous end point bit for bit
-    /// at every knot, and the exact Newton model needs no third-order flows there for its first
-    /// step; wherever a point differs they are taken anew
-    /// ([`crate::core::solver::sooc::MomentDynamics::expand_reusing_third`]). The result is
-    /// that of [`SoocSolver::solve`] from the same controls, to the bit.
+    /// What it carries over besides the controls: the flow's derivatives at the previous
+    /// solution (first, second and third). Where the new start is the previous plan's own mean
+    /// at that knot (a re-solve that believes the plan), the rollout meets the previous end
+    /// point bit for bit at every knot: the first expansion computes only what the covariance
+    /// changes, and the exact Newton model needs no third-order flows for its first step.
+    /// Wherever a point differs they are taken anew
+    /// ([`crate::core::solver::sooc::MomentDynamics::expand_reusing_third`]), so a problem that
+    /// is not the previous one's rest (another plant model) must go to [`SoocSolver::solve`]
+    /// instead. The result is that of [`SoocSolver::solve`] from the same controls on a new
+    /// workspace, to the bit.
     pub fn resolve_remaining(
         &mut self,
         problem: &SoocProblem,
