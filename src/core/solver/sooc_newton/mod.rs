@@ -165,9 +165,6 @@ pub struct SoocSolver {
     dz: DVector<f64>,
     /// Whether `u` holds a solution that [`SoocSolver::resolve_shifted`] may shift.
     solved: bool,
-    /// The next solve's first expansion may find the flow's third derivatives of its points
-    /// in the workspace ([`SoocSolver::resolve_remaining`]).
-    carry_third: bool,
 }
 
 impl SoocSolver {
@@ -200,7 +197,6 @@ impl SoocSolver {
             bw: Backward::new(nz, m),
             dz: DVector::zeros(nz),
             solved: false,
-            carry_third: false,
         }
     }
 
@@ -249,13 +245,19 @@ impl SoocSolver {
             }
             dst.copy_from(src);
         }
-        self.run(problem)
+        self.run(problem, false)
     }
 
     /// The solver proper, from the controls in `self.u`: per iteration the model (first
     /// derivatives, costates, and the Newton curvature when tried), the convergence test on the
-    /// exact gradient, the regularised backward pass and the line search on the true `J`.
-    pub(super) fn run(&mut self, problem: &SoocProblem) -> Result<SoocSolution, SoocError> {
+    /// exact gradient, the regularised backward pass and the line search on the true `J`. With
+    /// `carry`, the first expansion keeps the flow derivatives the workspace holds for the very
+    /// points it meets ([`SoocSolver::resolve_remaining`]).
+    pub(super) fn run(
+        &mut self,
+        problem: &SoocProblem,
+        carry: bool,
+    ) -> Result<SoocSolution, SoocError> {
         let start = Instant::now();
         self.solved = false;
         let mut cost = self.start(problem)?;
@@ -271,7 +273,7 @@ impl SoocSolver {
             fresh: false,
             first: true,
             last_predicted: f64::INFINITY,
-            carry: std::mem::take(&mut self.carry_third),
+            carry,
             carried: 0,
         };
         // Sized once: the iterations themselves allocate nothing.

@@ -26,7 +26,7 @@ impl SoocSolver {
             let (head, tail) = self.u.split_at_mut(k);
             tail[0].copy_from(&head[k - 1]);
         }
-        self.run(problem)
+        self.run(problem, false)
     }
 
     /// Re-solves the rest of the movement `advanced` knots later: `problem` is the previous one
@@ -86,7 +86,6 @@ impl SoocSolver {
         for f in &mut self.ff {
             zero(f);
         }
-        self.carry_third = true;
-        self.run(problem)
+        self.run(problem, true)
     }
 }
