@@ -103,6 +103,9 @@ fn main() {
     };
     let solve = |solver: &mut SoocSolver| {
         if carry {
+            // A fresh workspace of the whole horizon each time (the last re-solve shrank it).
+            let observer = solver.observer.take();
+            *solver = SoocSolver::new(&full_moments, s.task.steps, s.solver.sooc_options());
             let whole = solver
                 .solve(&full, &cold.u)
                 .expect("solves the whole movement");
@@ -110,6 +113,7 @@ fn main() {
                 whole.iterations, 0,
                 "the plan is the whole movement's optimum"
             );
+            solver.observer = observer;
             solver.resolve_remaining(&problem, shift)
         } else {
             solver.solve(&problem, warm)

@@ -6,8 +6,9 @@ mod common;
 use common::alloc::{Counting, allocations};
 use nalgebra::DVector;
 use std::path::Path;
+use vic::core::solver::Solution;
 use vic::core::solver::sooc::{MomentCost, MomentDynamics};
-use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
+use vic::core::solver::sooc_newton::{SoocProblem, SoocSolution, SoocSolver};
 use vic::planning::plan::{self, Setup};
 use vic::planning::scenario::Scenario;
 
@@ -21,6 +22,35 @@ fn load(file: &str) -> (Scenario, Setup) {
     let s = Scenario::load(&path, &[]).expect("scenario loads");
     let setup = plan::setup(&s).expect("scenario sets up");
     (s, setup)
+}
+
+/// The divergent arm's plan (SOOC, cold) and the setup whose warm start is that plan.
+fn divergent_plan() -> (Scenario, Setup, Solution, Setup) {
+    let (s, setup) = load("two_link_divergent.toml");
+    let horizon = s.task.steps;
+    let (plan, _) = plan::plan_sooc(&s, &setup, &setup.problem(horizon), &None).expect("plans");
+    let planned = Setup {
+        u_init: plan.u.clone(),
+        ..setup.clone()
+    };
+    (s, setup, plan, planned)
+}
+
+/// A pool of one thread: the allocation counter is per thread.
+fn one_thread() -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool")
+}
+
+/// The same steps, stop, cost and controls, to the bit.
+fn assert_same_bits(a: &SoocSolution, b: &SoocSolution) {
+    assert_eq!((a.iterations, a.stop), (b.iterations, b.stop));
+    assert_eq!(a.expected_cost.to_bits(), b.expected_cost.to_bits());
+    for (x, y) in a.u.iter().zip(&b.u) {
+        assert!(x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()));
+    }
 }
 
 /// Allocations of one solve from `u0`, on one thread (the counter is
@@ -94,10 +124,9 @@ fn iterations_do_not_allocate() {
 /// call that does not fit leaves the workspace as it was.
 #[test]
 fn a_re_solve_of_the_remaining_movement_carries_only_exact_third_derivatives() {
-    let (s, setup) = load("two_link_divergent.toml");
+    let (s, setup, plan, planned) = divergent_plan();
     let options = s.solver.sooc_options();
     let horizon = s.task.steps;
-    let (plan, _) = plan::plan_sooc(&s, &setup, &setup.problem(horizon), &None).expect("plans");
     let moments = MomentDynamics::new(&setup.dynamics);
     let cost = MomentCost::new(&setup.cost, horizon);
     let whole = SoocProblem {
@@ -107,14 +136,7 @@ fn a_re_solve_of_the_remaining_movement_carries_only_exact_third_derivatives() {
         bounds: &setup.bounds,
         horizon,
     };
-    let planned = Setup {
-        u_init: plan.u.clone(),
-        ..setup.clone()
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .expect("pool");
+    let pool = one_thread();
     let at_plan = plan.x[2].as_slice().to_vec();
     let mut beside = at_plan.clone();
     beside[2] += 1e-6;
@@ -164,17 +186,92 @@ fn a_re_solve_of_the_remaining_movement_carries_only_exact_third_derivatives() {
             resolved.solve_time.as_secs_f64() * 1e3,
             fresh.solve_time.as_secs_f64() * 1e3,
         );
-        assert_eq!(resolved.carried_third, carried);
-        assert_eq!(fresh.carried_third, 0);
-        assert_eq!(resolved.iterations, fresh.iterations);
-        assert_eq!(resolved.stop, fresh.stop);
-        assert_eq!(
+        eprintln!(
+            "BITS {} {}",
             resolved.expected_cost.to_bits(),
             fresh.expected_cost.to_bits()
         );
-        for (a, b) in resolved.u.iter().zip(&fresh.u) {
-            assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()));
-        }
+        assert_eq!(resolved.carried_third, carried);
+        assert_eq!(fresh.carried_third, 0);
+        assert_same_bits(&resolved, &fresh);
         assert!(resolve_allocations <= fresh_allocations);
     }
+}
+
+/// `solve` over a shorter horizon fits the workspace of a longer one (the central controller's
+/// re-solves over a shrinking rest of the movement): it allocates what a solve on a workspace of
+/// that size does, and gives its result to the bit, although the workspace holds a previous
+/// solve's steps. Back to the longer horizon it takes a new workspace, with the same result as
+/// one; a call refused for its warm start's length leaves the workspace as it was.
+#[test]
+fn a_solve_over_a_shorter_horizon_reuses_the_workspace_to_the_bit() {
+    let (s, setup, plan, planned) = divergent_plan();
+    let mut options = s.solver.sooc_options();
+    // A re-solve's cap, as the replanner's: the steps from a state off the plan, unconverged.
+    options.max_iterations = 3;
+    let horizon = s.task.steps;
+    let moments = MomentDynamics::new(&setup.dynamics);
+    let cost = MomentCost::new(&setup.cost, horizon);
+    let whole = SoocProblem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: &setup.x0,
+        bounds: &setup.bounds,
+        horizon,
+    };
+    let pool = one_thread();
+    let mut reused = SoocSolver::new(&moments, horizon, options.clone());
+    // From the start the plan was made for: the workspace ends with that solve's steps.
+    let first = reused.solve(&whole, &setup.u_init).expect("solves");
+    assert!(first.iterations > 0);
+
+    let k0 = 6;
+    let mut x = plan.x[k0].as_slice().to_vec();
+    x[0] += 1e-2;
+    let rest = planned.remaining(k0, &x);
+    let rest_moments = MomentDynamics::new(&rest.dynamics);
+    let rest_cost = MomentCost::new(&rest.cost, horizon - k0);
+    let problem = SoocProblem {
+        dynamics: &rest_moments,
+        cost: &rest_cost,
+        x0: &rest.x0,
+        bounds: &rest.bounds,
+        horizon: horizon - k0,
+    };
+    assert!(
+        reused.solve(&problem, &plan.u).is_err(),
+        "100 controls for 94 knots"
+    );
+    assert_eq!(reused.horizon(), horizon, "a refused call changes nothing");
+    let (fitted, fitted_allocations) = pool.install(|| {
+        let before = allocations();
+        let sol = reused.solve(&problem, &rest.u_init).expect("re-solves");
+        (sol, allocations() - before)
+    });
+    assert_eq!(reused.horizon(), horizon - k0);
+    let mut new = SoocSolver::new(&rest_moments, horizon - k0, options.clone());
+    // Its first solve sizes what grows once (rayon's pool); the second is counted.
+    new.solve(&problem, &rest.u_init).expect("solves");
+    let (fresh, fresh_allocations) = pool.install(|| {
+        let before = allocations();
+        let sol = new.solve(&problem, &rest.u_init).expect("solves");
+        (sol, allocations() - before)
+    });
+    let fresh_once = SoocSolver::new(&rest_moments, horizon - k0, options.clone())
+        .solve(&problem, &rest.u_init)
+        .expect("solves");
+    eprintln!(
+        "rest of the movement from knot {k0}, 1 cm off: {:?} after {} steps; allocations \
+         {fitted_allocations} fitted, {fresh_allocations} on its own workspace",
+        fitted.stop, fitted.iterations
+    );
+    assert!(fitted.iterations > 0);
+    assert_same_bits(&fitted, &fresh_once);
+    assert_same_bits(&fresh, &fresh_once);
+    assert_eq!(fitted_allocations, fresh_allocations);
+
+    // Back to the whole movement: a new workspace, the same result.
+    let again = reused.solve(&whole, &setup.u_init).expect("solves");
+    assert_eq!(reused.horizon(), horizon);
+    assert_same_bits(&again, &first);
 }

@@ -158,6 +158,27 @@ pub struct Replanner {
     /// The plan being played: the original with every accepted re-solve written over its tail.
     plan: Policy,
     pub stats: ReplanStats,
+    workspace: Workspace,
+}
+
+/// The re-solves' SOOC workspace, kept from one re-solve to the next. Over a movement the
+/// horizon only shrinks, which [`SoocSolver::solve`] does without allocating: a trial allocates
+/// it at its first re-solve only. Scratch, not state: a clone (the live controller's worker
+/// thread) starts without one, and a re-solve's result does not depend on it (to the bit).
+#[derive(Default)]
+struct Workspace(Option<SoocSolver>);
+
+impl Clone for Workspace {
+    fn clone(&self) -> Self {
+        Workspace(None)
+    }
+}
+
+impl std::fmt::Debug for Workspace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let horizon = self.0.as_ref().map(SoocSolver::horizon);
+        f.debug_tuple("Workspace").field(&horizon).finish()
+    }
 }
 
 impl Replanner {
@@ -178,6 +199,7 @@ impl Replanner {
             original: policy.acting.clone(),
             plan,
             stats: ReplanStats::default(),
+            workspace: Workspace::default(),
         }
     }
 
@@ -309,7 +331,11 @@ impl Replanner {
             flow_third_derivatives: self.options.flow_third_derivatives,
             ..SoocOptions::default()
         };
-        let mut solver = SoocSolver::new(&moments, horizon, options);
+        let solver = self
+            .workspace
+            .0
+            .get_or_insert_with(|| SoocSolver::new(&moments, horizon, options.clone()));
+        solver.options = options;
         let Ok(sol) = solver.solve(&problem, warm) else {
             self.stats.kept_old += 1;
             return ReplanOutcome::KeptOld;

@@ -134,8 +134,9 @@ pub struct SoocProblem<'a> {
 pub type Observer = std::sync::Arc<dyn Fn(&crate::core::solver::ilqg::Progress) + Send + Sync>;
 
 /// The solver with its preallocated workspace, sized for one problem size; reuse it across solves
-/// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`]). A solve allocates its
-/// solution; its iterations allocate nothing (test `sooc_workspace`).
+/// (the receding-horizon replanning of [`SoocSolver::resolve_shifted`], the shrinking horizon of
+/// [`SoocSolver::resolve_remaining`] and of a [`SoocSolver::solve`] over fewer knots). A solve
+/// allocates its solution; its iterations allocate nothing (test `sooc_workspace`).
 pub struct SoocSolver {
     pub options: SoocOptions,
     /// Told of every accepted step (iteration, `J`, relative μ, step length): progress for
@@ -200,6 +201,11 @@ impl SoocSolver {
         }
     }
 
+    /// The number of knots the workspace holds now.
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
     /// A workspace sized for `problem`.
     pub fn for_problem(problem: &SoocProblem, options: SoocOptions) -> Self {
         Self::new(problem.dynamics, problem.horizon, options)
@@ -221,28 +227,44 @@ impl SoocSolver {
         Ok(())
     }
 
-    /// Solves from the control sequence `u_init` (clamped into the limits).
+    /// Solves from the control sequence `u_init` (clamped into the limits). The workspace fits
+    /// itself to the problem's horizon: a shorter one drops knots (nothing is allocated; the
+    /// central controller's re-solves over a shrinking rest of the movement), a longer one takes
+    /// a new workspace. Either way the result is that of a new workspace, to the bit.
     pub fn solve(
         &mut self,
         problem: &SoocProblem,
         u_init: &[DVector<f64>],
     ) -> Result<SoocSolution, SoocError> {
-        self.check(problem)?;
-        if u_init.len() != self.horizon {
+        // Every check before the workspace changes: a refused call leaves it as it was.
+        if u_init.len() != problem.horizon {
             return Err(SoocError::Length {
                 what: "u_init",
                 got: u_init.len(),
-                want: self.horizon,
+                want: problem.horizon,
             });
         }
-        for (dst, src) in self.u.iter_mut().zip(u_init) {
-            if src.len() != self.nu {
+        if let Some(src) = u_init.iter().find(|u| u.len() != self.nu) {
+            return Err(SoocError::Length {
+                what: "a control of u_init",
+                got: src.len(),
+                want: self.nu,
+            });
+        }
+        let sizes = (problem.dynamics.n(), problem.dynamics.nu());
+        if sizes == (self.n, self.nu) && problem.horizon > 0 {
+            let x0 = problem.x0.len();
+            if x0 != self.n && x0 != self.z[0].len() {
                 return Err(SoocError::Length {
-                    what: "a control of u_init",
-                    got: src.len(),
-                    want: self.nu,
+                    what: "x0",
+                    got: x0,
+                    want: self.n,
                 });
             }
+            self.fit(problem);
+        }
+        self.check(problem)?;
+        for (dst, src) in self.u.iter_mut().zip(u_init) {
             dst.copy_from(src);
         }
         self.run(problem, false)
@@ -436,6 +458,11 @@ impl SoocSolver {
         }
         for g in &mut self.gains {
             zero(g);
+        }
+        // The stage QPs start from 0 as in a new workspace (a previous solve's last steps
+        // would be starts of their own, rounding the result differently).
+        for f in &mut self.ff {
+            zero(f);
         }
         zero(&mut self.z[0]);
         self.z[0]

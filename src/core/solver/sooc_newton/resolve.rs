@@ -3,7 +3,6 @@
 //! movement ([`SoocSolver::resolve_remaining`]).
 
 use super::{SoocError, SoocProblem, SoocSolution, SoocSolver};
-use crate::core::dense::zero;
 use crate::core::dynamics::Dynamics;
 
 impl SoocSolver {
@@ -61,31 +60,44 @@ impl SoocSolver {
         }
         // Every check before the workspace changes: a refused call leaves it as it was.
         let whole = std::mem::replace(&mut self.horizon, remaining);
-        if let Err(e) = self.check(problem) {
-            self.horizon = whole;
-            return Err(e);
+        let checked = self.check(problem);
+        self.horizon = whole;
+        checked?;
+        self.drop_front(advanced);
+        self.run(problem, true)
+    }
+
+    /// Fits the workspace to `problem`'s horizon for a solve from new controls: a shorter
+    /// horizon drops knots from the front (nothing is allocated), a longer one takes a new
+    /// workspace (the observer and the options stay).
+    pub(super) fn fit(&mut self, problem: &SoocProblem) {
+        let h = problem.horizon;
+        if h < self.horizon {
+            self.drop_front(self.horizon - h);
+        } else if h > self.horizon {
+            let observer = self.observer.take();
+            *self = SoocSolver::new(problem.dynamics, h, self.options.clone());
+            self.observer = observer;
         }
-        // Knot k of the rest is knot k + advanced of the previous problem.
+    }
+
+    /// Drops the first `by` knots of every per-knot buffer: knot k becomes knot k − by.
+    fn drop_front(&mut self, by: usize) {
         fn advance<T>(v: &mut Vec<T>, by: usize) {
             v.drain(..by);
         }
-        advance(&mut self.z, advanced);
-        advance(&mut self.u, advanced);
-        advance(&mut self.cand_z, advanced);
-        advance(&mut self.cand_u, advanced);
-        advance(&mut self.expansions, advanced);
-        advance(&mut self.curvatures, advanced);
-        advance(&mut self.derivs, advanced);
-        advance(&mut self.lam, advanced);
-        advance(&mut self.grad, advanced);
-        advance(&mut self.ff, advanced);
-        advance(&mut self.gains, advanced);
-        advance(&mut self.hess_diag, advanced);
-        // The stage QPs start from 0 as in a new workspace (their last steps would be starts
-        // of their own, rounding the result differently).
-        for f in &mut self.ff {
-            zero(f);
-        }
-        self.run(problem, true)
+        self.horizon -= by;
+        advance(&mut self.z, by);
+        advance(&mut self.u, by);
+        advance(&mut self.cand_z, by);
+        advance(&mut self.cand_u, by);
+        advance(&mut self.expansions, by);
+        advance(&mut self.curvatures, by);
+        advance(&mut self.derivs, by);
+        advance(&mut self.lam, by);
+        advance(&mut self.grad, by);
+        advance(&mut self.ff, by);
+        advance(&mut self.gains, by);
+        advance(&mut self.hess_diag, by);
     }
 }
