@@ -79,7 +79,11 @@ pub struct ReplanOptions {
     /// need the exact model, and the third derivatives are about two thirds of each step (~80 %
     /// when this was measured). Measured on the
     /// divergent arm at 200 ms (4 trials, seed 1): 13.8 s of CPU with them, 2.8 s without, final
-    /// error 0.99 and 0.88 mm, Monte Carlo cost 1222 and 1211.
+    /// error 0.99 and 0.88 mm, Monte Carlo cost 1222 and 1211. Measured again once a start
+    /// near the optimum took the exact model at once: from the plan's own mean one exact step
+    /// converges in the time of three Gauss–Newton steps, but a re-solve starts from a measured
+    /// state, and from states off the plan the three exact steps took about twice as long and
+    /// ended no lower except after a large deviation (`docs/BENCHMARKS.md`).
     #[serde(default)]
     pub flow_third_derivatives: bool,
 }
