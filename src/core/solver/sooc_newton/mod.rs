@@ -212,8 +212,14 @@ impl SoocSolver {
     }
 
     pub(super) fn check(&self, problem: &SoocProblem) -> Result<(), SoocError> {
+        self.check_for(problem, self.horizon)
+    }
+
+    /// [`SoocSolver::check`] for a workspace of `horizon` knots (the sizes the call will fit it
+    /// to), before it changes.
+    pub(super) fn check_for(&self, problem: &SoocProblem, horizon: usize) -> Result<(), SoocError> {
         let got = (problem.dynamics.n(), problem.dynamics.nu(), problem.horizon);
-        let want = (self.n, self.nu, self.horizon);
+        let want = (self.n, self.nu, horizon);
         if got != want {
             return Err(SoocError::SizeMismatch { got, want });
         }
@@ -251,19 +257,8 @@ impl SoocSolver {
                 want: self.nu,
             });
         }
-        let sizes = (problem.dynamics.n(), problem.dynamics.nu());
-        if sizes == (self.n, self.nu) && problem.horizon > 0 {
-            let x0 = problem.x0.len();
-            if x0 != self.n && x0 != self.z[0].len() {
-                return Err(SoocError::Length {
-                    what: "x0",
-                    got: x0,
-                    want: self.n,
-                });
-            }
-            self.fit(problem);
-        }
-        self.check(problem)?;
+        self.check_for(problem, problem.horizon)?;
+        self.fit(problem);
         for (dst, src) in self.u.iter_mut().zip(u_init) {
             dst.copy_from(src);
         }

@@ -59,10 +59,7 @@ impl SoocSolver {
             return Err(SoocError::SizeMismatch { got, want });
         }
         // Every check before the workspace changes: a refused call leaves it as it was.
-        let whole = std::mem::replace(&mut self.horizon, remaining);
-        let checked = self.check(problem);
-        self.horizon = whole;
-        checked?;
+        self.check_for(problem, remaining)?;
         self.drop_front(advanced);
         self.run(problem, true)
     }
