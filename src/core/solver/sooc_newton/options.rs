@@ -21,7 +21,7 @@ pub struct SoocOptions {
     /// Whether the Newton model includes the third derivatives of the flow (default true: the
     /// exact Hessian, which the convergence to a stated criterion needs; see
     /// [`crate::core::solver::sooc::MomentDynamics::second_order`]). They are about two thirds
-    /// of a Newton iteration on the arm (third derivatives along 56 directions per knot, eight
+    /// of a Newton iteration on the arm (third derivatives along 116 directions per knot, eight
     /// to a flow; the solver bench's three exact steps against three without them: 66–68 ms
     /// against 20–25 ms). Without them the model keeps the
     /// curvature that makes stiffness worth buying (the covariance's `A P Aᵀ` is quadratic in
