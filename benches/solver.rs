@@ -1,9 +1,8 @@
 //! Solver benchmarks: `cargo bench --bench solver`.
 //!
 //! Each case is solved once up front to print its iteration count, so the time per iteration can
-//! be read off criterion's time per solve. Reference (planner-core issue): Crocoddyl 3.2.1 solves
-//! the deterministic torque-driven reach (N = 100, Euler, Δ = 10 ms) in about 2 ms, 4 iterations
-//! (0.5 ms per iteration) on this kind of machine, and its box-constrained solver in about 30 ms.
+//! be read off criterion's time per solve. Crocoddyl on the same reach and box reach is timed in
+//! the same run by `scripts/bench_peers.sh`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -12,7 +11,7 @@ use vic::core::delay::{Delayed, DelayedPlanner, Offset};
 use vic::core::replan::{ReplanOptions, Replanner};
 use vic::core::solver::sooc::{MomentCost, MomentDynamics};
 use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
-use vic::core::solver::{Ilqg, Problem};
+use vic::core::solver::{Ilqg, IlqgOptions, Problem, Solution};
 use vic::planning::method::Method;
 use vic::planning::plan::{self, Setup};
 use vic::planning::scenario::Scenario;
@@ -27,24 +26,59 @@ fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
     (s, setup)
 }
 
+/// ILQG on a scenario's plant as `vic plan --method ilqg` solves it (without a delay): a
+/// stochastic scenario in two phases, the deterministic problem and then the stochastic one from
+/// its optimum ([`plan::solve_in_phases`]; from the first guess directly the single joint's
+/// stochastic solve stops at its iteration limit), on one reused workspace and one reused
+/// `Solution` per phase, as Crocoddyl keeps its trajectory in the solver.
 fn bench_plain(c: &mut Criterion, name: &str, file: &str, overrides: &[&str]) {
     let (s, setup) = load(file, overrides);
     let problem = setup.problem(s.task.steps);
-    let mut solver = Ilqg::new(&problem, s.solver.options.clone());
-    let sol = solver.solve(&problem, &setup.u_init);
+    let options = s.solver.options.clone();
+    let phases = options.stochastic && problem.dynamics.nw() > 0;
+    let deterministic = IlqgOptions {
+        stochastic: false,
+        ..options.clone()
+    };
+    let mut solver = Ilqg::new(&problem, options.clone());
+    let solve = |solver: &mut Ilqg, first: &mut Solution, out: &mut Solution| {
+        if phases {
+            solver.options = deterministic.clone();
+            solver
+                .try_solve_into(&problem, &setup.u_init, first)
+                .expect("solves");
+            solver.options = options.clone();
+            solver
+                .try_solve_into(&problem, &first.u, out)
+                .expect("solves");
+        } else {
+            solver
+                .try_solve_into(&problem, &setup.u_init, out)
+                .expect("solves");
+        }
+    };
+    let (mut first, mut out) = (Solution::empty(), Solution::empty());
+    solve(&mut solver, &mut first, &mut out);
+    let iterations = out.iterations + if phases { first.iterations } else { 0 };
+    let time = out.solve_time
+        + if phases {
+            first.solve_time
+        } else {
+            Default::default()
+        };
     eprintln!(
-        "{name}: {} iterations, {:?}, {:.3} ms per iteration (single run)",
-        sol.iterations,
-        sol.stop,
-        sol.solve_time.as_secs_f64() * 1e3 / sol.iterations.max(1) as f64
+        "{name}: {iterations} iterations{}, {:?}, {:.3} ms per iteration (single run)",
+        if phases {
+            format!(" ({} deterministic, then stochastic)", first.iterations)
+        } else {
+            String::new()
+        },
+        out.stop,
+        time.as_secs_f64() * 1e3 / iterations.max(1) as f64
     );
     c.bench_function(name, |b| {
-        let mut out = sol.clone();
         b.iter(|| {
-            // One reused `Solution`, as Crocoddyl keeps its trajectory in the solver.
-            solver
-                .try_solve_into(&problem, &setup.u_init, &mut out)
-                .expect("solves");
+            solve(&mut solver, &mut first, &mut out);
             black_box(out.cost)
         })
     });
