@@ -218,6 +218,24 @@ impl Ilqg {
     }
 }
 
+/// `y = S c` taking `c` by its nonzeros: the noise columns live in the plant's rows (those of
+/// the delayed plant's commands in flight are zero), so on the 42-state delayed single joint
+/// this is 2 of 42 columns of `S`. The columns are added in ascending order, each term
+/// `s_ij c_j` to `y_i` as nalgebra's `gemv` adds every column; a skipped term would add exactly 0,
+/// so `y` is `gemv`'s to the bit (up to the sign of an entry that ends at zero).
+fn mul_nonzeros(s: &DMatrix<f64>, c: &[f64], y: &mut DVector<f64>) {
+    let n = s.nrows();
+    let (sd, yd) = (s.as_slice(), y.as_mut_slice());
+    yd.fill(0.0);
+    for (j, &cj) in c.iter().enumerate() {
+        if cj != 0.0 {
+            for (yi, &sij) in yd.iter_mut().zip(&sd[j * n..(j + 1) * n]) {
+                *yi += sij * cj;
+            }
+        }
+    }
+}
+
 impl Backward {
     pub(super) fn new(nx: usize, nu: usize) -> Self {
         Backward {
@@ -270,7 +288,7 @@ impl Backward {
         b.tr_mul_add(1.0, &self.sa, &mut self.qux);
         if stochastic && lin.noise != NoiseKind::None {
             for i in 0..lin.c.ncols() {
-                self.sc.gemv(1.0, &self.s_mat, &lin.c.column(i), 0.0);
+                mul_nonzeros(&self.s_mat, lin.c.column(i).as_slice(), &mut self.sc);
                 q0 += 0.5 * lin.c.column(i).dot(&self.sc);
                 if lin.noise == NoiseKind::Dependent {
                     let (cx, cu) = (&sp.cx[i], &sp.cu[i]);
@@ -575,6 +593,35 @@ mod tests {
                 solved >= 100,
                 "{nx}x{nu}: only {solved} of 400 knots solved"
             );
+        }
+    }
+
+    /// `mul_nonzeros` gives `gemv`'s bits wherever the product is not zero, for noise columns
+    /// that are zero outside a plant block (the delayed plant's), dense, or zero altogether,
+    /// with exact zeros of both signs and values far apart in scale in `S`.
+    #[test]
+    fn the_product_over_the_nonzeros_is_gemv_to_the_bit() {
+        let mut seed = 7;
+        for trial in 0..200 {
+            let n = [2, 4, 42][trial % 3];
+            let s = matrix(n, n, &mut seed);
+            let mut c = DVector::from_vec(entries(&mut seed, n));
+            match trial % 4 {
+                0 => c.rows_mut(2.min(n), n - 2.min(n)).fill(0.0),
+                1 => c.fill(0.0),
+                _ => {}
+            }
+            let mut want = DVector::zeros(n);
+            want.gemv(1.0, &s, &c, 0.0);
+            let mut got = DVector::from_element(n, f64::NAN);
+            mul_nonzeros(&s, c.as_slice(), &mut got);
+            for (g, w) in got.iter().zip(want.iter()) {
+                if *w == 0.0 {
+                    assert_eq!(*g, 0.0, "trial {trial}");
+                } else {
+                    assert_eq!(g.to_bits(), w.to_bits(), "trial {trial}: {g} vs {w}");
+                }
+            }
         }
     }
 }

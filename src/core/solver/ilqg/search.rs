@@ -126,7 +126,11 @@ impl Ilqg {
                 let c = g.column(i);
                 let mut q = 0.0;
                 for a in 0..c.len() {
-                    q += c[a] * s.column(a).dot(&c);
+                    // The noise lives in the plant's rows (the delayed plant's commands in
+                    // flight carry none): a zero entry would add exactly 0, for n dot products.
+                    if c[a] != 0.0 {
+                        q += c[a] * s.column(a).dot(&c);
+                    }
                 }
                 noise += 0.5 * q;
             }
