@@ -81,6 +81,36 @@ impl SparseColumns {
         let r = self.start[j]..self.start[j + 1];
         (&self.row[r.clone()], &self.val[r])
     }
+
+    /// `out (+)= S M` column by column, as `axpy`s on contiguous columns of `S`, which
+    /// vectorise; with `overwrite` each column's first term is written, not added
+    /// ([`ColumnProducts::right_mul`]).
+    fn mul_columns(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>, overwrite: bool) {
+        let p = s.nrows();
+        debug_assert_eq!(s.ncols(), self.nrows);
+        debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
+        let sd = s.as_slice();
+        let od = out.as_mut_slice();
+        for j in 0..self.ncols() {
+            let col = &mut od[j * p..(j + 1) * p];
+            let (rows, vals) = self.column(j);
+            let mut terms = rows.iter().zip(vals);
+            if overwrite {
+                let Some((&i, &a)) = terms.next() else {
+                    col.fill(0.0);
+                    continue;
+                };
+                for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
+                    *o = 0.0 + a * s;
+                }
+            }
+            for (&i, &a) in terms {
+                for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
+                    *o += a * s;
+                }
+            }
+        }
+    }
 }
 
 /// The products of the backward pass with a Jacobian `M` (A, B or a noise Jacobian) taken by its
@@ -125,28 +155,7 @@ impl ColumnProducts for SparseColumns {
     /// zero), and an empty column is cleared. On the 42-state delayed plant every column of `A`
     /// has a nonzero, so the pass that cleared the whole product is saved.
     fn right_mul(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        let p = s.nrows();
-        debug_assert_eq!(s.ncols(), self.nrows);
-        debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
-        let sd = s.as_slice();
-        let od = out.as_mut_slice();
-        for j in 0..self.ncols() {
-            let col = &mut od[j * p..(j + 1) * p];
-            let (rows, vals) = self.column(j);
-            let Some((&first, rest)) = rows.split_first() else {
-                col.fill(0.0);
-                continue;
-            };
-            let a = vals[0];
-            for (o, s) in col.iter_mut().zip(&sd[first * p..(first + 1) * p]) {
-                *o = 0.0 + a * s;
-            }
-            for (&i, &a) in rest.iter().zip(&vals[1..]) {
-                for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
-                    *o += a * s;
-                }
-            }
-        }
+        self.mul_columns(s, out, true);
     }
 
     fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
@@ -158,21 +167,7 @@ impl ColumnProducts for SparseColumns {
     }
 
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        // Column by column, as `axpy`s on contiguous columns of `S`, which vectorise.
-        let p = s.nrows();
-        debug_assert_eq!(s.ncols(), self.nrows);
-        debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
-        let sd = s.as_slice();
-        let od = out.as_mut_slice();
-        for j in 0..self.ncols() {
-            let col = &mut od[j * p..(j + 1) * p];
-            let (rows, vals) = self.column(j);
-            for (&i, &a) in rows.iter().zip(vals) {
-                for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
-                    *o += a * s;
-                }
-            }
-        }
+        self.mul_columns(s, out, false);
     }
 
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
