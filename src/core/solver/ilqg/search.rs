@@ -127,7 +127,8 @@ impl Ilqg {
                 let mut q = 0.0;
                 for a in 0..c.len() {
                     // The noise lives in the plant's rows (the delayed plant's commands in
-                    // flight carry none): a zero entry would add exactly 0, for n dot products.
+                    // flight carry none): a zero entry would add exactly 0 after a dot
+                    // product over the whole state, so it is skipped.
                     if c[a] != 0.0 {
                         q += c[a] * s.column(a).dot(&c);
                     }
