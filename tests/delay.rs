@@ -401,3 +401,68 @@ fn delayed_linearization_matches_finite_differences() {
         }
     }
 }
+
+/// A relinearisation (`Dynamics::relinearize`) into a buffer that holds the model's
+/// linearisation at another state and control is the fresh linearisation there, bit for bit:
+/// the entries it leaves alone are the ones every linearisation writes the same. Also when the
+/// last call was noise-free and left the noise Jacobians as they were (emulated by junk in
+/// them). And every nonzero of `A` and of the `Cx_i` lies in the rows `state_support` gives,
+/// so reading the nonzeros there finds them all.
+#[test]
+fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero() {
+    let mut rng = StdRng::seed_from_u64(9);
+    let bits = |lin: &Linearization| {
+        let mut all = vec![lin.a.as_slice(), lin.b.as_slice(), lin.c.as_slice()];
+        all.extend(lin.cx.iter().chain(&lin.cu).map(|m| m.as_slice()));
+        let all: Vec<u64> = all.concat().iter().map(|v| v.to_bits()).collect();
+        (all, lin.noise)
+    };
+    for model in models() {
+        let base = discrete(&model, &mut rng);
+        for d in [0, 1, 2, 5] {
+            let delayed = Delayed::new(base.clone(), d);
+            let mut support = vic::core::dynamics::StateSupport::default();
+            assert!(delayed.state_support(&mut support));
+            let point = |rng: &mut StdRng| {
+                let mut x = random_state(&model, rng);
+                for _ in 0..d {
+                    x.extend(random_control(&model, rng));
+                }
+                (x, random_control(&model, rng))
+            };
+            for k in [0, 6, HORIZON - 1] {
+                let name = format!("{:?} / {:?}, d = {d}, k = {k}", model.actuator, model.noise);
+                let ((x1, u1), (x2, u2)) = (point(&mut rng), point(&mut rng));
+                let fresh = linearize(&delayed, k, &x2, &u2);
+                let mut lin = linearize(&delayed, k, &x1, &u1);
+                delayed.relinearize(k, &x2, &u2, &mut lin);
+                assert_eq!(bits(&lin), bits(&fresh), "{name}");
+                if delayed.nw() > 0 {
+                    let mut lin = linearize(&delayed, k, &x1, &u1);
+                    lin.noise = vic::core::dynamics::NoiseKind::None;
+                    lin.c.fill(f64::NAN);
+                    for m in lin.cx.iter_mut().chain(lin.cu.iter_mut()) {
+                        m.fill(f64::NAN);
+                    }
+                    delayed.relinearize(k, &x2, &u2, &mut lin);
+                    assert_eq!(bits(&lin), bits(&fresh), "{name}: after a noise-free call");
+                }
+                for (what, m, rows) in std::iter::once(("A", &fresh.a, &support.a))
+                    .chain(fresh.cx.iter().map(|cx| ("Cx", cx, &support.cx)))
+                {
+                    for ((i, j), v) in m
+                        .iter()
+                        .enumerate()
+                        .map(|(e, v)| ((e % m.nrows(), e / m.nrows()), v))
+                    {
+                        assert!(
+                            *v == 0.0 || rows[j].contains(&i),
+                            "{name}: {what} ({i}, {j}) = {v} outside rows {:?}",
+                            rows[j]
+                        );
+                    }
+                }
+            }
+        }
+    }
+}

@@ -296,3 +296,88 @@ fn undelayed_guess_is_the_deterministic_delayed_optimum() {
     assert!(from_guess.cost <= cold.cost * (1.0 + 1e-9));
     assert!(from_guess.iterations * 5 <= cold.iterations);
 }
+
+/// The delayed plant with nonzeros where its Jacobians have zeros (and no support declared):
+/// another plant of the same size, whose linearisations fill the whole buffer.
+struct Filled<'a>(&'a Delayed<vic::core::dynamics::DiscreteDynamics>);
+
+impl vic::core::dynamics::Dynamics for Filled<'_> {
+    fn nx(&self) -> usize {
+        self.0.nx()
+    }
+    fn nu(&self) -> usize {
+        self.0.nu()
+    }
+    fn nw(&self) -> usize {
+        self.0.nw()
+    }
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.0.step(k, x, u, next);
+    }
+    fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut nalgebra::DMatrix<f64>) {
+        self.0.noise_gain(k, x, u, out);
+    }
+    fn linearize(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        lin: &mut vic::core::dynamics::Linearization,
+    ) {
+        self.0.linearize(k, x, u, lin);
+        for m in std::iter::once(&mut lin.a).chain(lin.cx.iter_mut()) {
+            m.iter_mut().filter(|v| **v == 0.0).for_each(|v| *v = 1e-3);
+        }
+    }
+    fn parallel_linearization(&self) -> bool {
+        false
+    }
+}
+
+/// A workspace that solved another plant of the same size solves the delayed single joint (its
+/// noise included) as a fresh workspace does, to the bit: what the delayed plant relies on
+/// between the linearisations of one solve (the zeros it does not rewrite, the rows its
+/// support names) is set up anew by each solve.
+#[test]
+fn a_workspace_from_another_plant_solves_the_delayed_plant_as_a_fresh_one() {
+    use vic::core::dynamics::Dynamics;
+    let (s, setup) = load("single_joint_delay.toml", &[]);
+    let delayed = Delayed::new(setup.dynamics.clone(), s.task.delay_steps());
+    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+    let filled = Filled(&delayed);
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let (plain, other) = [&delayed as &dyn Dynamics, &filled]
+        .map(|dynamics| Problem {
+            dynamics,
+            cost: &cost,
+            x0: x0.clone(),
+            horizon: s.task.steps,
+            bounds: setup.bounds.clone(),
+        })
+        .into();
+    let bits = |sol: &vic::core::solver::Solution| -> Vec<u64> {
+        let mut all = vec![sol.cost.to_bits(), sol.expected_cost.to_bits()];
+        for v in sol
+            .u
+            .iter()
+            .map(|u| u.as_slice())
+            .chain(sol.gains.iter().map(|g| g.as_slice()))
+        {
+            all.extend(v.iter().map(|e| e.to_bits()));
+        }
+        all
+    };
+    let mut options = s.solver.options.clone();
+    options.max_iterations = 4;
+    let fresh = Ilqg::new(&plain, options.clone()).solve(&plain, &setup.u_init);
+    let mut reused = Ilqg::new(&plain, options);
+    let first = reused.solve(&other, &setup.u_init);
+    assert_ne!(
+        bits(&first),
+        bits(&fresh),
+        "the other plant must plan differently"
+    );
+    let again = reused.solve(&plain, &setup.u_init);
+    assert!(fresh.iterations >= 2, "the solve must relinearise");
+    assert_eq!(bits(&again), bits(&fresh));
+}

@@ -6,6 +6,7 @@ use crate::core::model::{ArmModel, Exogenous};
 use crate::core::scalar::{MAX_NU, MAX_NW, MAX_NX, Scalar};
 use nalgebra::DMatrix;
 use num_dual::{Dual, DualNum};
+use std::ops::Range;
 
 /// What kind of noise a linearisation carries; the backward pass skips what is absent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,6 +53,29 @@ impl Linearization {
     }
 }
 
+/// The rows of each column of `A` and of every `Cx_i` that can hold a nonzero, at any knot,
+/// state and control: the entries outside are exactly zero always. The delay-augmented plant's
+/// columns hold the plant's rows or a single one of the shift register (3 of 42 rows at most
+/// for the single joint with 200 ms of delay), so that reading its Jacobians' nonzeros by the
+/// support touches 46 entries of `A` instead of 42².
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StateSupport {
+    /// Column `j` of `A` can be nonzero in rows `a[j]` only.
+    pub a: Vec<Range<usize>>,
+    /// Column `j` of every `Cx_i` can be nonzero in rows `cx[j]` only.
+    pub cx: Vec<Range<usize>>,
+}
+
+impl StateSupport {
+    /// Empty, with room for an `nx`-state model's columns (refilled without allocating).
+    pub fn with_capacity(nx: usize) -> Self {
+        StateSupport {
+            a: Vec::with_capacity(nx),
+            cx: Vec::with_capacity(nx),
+        }
+    }
+}
+
 /// A discrete-time stochastic plant with exact first derivatives.
 pub trait Dynamics: Send + Sync {
     /// State dimension.
@@ -66,6 +90,22 @@ pub trait Dynamics: Send + Sync {
     fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>);
     /// Linearisation of the step around (x, u).
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization);
+    /// [`Dynamics::linearize`] into a `lin` that holds this model's linearisation at knot `k`
+    /// from an earlier call (at another state and control), with the same result. A model whose
+    /// Jacobians are zero outside fixed blocks (the delay-augmented plant: 46 of 42² entries of
+    /// `A` can be nonzero) writes only those blocks instead of clearing and refilling every
+    /// entry. The solvers call it for the second and later linearisations of a knot within one
+    /// solve. Default: [`Dynamics::linearize`].
+    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.linearize(k, x, u, lin);
+    }
+    /// Where `A` and the noise Jacobians `Cx_i` can be nonzero, if the model knows: `false`
+    /// (the default) when any entry may be; else `true`, with `support` filled ([`StateSupport`]).
+    /// The solvers then read a linearisation's nonzeros only there.
+    fn state_support(&self, support: &mut StateSupport) -> bool {
+        let _ = support;
+        false
+    }
     /// The step and its linearisation at once: `next` as [`Dynamics::step`] gives it and `lin`
     /// as [`Dynamics::linearize`] does, bit for bit. A rollout that will be linearised anyway
     /// calls this, and a plant whose Jacobian computes the step on the way (the chain rule runs

@@ -15,7 +15,7 @@
 
 use crate::core::cost::{Cost, CostDerivatives};
 use crate::core::dense::zero;
-use crate::core::dynamics::{Dynamics, Linearization, NoiseKind};
+use crate::core::dynamics::{Dynamics, Linearization, NoiseKind, StateSupport};
 use nalgebra::DMatrix;
 use std::sync::Mutex;
 
@@ -110,6 +110,51 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
     }
 
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.write_linearization(k, x, u, lin, true);
+    }
+
+    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.write_linearization(k, x, u, lin, false);
+    }
+
+    fn state_support(&self, support: &mut StateSupport) -> bool {
+        // What `write_linearization` writes: the plant's Jacobians in the plant's rows of the
+        // first n + m columns (its own state and the command acting now), then column
+        // n + m + i holds the shift's one in row n + i; the noise acts in the plant's rows.
+        let (n, m) = (self.base.nx(), self.base.nu());
+        let total = self.nx();
+        let plant = if self.steps == 0 { n } else { n + m };
+        support.a.clear();
+        support.cx.clear();
+        for j in 0..total {
+            if j < plant {
+                support.a.push(0..n);
+                support.cx.push(0..n);
+            } else {
+                support.a.push(j - m..j - m + 1);
+                support.cx.push(0..0);
+            }
+        }
+        true
+    }
+}
+
+impl<D: Dynamics> Delayed<D> {
+    /// The augmented linearisation: the plant's Jacobians in the plant's rows, the shift of the
+    /// commands in flight below. With `clear` every entry is written; without, `lin` holds this
+    /// model's linearisation from an earlier call ([`Dynamics::relinearize`]), whose entries
+    /// outside the plant's blocks are the zeros and ones written here anyway, so only the
+    /// blocks are (clearing 42² entries of `A` and of each noise Jacobian at every knot cost a
+    /// sixth of a stochastic solve of the delayed single joint). The noise Jacobians are
+    /// cleared when the noise kind changed: a noise-free call leaves them as they were.
+    fn write_linearization(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        lin: &mut Linearization,
+        clear: bool,
+    ) {
         let (n, m) = (self.base.nx(), self.base.nu());
         let total = self.nx();
         // The shared scratch when free (the solvers linearise a cheap model's knots in order, and
@@ -121,8 +166,11 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
             Err(_) => own.insert(Linearization::new(n, m, self.base.nw())),
         };
         self.base.linearize(k, &x[..n], self.acting(x, u), base);
-        zero(&mut lin.a);
-        zero(&mut lin.b);
+        if clear {
+            zero(&mut lin.a);
+            zero(&mut lin.b);
+        }
+        let clear_noise = clear || lin.noise != base.noise;
         lin.noise = base.noise;
         lin.a.view_mut((0, 0), (n, n)).copy_from(&base.a);
         if self.steps == 0 {
@@ -139,13 +187,17 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
         if base.noise == NoiseKind::None {
             return;
         }
-        zero(&mut lin.c);
+        if clear_noise {
+            zero(&mut lin.c);
+        }
         lin.c
             .view_mut((0, 0), (n, base.c.ncols()))
             .copy_from(&base.c);
         for i in 0..base.cx.len() {
-            zero(&mut lin.cx[i]);
-            zero(&mut lin.cu[i]);
+            if clear_noise {
+                zero(&mut lin.cx[i]);
+                zero(&mut lin.cu[i]);
+            }
             lin.cx[i].view_mut((0, 0), (n, n)).copy_from(&base.cx[i]);
             if self.steps == 0 {
                 lin.cu[i].copy_from(&base.cu[i]);
@@ -189,6 +241,12 @@ impl<T: Dynamics + ?Sized> Dynamics for Offset<'_, T> {
     }
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         self.inner.linearize(k + self.offset, x, u, lin);
+    }
+    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.inner.relinearize(k + self.offset, x, u, lin);
+    }
+    fn state_support(&self, support: &mut StateSupport) -> bool {
+        self.inner.state_support(support)
     }
     fn parallel_linearization(&self) -> bool {
         self.inner.parallel_linearization()

@@ -483,7 +483,7 @@ mod tests {
             bw.s_mat.copy_from(&self.s_mat);
             bw.s_vec.copy_from(&self.s_vec);
             let mut sp = SparseLinearization::new(nx, nu, self.lin.c.ncols());
-            sp.assign(&self.lin);
+            sp.assign(&self.lin, None);
             let q0 = bw.q_function((&self.lin, &self.d), &sp, self.running, self.stochastic);
             bw.regularize(&sp.b, &self.lin, self.mu);
             let (mut l, mut gain) = (self.l.clone(), DMatrix::from_element(nu, nx, 7.0));

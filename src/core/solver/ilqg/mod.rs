@@ -13,7 +13,7 @@ use super::sparse::SparseLinearization;
 use super::{Bounds, Problem};
 use crate::core::cost::CostDerivatives;
 use crate::core::dense::zero;
-use crate::core::dynamics::{Linearization, NoiseKind};
+use crate::core::dynamics::{Linearization, NoiseKind, StateSupport};
 use nalgebra::allocator::Allocator;
 use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix};
 use serde::{Deserialize, Serialize};
@@ -174,6 +174,16 @@ struct Trajectory {
     /// Whether `lin`, `sparse` and `derivs` belong to `x` and `u` (set by [`rollout::linearize`] and
     /// by a complete fused rollout, cleared when a rollout starts).
     linearized: bool,
+    /// Whether every `lin[k]` holds the linearisation of this solve's plant at knot `k` (from
+    /// any state), so that
+    /// [`Dynamics::relinearize`](crate::core::dynamics::Dynamics::relinearize) may refill it: set by a complete
+    /// linearisation, cleared when a solve starts (another solve may bring another plant).
+    relinearizable: bool,
+    /// Where the plant's `A` and `Cx_i` can be nonzero, when it says
+    /// ([`Dynamics::state_support`](crate::core::dynamics::Dynamics::state_support)): the
+    /// nonzeros are then read there only.
+    support: StateSupport,
+    supported: bool,
 }
 
 impl Trajectory {
@@ -194,7 +204,23 @@ impl Trajectory {
                 .map(|_| CostDerivatives::new(nx, nu))
                 .collect(),
             linearized: false,
+            relinearizable: false,
+            support: StateSupport::with_capacity(nx),
+            supported: false,
         }
+    }
+
+    /// Forgets what belonged to the last solve's plant and reads this one's support (kept only
+    /// if it fits the plant's size).
+    fn start_solve(&mut self, problem: &Problem) {
+        let nx = problem.dynamics.nx();
+        self.relinearizable = false;
+        let fits = |rows: &[std::ops::Range<usize>]| {
+            rows.len() == nx && rows.iter().all(|r| r.start <= r.end && r.end <= nx)
+        };
+        self.supported = problem.dynamics.state_support(&mut self.support)
+            && fits(&self.support.a)
+            && fits(&self.support.cx);
     }
 }
 
@@ -368,6 +394,8 @@ impl Ilqg {
             });
         }
         self.solved = false;
+        self.nominal.start_solve(problem);
+        self.candidate.start_solve(problem);
         for k in 0..horizon {
             self.nominal.u[k].copy_from(&u_init[k]);
             problem.bounds.clamp(self.nominal.u[k].as_mut_slice());
@@ -411,6 +439,8 @@ impl Ilqg {
         shift_knots(&mut self.gains, s);
         shift_knots(&mut self.nominal.x, s);
         self.nominal.linearized = false;
+        self.nominal.start_solve(problem);
+        self.candidate.start_solve(problem);
         for l in &mut self.ff {
             zero(l);
         }

@@ -57,7 +57,8 @@ pub(super) fn rollout(
             let lin = &mut traj.lin[k];
             problem.dynamics.step_linearized(k, x, u, next, lin);
             if pattern {
-                traj.sparse[k].assign(lin);
+                let support = traj.supported.then_some(&traj.support);
+                traj.sparse[k].assign(lin, support);
             }
             problem
                 .cost
@@ -83,6 +84,7 @@ pub(super) fn rollout(
         let h = problem.horizon;
         problem.cost.terminal_derivatives(end, &mut traj.derivs[h]);
         traj.linearized = true;
+        traj.relinearizable = true;
     }
     Ok(())
 }
@@ -98,14 +100,20 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
     let h = problem.horizon;
     let (xs, us) = (&traj.x, &traj.u);
     let pattern = !reads_in_place(problem.dynamics.nx(), problem.dynamics.nu());
+    let again = traj.relinearizable;
+    let support = traj.supported.then_some(&traj.support);
     let knot = |k: usize,
                 lin: &mut Linearization,
                 sparse: &mut SparseLinearization,
                 d: &mut CostDerivatives| {
         let (x, u) = (xs[k].as_slice(), us[k].as_slice());
-        problem.dynamics.linearize(k, x, u, lin);
+        if again {
+            problem.dynamics.relinearize(k, x, u, lin);
+        } else {
+            problem.dynamics.linearize(k, x, u, lin);
+        }
         if pattern {
-            sparse.assign(lin);
+            sparse.assign(lin, support);
         }
         problem.cost.running_derivatives(k, x, u, d);
     };
@@ -131,6 +139,7 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
         .cost
         .terminal_derivatives(xs[h].as_slice(), &mut traj.derivs[h]);
     traj.linearized = true;
+    traj.relinearizable = true;
 }
 
 /// [`linearize`] unless a fused rollout already did.
