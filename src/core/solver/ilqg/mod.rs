@@ -175,9 +175,10 @@ struct Trajectory {
     /// by a complete fused rollout, cleared when a rollout starts).
     linearized: bool,
     /// Whether every `lin[k]` holds the linearisation of this solve's plant at knot `k` (from
-    /// any state), so that
-    /// [`Dynamics::relinearize`](crate::core::dynamics::Dynamics::relinearize) may refill it: set by a complete
+    /// any state), so that [`Dynamics::relinearize`] may refill it: set by a complete
     /// linearisation, cleared when a solve starts (another solve may bring another plant).
+    ///
+    /// [`Dynamics::relinearize`]: crate::core::dynamics::Dynamics::relinearize
     relinearizable: bool,
     /// Where the plant's `A` and `Cx_i` can be nonzero, when it says
     /// ([`Dynamics::state_support`](crate::core::dynamics::Dynamics::state_support)): the
