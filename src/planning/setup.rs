@@ -176,6 +176,15 @@ impl crate::core::cost::Cost for DelayedCost<'_> {
         debug_assert!(self.inner.nx <= x.len());
         self.inner.running_derivatives(k, x, u, d);
     }
+    fn running_derivatives_again(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        d: &mut crate::core::cost::CostDerivatives,
+    ) {
+        self.inner.running_derivatives_again(k, x, u, d);
+    }
     fn terminal_derivatives(&self, x: &[f64], d: &mut crate::core::cost::CostDerivatives) {
         self.inner.terminal_derivatives(x, d);
     }

@@ -263,6 +263,10 @@ impl<T: Cost + ?Sized> Cost for Offset<'_, T> {
     fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
         self.inner.running_derivatives(k + self.offset, x, u, d);
     }
+    fn running_derivatives_again(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
+        self.inner
+            .running_derivatives_again(k + self.offset, x, u, d);
+    }
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
         self.inner.terminal_derivatives(x, d);
     }

@@ -174,11 +174,14 @@ struct Trajectory {
     /// Whether `lin`, `sparse` and `derivs` belong to `x` and `u` (set by [`rollout::linearize`] and
     /// by a complete fused rollout, cleared when a rollout starts).
     linearized: bool,
-    /// Whether every `lin[k]` holds the linearisation of this solve's plant at knot `k` (from
-    /// any state), so that [`Dynamics::relinearize`] may refill it: set by a complete
-    /// linearisation, cleared when a solve starts (another solve may bring another plant).
+    /// Whether every `lin[k]` and `derivs[k]` hold the linearisation of this solve's plant and
+    /// the derivatives of its cost at knot `k` (from any state), so that
+    /// [`Dynamics::relinearize`] and [`Cost::running_derivatives_again`] may refill them: set by
+    /// a complete linearisation, cleared when a solve starts (another solve may bring another
+    /// plant or cost).
     ///
     /// [`Dynamics::relinearize`]: crate::core::dynamics::Dynamics::relinearize
+    /// [`Cost::running_derivatives_again`]: crate::core::cost::Cost::running_derivatives_again
     relinearizable: bool,
     /// Where the plant's `A` and `Cx_i` can be nonzero, when it says
     /// ([`Dynamics::state_support`](crate::core::dynamics::Dynamics::state_support)): the

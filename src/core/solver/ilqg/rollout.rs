@@ -115,7 +115,11 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
         if pattern {
             sparse.assign(lin, support);
         }
-        problem.cost.running_derivatives(k, x, u, d);
+        if again {
+            problem.cost.running_derivatives_again(k, x, u, d);
+        } else {
+            problem.cost.running_derivatives(k, x, u, d);
+        }
     };
     if problem.dynamics.parallel_linearization() {
         traj.lin[..h]
