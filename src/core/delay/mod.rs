@@ -144,8 +144,8 @@ impl<D: Dynamics> Delayed<D> {
     /// commands in flight below. With `clear` every entry is written; without, `lin` holds this
     /// model's linearisation from an earlier call ([`Dynamics::relinearize`]), whose entries
     /// outside the plant's blocks are the zeros and ones written here anyway, so only the
-    /// blocks are (clearing 42² entries of `A` and of each noise Jacobian at every knot cost a
-    /// sixth of a stochastic solve of the delayed single joint). The noise Jacobians are
+    /// blocks are (clearing 42² entries of `A` and of each noise Jacobian at every knot cost
+    /// about a tenth of a stochastic solve of the delayed single joint). The noise Jacobians are
     /// cleared when the noise kind changed: a noise-free call leaves them as they were.
     fn write_linearization(
         &self,
