@@ -265,6 +265,41 @@ fn solve(plant: &LinearPlant, cost: &QuadraticCost, x0: &[f64], stochastic: bool
     solver.solve(&problem, &u_init)
 }
 
+/// The value Hessians a stochastic solve leaves for its line search's merit are the Riccati
+/// recursion's `S_{k+1}` at every knot: on the plant's size that the backward pass takes by the
+/// Jacobians' nonzeros, whose stochastic pass writes them in place of a copy.
+#[test]
+fn the_merit_reads_the_riccati_value_hessians() {
+    for seed in [7, 8] {
+        let (plant, cost, x0) = problem_data(seed);
+        let lqg = riccati(&plant, &cost, &x0);
+        let problem = Problem {
+            dynamics: &plant,
+            cost: &cost,
+            x0: x0.clone(),
+            horizon: HORIZON,
+            bounds: Bounds::unbounded(NU),
+        };
+        let mut solver = Ilqg::new(&problem, IlqgOptions::default());
+        let sol = solver.solve(&problem, &vec![DVector::zeros(NU); HORIZON]);
+        assert!(
+            sol.stop.converged(),
+            "seed {seed}: stopped with {:?}",
+            sol.stop
+        );
+        let hessians = solver.value_hessians();
+        assert_eq!(hessians.len(), HORIZON);
+        for (k, s) in hessians.iter().enumerate() {
+            assert_matrix_rel(
+                &format!("seed {seed}: S_{}", k + 1),
+                s,
+                &lqg.s_mat[k + 1],
+                REL,
+            );
+        }
+    }
+}
+
 #[test]
 fn riccati_reference_is_self_consistent() {
     // The deterministic value from the recursion equals the cost of rolling its policy out, and

@@ -332,9 +332,34 @@ impl DiscreteDynamics {
             lin.noise = NoiseKind::None;
             return;
         }
-        let mut g = [0.0; MAX_NX * MAX_NW];
-        let mut dgx = [0.0; MAX_NX * MAX_NX * MAX_NW];
-        let mut dgu = [0.0; MAX_NU * MAX_NX * MAX_NW];
+        // Scratch sized for the plant: `noise_jacobian` writes every entry read back, so the
+        // buffers only need to be large enough, and clearing the largest plant's (6.5 kB) at
+        // every knot of every linearisation was a twentieth of a stochastic plan of the
+        // delayed single joint (whose plant needs 20 entries).
+        let fits = |g: usize, dx: usize, du: usize| {
+            nx * nw <= g && nx * nx * nw <= dx && nu * nx * nw <= du
+        };
+        if fits(4, 8, 8) {
+            self.noise_linearization_in::<4, 8, 8>(x, u, lin)
+        } else if fits(16, 64, 64) {
+            self.noise_linearization_in::<16, 64, 64>(x, u, lin)
+        } else {
+            self.noise_linearization_in::<{ MAX_NX * MAX_NW }, { MAX_NX * MAX_NX * MAX_NW }, { MAX_NU * MAX_NX * MAX_NW }>(x, u, lin)
+        }
+    }
+
+    /// [`DiscreteDynamics::noise_linearization`] with scratch of `G`, `DX`, `DU` entries for
+    /// `g`, `∂g/∂x` and `∂g/∂u`.
+    fn noise_linearization_in<const G: usize, const DX: usize, const DU: usize>(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        lin: &mut Linearization,
+    ) {
+        let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
+        let mut g = [0.0; G];
+        let mut dgx = [0.0; DX];
+        let mut dgu = [0.0; DU];
         self.noise_jacobian(x, u, &mut g, &mut dgx, &mut dgu);
         let block = nx * nw;
         let mut dependent = false;

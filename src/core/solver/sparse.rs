@@ -10,7 +10,7 @@
 //! that declares where its Jacobians can be nonzero ([`StateSupport`]: the delayed plant) has them
 //! read there only, which is the same pattern at a fraction of the reads.
 
-use crate::core::dense::zero;
+use crate::core::dense::{copy, zero};
 use crate::core::dynamics::{Linearization, NoiseKind, StateSupport};
 use nalgebra::DMatrix;
 use std::ops::Range;
@@ -97,10 +97,11 @@ impl SparseColumns {
         (&self.row[r.clone()], &self.val[r])
     }
 
-    /// `out (+)= S M` column by column, as `axpy`s on contiguous columns of `S`, which
-    /// vectorise; with `overwrite` each column's first term is written, not added
-    /// ([`ColumnProducts::right_mul`]).
-    fn mul_columns(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>, overwrite: bool) {
+    /// `out = first + S M` column by column, as `axpy`s on contiguous columns of `S`, which
+    /// vectorise. Each column's first term is added to `first`'s column as it is written
+    /// (what a pass that wrote `first` and then added every term gives, to the bit), so
+    /// [`ColumnProducts::right_mul`] and [`ColumnProducts::right_mul_onto`] save that pass.
+    fn mul_columns(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>, first: First) {
         let p = s.nrows();
         debug_assert_eq!(s.ncols(), self.nrows);
         debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
@@ -110,13 +111,26 @@ impl SparseColumns {
             let col = &mut od[j * p..(j + 1) * p];
             let (rows, vals) = self.column(j);
             let mut terms = rows.iter().zip(vals);
-            if overwrite {
-                let Some((&i, &a)) = terms.next() else {
-                    col.fill(0.0);
-                    continue;
-                };
-                for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
-                    *o = 0.0 + a * s;
+            match first {
+                First::Out => {}
+                First::Zero => {
+                    let Some((&i, &a)) = terms.next() else {
+                        col.fill(0.0);
+                        continue;
+                    };
+                    for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
+                        *o = 0.0 + a * s;
+                    }
+                }
+                First::Base(base) => {
+                    let base = &base.as_slice()[j * p..(j + 1) * p];
+                    let Some((&i, &a)) = terms.next() else {
+                        col.copy_from_slice(base);
+                        continue;
+                    };
+                    for ((o, s), b) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]).zip(base) {
+                        *o = b + a * s;
+                    }
                 }
             }
             for (&i, &a) in terms {
@@ -126,6 +140,17 @@ impl SparseColumns {
             }
         }
     }
+}
+
+/// What a column of [`SparseColumns::mul_columns`] starts from.
+#[derive(Clone, Copy)]
+enum First<'a> {
+    /// The output as it is (`out += S M`).
+    Out,
+    /// Zero (`out = S M`).
+    Zero,
+    /// Another matrix of the output's size (`out = base + S M`).
+    Base(&'a DMatrix<f64>),
 }
 
 /// The products of the backward pass with a Jacobian `M` (A, B or a noise Jacobian) taken by its
@@ -145,6 +170,13 @@ pub trait ColumnProducts {
     /// `out += S M` for a dense `S` (p × nrows); `out` is p × ncols.
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>);
 
+    /// `out = base + S M`: `base` copied into `out`, then [`ColumnProducts::right_mul_add`]
+    /// (to the bit).
+    fn right_mul_onto(&self, base: &DMatrix<f64>, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        copy(base, out);
+        self.right_mul_add(s, out);
+    }
+
     /// `out += α Mᵀ X` for a dense `X` (nrows × q); `out` is ncols × q.
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>);
 }
@@ -159,6 +191,9 @@ impl<T: ColumnProducts> ColumnProducts for &T {
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         (**self).right_mul_add(s, out)
     }
+    fn right_mul_onto(&self, base: &DMatrix<f64>, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        (**self).right_mul_onto(base, s, out)
+    }
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         (**self).tr_mul_add(alpha, x, out)
     }
@@ -170,7 +205,7 @@ impl ColumnProducts for SparseColumns {
     /// zero), and an empty column is cleared. On the 42-state delayed plant every column of `A`
     /// has a nonzero, so the pass that cleared the whole product is saved.
     fn right_mul(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        self.mul_columns(s, out, true);
+        self.mul_columns(s, out, First::Zero);
     }
 
     fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
@@ -182,7 +217,15 @@ impl ColumnProducts for SparseColumns {
     }
 
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        self.mul_columns(s, out, false);
+        self.mul_columns(s, out, First::Out);
+    }
+
+    /// Without the copy of `base`: each column's first term is added to `base`'s column as
+    /// it is written (on the delayed single joint the copy of the cost's 42×42 Hessian was a
+    /// full pass over both matrices at every knot).
+    fn right_mul_onto(&self, base: &DMatrix<f64>, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        debug_assert_eq!(base.shape(), out.shape());
+        self.mul_columns(s, out, First::Base(base));
     }
 
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
@@ -267,8 +310,9 @@ pub(crate) mod tests {
         })
     }
 
-    /// `right_mul` writes what clearing the product and `right_mul_add` write, bit for bit
-    /// (signs of zeros included), over empty, sparse and dense columns and a dirty `out`.
+    /// `right_mul` writes what clearing the product and `right_mul_add` write, and
+    /// `right_mul_onto` what copying the base and `right_mul_add` write, bit for bit (signs of
+    /// zeros included), over empty, sparse and dense columns and a dirty `out`.
     #[test]
     fn the_product_without_clearing_is_the_cleared_one_to_the_bit() {
         for seed in 0..50 {
@@ -278,13 +322,28 @@ pub(crate) mod tests {
             let s = pattern(5, 9, seed + 100).map(|v| if v == 0.0 { -0.0 } else { v * 1e6 });
             let mut sp = SparseColumns::new(9, 6);
             sp.assign(&m);
+            let same = |got: &DMatrix<f64>, want: &DMatrix<f64>| {
+                for (g, w) in got.iter().zip(want.iter()) {
+                    assert_eq!(g.to_bits(), w.to_bits(), "seed {seed}: {g} vs {w}");
+                }
+            };
             let mut want = DMatrix::zeros(5, 6);
             sp.right_mul_add(&s, &mut want);
             let mut got = DMatrix::from_element(5, 6, f64::NAN);
             sp.right_mul(&s, &mut got);
-            for (g, w) in got.iter().zip(want.iter()) {
-                assert_eq!(g.to_bits(), w.to_bits(), "seed {seed}: {g} vs {w}");
-            }
+            same(&got, &want);
+            // A base with zeros of both signs, tiny and huge entries.
+            let base = pattern(5, 6, seed + 200).map(|v| match (v * 8.0) as i64 {
+                0 => -0.0,
+                1 => v * 1e-300,
+                -1 => v * 1e300,
+                _ => v,
+            });
+            let mut want = base.clone();
+            sp.right_mul_add(&s, &mut want);
+            let mut got = DMatrix::from_element(5, 6, f64::NAN);
+            sp.right_mul_onto(&base, &s, &mut got);
+            same(&got, &want);
         }
     }
 

@@ -182,21 +182,37 @@ impl Ilqg {
         let bw = &mut self.bw;
         let traj = &self.nominal;
         let term = &traj.derivs[horizon];
-        copy(&term.lxx, &mut bw.s_mat);
+        // The value Hessian `S_{k+1}` the knot reads: in a stochastic pass the merit's
+        // `value_hessians[k]`, which the value update of knot k + 1 writes (no copy of a
+        // 42×42 matrix per knot on the delayed plant); otherwise `s_mat`, updated in place.
+        // `S_0` ends in `s_mat` either way ([`Ilqg::value_scale`]).
+        let mut s_mat = std::mem::take(&mut bw.s_mat);
+        let chained = stochastic && horizon > 0;
+        copy(
+            &term.lxx,
+            if chained {
+                &mut self.value_hessians[horizon - 1]
+            } else {
+                &mut s_mat
+            },
+        );
         copy(&term.lx, &mut bw.s_vec);
         let mut pass = BackwardPass {
             s0: traj.terminal,
             dv1: 0.0,
             dv2: 0.0,
         };
+        let mut failed = false;
         for k in (0..horizon).rev() {
-            if stochastic {
-                // Only the stochastic merit reads them.
-                copy(&bw.s_mat, &mut self.value_hessians[k]);
-            }
             let running = traj.running[k];
             let (lin, sp) = (&traj.lin[k], &traj.sparse[k]);
-            let q0 = bw.q_function((lin, &traj.derivs[k]), sp, running, stochastic) + pass.s0;
+            let s_next = if chained {
+                &self.value_hessians[k]
+            } else {
+                &s_mat
+            };
+            let q0 =
+                bw.q_function(s_next, (lin, &traj.derivs[k]), sp, running, stochastic) + pass.s0;
             bw.regularize(&sp.b, lin, mu);
             if !policy::<MAX_QP>(
                 bw.quu_reg.as_slice(),
@@ -207,14 +223,21 @@ impl Ilqg {
                 self.ff[k].as_mut_slice(),
                 self.gains[k].as_mut_slice(),
             ) {
-                return None;
+                failed = true;
+                break;
             }
-            let (lqu, lquul) = bw.value_update(&self.ff[k], &self.gains[k]);
+            let s_here = if chained && k > 0 {
+                &mut self.value_hessians[k - 1]
+            } else {
+                &mut s_mat
+            };
+            let (lqu, lquul) = bw.value_update(&self.ff[k], &self.gains[k], s_here);
             pass.s0 = q0 + lqu + 0.5 * lquul;
             pass.dv1 += lqu;
             pass.dv2 += 0.5 * lquul;
         }
-        Some(pass)
+        bw.s_mat = s_mat;
+        (!failed).then_some(pass)
     }
 }
 
@@ -266,6 +289,7 @@ impl Backward {
     /// `s₀`). The products take A, B, Cx, Cu by their nonzeros `sp` (see `sparse`): n·nnz, not n³.
     fn q_function(
         &mut self,
+        s: &DMatrix<f64>,
         (lin, d): (&Linearization, &CostDerivatives),
         sp: &SparseLinearization,
         running: f64,
@@ -277,25 +301,24 @@ impl Backward {
         a.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qx.as_mut_slice());
         copy(&d.lu, &mut self.qu);
         b.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qu.as_mut_slice());
-        a.right_mul(&self.s_mat, &mut self.sa);
-        b.right_mul(&self.s_mat, &mut self.sb);
-        copy(&d.lxx, &mut self.qxx);
+        a.right_mul(s, &mut self.sa);
+        b.right_mul(s, &mut self.sb);
         transpose(&self.sa, &mut self.sat);
-        a.right_mul_add(&self.sat, &mut self.qxx);
+        a.right_mul_onto(&d.lxx, &self.sat, &mut self.qxx);
         copy(&d.luu, &mut self.quu);
         b.tr_mul_add(1.0, &self.sb, &mut self.quu);
         copy(&d.lux, &mut self.qux);
         b.tr_mul_add(1.0, &self.sa, &mut self.qux);
         if stochastic && lin.noise != NoiseKind::None {
             for i in 0..lin.c.ncols() {
-                mul_nonzeros(&self.s_mat, lin.c.column(i).as_slice(), &mut self.sc);
+                mul_nonzeros(s, lin.c.column(i).as_slice(), &mut self.sc);
                 q0 += 0.5 * lin.c.column(i).dot(&self.sc);
                 if lin.noise == NoiseKind::Dependent {
                     let (cx, cu) = (&sp.cx[i], &sp.cu[i]);
                     cx.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qx.as_mut_slice());
                     cu.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qu.as_mut_slice());
-                    cx.right_mul(&self.s_mat, &mut self.scx);
-                    cu.right_mul(&self.s_mat, &mut self.scu);
+                    cx.right_mul(s, &mut self.scx);
+                    cu.right_mul(s, &mut self.scu);
                     transpose(&self.scx, &mut self.sat);
                     cx.right_mul_add(&self.sat, &mut self.qxx);
                     cu.tr_mul_add(1.0, &self.scu, &mut self.quu);
@@ -325,28 +348,45 @@ impl Backward {
 
     /// Value function update (Tassa 2012 form, valid with regularisation and clamping):
     /// `s = Q_x + Lᵀ Q_uu l + Lᵀ Q_u + Q_uxᵀ l`, `S = Q_xx + Lᵀ Q_uu L + Lᵀ Q_ux + Q_uxᵀ L`.
-    /// Returns `(lᵀ Q_u, lᵀ Q_uu l)` for `s_0` and the expected improvement.
-    fn value_update(&mut self, l: &DVector<f64>, gain: &DMatrix<f64>) -> (f64, f64) {
+    /// Into `s_mat` (the value Hessian `S`); returns `(lᵀ Q_u, lᵀ Q_uu l)` for `s_0` and the
+    /// expected improvement.
+    fn value_update(
+        &mut self,
+        l: &DVector<f64>,
+        gain: &DMatrix<f64>,
+        s_mat: &mut DMatrix<f64>,
+    ) -> (f64, f64) {
         let nu = l.len();
         let (lqu, lquul) = self.value_terms_dynamic(l, gain);
         // S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L as 2m rank-one updates, each an axpy on
         // contiguous columns of the transposed thin factors (nalgebra's transposed products
-        // are plain dot loops).
+        // are plain dot loops). The first update reads `Q_xx` where the others read `S`: the
+        // same sums as a copy of `Q_xx` followed by every update, without that pass.
         transpose(gain, &mut self.lt);
         transpose(&self.qux, &mut self.xt);
-        let n = self.s_mat.nrows();
+        let n = s_mat.nrows();
         let (gd, td) = (gain.as_slice(), self.t_mn.as_slice());
         let (ltd, xtd) = (self.lt.as_slice(), self.xt.as_slice());
-        let sd = self.s_mat.as_mut_slice();
-        sd.copy_from_slice(self.qxx.as_slice());
+        let qd = self.qxx.as_slice();
+        let sd = s_mat.as_mut_slice();
         for j in 0..n {
             let col = &mut sd[j * n..(j + 1) * n];
+            let q = &qd[j * n..(j + 1) * n];
             for r in 0..nu {
                 let (t, g) = (td[j * nu + r], gd[j * nu + r]);
                 let (lr, xr) = (&ltd[r * n..(r + 1) * n], &xtd[r * n..(r + 1) * n]);
-                for ((s, l), x) in col.iter_mut().zip(lr).zip(xr) {
-                    *s += l * t + x * g;
+                if r == 0 {
+                    for (((s, q), l), x) in col.iter_mut().zip(q).zip(lr).zip(xr) {
+                        *s = q + (l * t + x * g);
+                    }
+                } else {
+                    for ((s, l), x) in col.iter_mut().zip(lr).zip(xr) {
+                        *s += l * t + x * g;
+                    }
                 }
+            }
+            if nu == 0 {
+                col.copy_from_slice(q);
             }
         }
         // Symmetric against round-off: the average of the two triangles.
@@ -480,11 +520,17 @@ mod tests {
         fn dynamic(&self) -> Option<Vec<u64>> {
             let (nx, nu) = (self.lin.b.nrows(), self.lin.b.ncols());
             let mut bw = Backward::new(nx, nu);
-            bw.s_mat.copy_from(&self.s_mat);
             bw.s_vec.copy_from(&self.s_vec);
             let mut sp = SparseLinearization::new(nx, nu, self.lin.c.ncols());
             sp.assign(&self.lin, None);
-            let q0 = bw.q_function((&self.lin, &self.d), &sp, self.running, self.stochastic);
+            let s_next = self.s_mat.clone();
+            let q0 = bw.q_function(
+                &s_next,
+                (&self.lin, &self.d),
+                &sp,
+                self.running,
+                self.stochastic,
+            );
             bw.regularize(&sp.b, &self.lin, self.mu);
             let (mut l, mut gain) = (self.l.clone(), DMatrix::from_element(nu, nx, 7.0));
             policy::<MAX_QP>(
@@ -497,9 +543,11 @@ mod tests {
                 gain.as_mut_slice(),
             )
             .then(|| {
-                let (lqu, lquul) = bw.value_update(&l, &gain);
+                // Over a dirty matrix: the update writes every entry of S.
+                let mut s_mat = DMatrix::from_element(nx, nx, f64::NAN);
+                let (lqu, lquul) = bw.value_update(&l, &gain, &mut s_mat);
                 let parts = [&[q0][..], l.as_slice(), gain.as_slice()];
-                let rest = [bw.s_vec.as_slice(), bw.s_mat.as_slice(), &[lqu, lquul]];
+                let rest = [bw.s_vec.as_slice(), s_mat.as_slice(), &[lqu, lquul]];
                 parts
                     .iter()
                     .chain(&rest)

@@ -581,6 +581,12 @@ impl Ilqg {
         &self.gains
     }
 
+    /// The value Hessians `S_{k+1}` that the last stochastic backward pass left for each knot
+    /// `k` (the line search's merit reads them; a deterministic pass leaves them as they were).
+    pub fn value_hessians(&self) -> &[DMatrix<f64>] {
+        &self.value_hessians
+    }
+
     /// The dynamics linearised at every knot of the last solution's nominal (valid after a
     /// solve: the nominal is linearised after every accepted step).
     pub fn linearizations(&self) -> &[Linearization] {
