@@ -92,6 +92,27 @@ impl SparseColumns {
         self.start[ncols] = self.row.len();
     }
 
+    /// `out += Wᵀ M` for a dense `W` (nrows × p), without forming `Wᵀ`: the terms of
+    /// [`ColumnProducts::right_mul_add`] on `Wᵀ`, in the same order (to the bit), each column of
+    /// `Wᵀ` read as a row of `W`. For the noise Jacobians of the delayed plant (a few nonzeros
+    /// in the plant's block) this reads a few rows of `W` where a transpose wrote all of it.
+    pub fn tr_right_mul_add(&self, w: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        let (n, p) = (w.nrows(), w.ncols());
+        debug_assert_eq!(n, self.nrows);
+        debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
+        let wd = w.as_slice();
+        let od = out.as_mut_slice();
+        for j in 0..self.ncols() {
+            let col = &mut od[j * p..(j + 1) * p];
+            let (rows, vals) = self.column(j);
+            for (&i, &a) in rows.iter().zip(vals) {
+                for (o, w) in col.iter_mut().zip(wd[i..].iter().step_by(n)) {
+                    *o += a * w;
+                }
+            }
+        }
+    }
+
     fn column(&self, j: usize) -> (&[usize], &[f64]) {
         let r = self.start[j]..self.start[j + 1];
         (&self.row[r.clone()], &self.val[r])
@@ -343,6 +364,11 @@ pub(crate) mod tests {
             sp.right_mul_add(&s, &mut want);
             let mut got = DMatrix::from_element(5, 6, f64::NAN);
             sp.right_mul_onto(&base, &s, &mut got);
+            same(&got, &want);
+            // `Wᵀ M` from `W` itself, over a base.
+            let w = s.transpose();
+            let mut got = base.clone();
+            sp.tr_right_mul_add(&w, &mut got);
             same(&got, &want);
         }
     }

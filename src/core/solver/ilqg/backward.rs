@@ -319,8 +319,8 @@ impl Backward {
                     cu.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qu.as_mut_slice());
                     cx.right_mul(s, &mut self.scx);
                     cu.right_mul(s, &mut self.scu);
-                    transpose(&self.scx, &mut self.sat);
-                    cx.right_mul_add(&self.sat, &mut self.qxx);
+                    // `Cxᵀ S Cx` from the rows of `S Cx` (no transpose of it).
+                    cx.tr_right_mul_add(&self.scx, &mut self.qxx);
                     cu.tr_mul_add(1.0, &self.scu, &mut self.quu);
                     cu.tr_mul_add(1.0, &self.scx, &mut self.qux);
                 }
