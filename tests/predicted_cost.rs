@@ -96,3 +96,57 @@ fn the_predictor_prediction_agrees_with_monte_carlo_at_every_latency() {
         last = predicted;
     }
 }
+
+/// The prediction flags where its own assumption, an unclamped linear law, fails: the ILQG plan
+/// of the iCub elbow, whose stiffness gains are huge (stiffness is nearly free), has knots where
+/// the feedback's predicted spread passes a bound, and there the Monte Carlo of the executed
+/// (clamped) law is far above the prediction; the plans without such knots (the experiment's
+/// elbow with its torque noise, the torque-only arm in the divergent field) agree with theirs.
+/// The arm's torques limited to ±5 N m (its feedback's spread reaches about 0.4 N m) keep the
+/// test from passing with a threshold far below the room to the bounds.
+#[test]
+fn clamped_feedback_is_flagged_where_the_monte_carlo_departs_from_the_prediction() {
+    for (config, extra, flagged) in [
+        ("icub_elbow.toml", None, true),
+        ("icub_experiment.toml", None, false),
+        (
+            "two_link_torque_divergent.toml",
+            Some("actuator.torque_limit=5"),
+            false,
+        ),
+    ] {
+        let (s, p) = planned(config, extra.as_slice(), Method::Ilqg);
+        let knots = p
+            .summary
+            .clamped_feedback_knots
+            .expect("an undelayed ILQG plan with noise");
+        let policy = p.policy(&s).unwrap();
+        let n = 300;
+        let trials = run_trials(&s, &policy, Feedback::Full, n, 7);
+        let costs: Vec<f64> = trials.iter().map(|t| t.cost).collect();
+        assert!(
+            costs.iter().all(|c| c.is_finite()),
+            "{config}: a trial diverged"
+        );
+        let mean = costs.iter().sum::<f64>() / n as f64;
+        let var = costs.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let se = (var / n as f64).sqrt();
+        let predicted = p.summary.expected_cost;
+        eprintln!(
+            "{config}: {knots} clamped knots, predicted {predicted:.4e}, Monte Carlo {mean:.4e} ± {se:.1e}"
+        );
+        if flagged {
+            assert!(knots > 0, "{config}: no clamped knot");
+            assert!(
+                mean > 5.0 * predicted,
+                "{config}: Monte Carlo {mean} close to the prediction {predicted}"
+            );
+        } else {
+            assert_eq!(knots, 0, "{config}: clamped knots");
+            assert!(
+                (mean - predicted).abs() < 3.0 * se + 0.03 * predicted,
+                "{config}: predicted {predicted} vs Monte Carlo {mean} ± {se}"
+            );
+        }
+    }
+}

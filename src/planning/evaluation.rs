@@ -218,6 +218,31 @@ fn spread(finals: &[Vec<f64>], dim: usize, k: f64) -> Spread {
 /// full feedback (ILQG's own prediction), zero gains open loop. Clamping into the bounds and
 /// the nonlinearity beyond second order are not modelled: the Monte Carlo checks what they cost.
 pub fn predicted_cost(setup: &Setup, policy: &Policy, feedback: Feedback) -> Option<f64> {
+    predict_closed_loop(setup, policy, feedback).map(|p| p.expected_cost)
+}
+
+/// What [`predict_closed_loop`] predicts of an executed law.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClosedLoopPrediction {
+    /// The expected cost ([`predicted_cost`]).
+    pub expected_cost: f64,
+    /// The knots at which the law's predicted standard deviation in some control, `√(K Σ Kᵀ)_ii`,
+    /// exceeds the room between the nominal command and its nearer bound: there the commands are
+    /// clamped in more than about one trial in six, which the linear prediction does not model.
+    /// The ILQG plans with stiffness in their feedback reach this (stiffness is nearly free, so
+    /// its gains are huge, and the clamped plant executes another law than the predicted one).
+    pub clamped_knots: usize,
+    /// The knots of the law.
+    pub knots: usize,
+}
+
+/// [`predicted_cost`] with the knots where the prediction's own assumption, an unclamped linear
+/// law, fails ([`ClosedLoopPrediction::clamped_knots`]).
+pub fn predict_closed_loop(
+    setup: &Setup,
+    policy: &Policy,
+    feedback: Feedback,
+) -> Option<ClosedLoopPrediction> {
     let d = match feedback {
         Feedback::OpenLoop | Feedback::Full => 0,
         Feedback::Predicted { latency_steps } => latency_steps,
@@ -231,6 +256,7 @@ pub fn predicted_cost(setup: &Setup, policy: &Policy, feedback: Feedback) -> Opt
     let mut lin = Linearization::new(n, m, p);
     let mut cd = CostDerivatives::new(n, m);
     let mut total = 0.0;
+    let mut clamped_knots = 0;
     for k in 0..policy.steps() {
         let (x, u) = (policy.nominal[k].as_slice(), policy.acting[k].as_slice());
         dynamics.linearize(k, x, u, &mut lin);
@@ -249,6 +275,12 @@ pub fn predicted_cost(setup: &Setup, policy: &Policy, feedback: Feedback) -> Opt
         sel.view_mut((0, 0), (n, n)).fill_with_identity();
         sel.rows_mut(n, m).copy_from(&gain_z);
         let cov = &sel * &sigma * sel.transpose();
+        let u_k = &policy.acting[k];
+        let clamped = (0..m).any(|i| {
+            let room = (u_k[i] - policy.bounds.lower[i]).min(policy.bounds.upper[i] - u_k[i]);
+            cov[(n + i, n + i)].max(0.0).sqrt() > room
+        });
+        clamped_knots += usize::from(clamped);
         let mut h = DMatrix::<f64>::zeros(n + m, n + m);
         h.view_mut((0, 0), (n, n)).copy_from(&cd.lxx);
         h.view_mut((n, n), (m, m)).copy_from(&cd.luu);
@@ -283,5 +315,9 @@ pub fn predicted_cost(setup: &Setup, policy: &Policy, feedback: Feedback) -> Opt
     setup.cost.terminal_derivatives(xn, &mut cd);
     let px = sigma.view((0, 0), (n, n));
     total += setup.cost.terminal(xn) + 0.5 * (&cd.lxx * px).trace();
-    total.is_finite().then_some(total)
+    total.is_finite().then_some(ClosedLoopPrediction {
+        expected_cost: total,
+        clamped_knots,
+        knots: policy.steps(),
+    })
 }

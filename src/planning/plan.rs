@@ -4,10 +4,12 @@
 
 use crate::core::dynamics::Dynamics;
 use crate::core::model::Noise;
+use crate::core::policy::Feedback;
 use crate::core::solver::ilqg::{OnIteration, Progress};
 use crate::core::solver::sooc::{MomentCost, MomentDynamics, unpack};
 use crate::core::solver::sooc_newton::{Optimality, SoocProblem, SoocSolver, SoocStop};
 use crate::core::solver::{Ilqg, IlqgOptions, Problem, Solution, StopReason};
+use crate::planning::evaluation::predict_closed_loop;
 pub use crate::planning::method::Method;
 use crate::planning::plan_file::plan_file;
 pub use crate::planning::plan_file::{
@@ -199,6 +201,13 @@ pub fn plan(
         .collect();
     let open_loop = predict_open_loop(&setup, &acting);
     let mut file = plan_file(s, &setup, &solution, d, nu, method, &open_loop);
+    // Whether the feedback's predicted spread stays within the controls' bounds, where the
+    // prediction `expected_cost` holds (a delayed plan's naive law is not predicted).
+    if method == Method::Ilqg && d == 0 && setup.dynamics.nw() > 0 {
+        let policy = file.policy(&setup)?;
+        file.summary.clamped_feedback_knots =
+            predict_closed_loop(&setup, &policy, Feedback::Full).map(|p| p.clamped_knots);
+    }
     if let Some((stop, optimality)) = verdict {
         file.summary.converged = stop == SoocStop::Converged;
         file.summary.stop = stop.into();

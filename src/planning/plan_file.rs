@@ -57,6 +57,13 @@ pub struct PlanSummary {
     /// channel's unit (`control_names`): how much a plan chatters.
     #[serde(default)]
     pub total_variation: Vec<f64>,
+    /// ILQG without delay, with noise: the knots at which the feedback's predicted standard
+    /// deviation in some control exceeds the room to its nearer bound
+    /// ([`crate::planning::evaluation::ClosedLoopPrediction::clamped_knots`]). Where this is not
+    /// 0, `expected_cost` is that of a linear law the clamped plant does not execute (`vic
+    /// simulate` measures what it does); `None` for other plans.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clamped_feedback_knots: Option<usize>,
 }
 
 /// `Σ_k |u[k+1]_j − u[k]_j|` for every channel `j` of the command sequence `u`.
@@ -264,6 +271,7 @@ pub(crate) fn plan_file(
             optimality: None,
             convergence: sol.convergence,
             total_variation: total_variation(&sol.u),
+            clamped_feedback_knots: None,
         },
     }
 }

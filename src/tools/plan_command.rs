@@ -112,6 +112,15 @@ fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
         "cost       {:.6e} nominal, {:.6e} expected (predicted)",
         s.cost, s.expected_cost
     );
+    if let Some(n) = s.clamped_feedback_knots.filter(|&n| n > 0) {
+        println!(
+            "warning    at {n} of {} knots the feedback's predicted spread in a control passes \
+             its bound: the plant clamps it, and the expected cost above is that of a linear law \
+             it does not execute (measure it with vic simulate --policy feedback); stiffness is \
+             better planned open loop (--method sooc)",
+            p.u.len()
+        );
+    }
     println!(
         "stiffness  max {:.2} N m/rad, mean {:.2} N m/rad",
         s.max_stiffness, s.mean_stiffness
