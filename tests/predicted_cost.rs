@@ -1,12 +1,12 @@
-//! The predicted expected cost of the executed policy (`planning::evaluation::predicted_cost`:
+//! The predicted expected cost of the executed policy (`planning::prediction::predicted_cost`:
 //! closed-loop covariance propagation of the plant augmented with the prediction error) against
 //! the solvers' own predictions where they exist and against the Monte Carlo where they do not.
 
 use std::path::Path;
 use vic::core::policy::Feedback;
-use vic::planning::evaluation::predicted_cost;
 use vic::planning::montecarlo::run_trials;
 use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
+use vic::planning::prediction::predicted_cost;
 use vic::planning::scenario::Scenario;
 
 fn planned(config: &str, extra: &[&str], method: Method) -> (Setup, PlanFile) {

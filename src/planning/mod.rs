@@ -9,6 +9,7 @@ pub mod method;
 pub mod montecarlo;
 pub mod plan;
 pub mod plan_file;
+pub mod prediction;
 pub mod reference;
 pub mod scenario;
 pub mod setup;

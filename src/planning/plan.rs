@@ -9,12 +9,12 @@ use crate::core::solver::ilqg::{OnIteration, Progress};
 use crate::core::solver::sooc::{MomentCost, MomentDynamics, unpack};
 use crate::core::solver::sooc_newton::{Optimality, SoocProblem, SoocSolver, SoocStop};
 use crate::core::solver::{Ilqg, IlqgOptions, Problem, Solution, StopReason};
-use crate::planning::evaluation::predict_closed_loop;
 pub use crate::planning::method::Method;
 use crate::planning::plan_file::plan_file;
 pub use crate::planning::plan_file::{
     OpenLoopPrediction, PLAN_VERSION, PlanFile, PlanSummary, Stop, final_position_covariance,
 };
+use crate::planning::prediction::predict_closed_loop;
 use crate::planning::scenario::Scenario;
 pub use crate::planning::setup::{DelayedCost, DelayedPlant, PlanError, Setup, setup};
 use nalgebra::{DMatrix, DVector};

@@ -59,7 +59,7 @@ pub struct PlanSummary {
     pub total_variation: Vec<f64>,
     /// ILQG without delay, with noise: the knots at which the feedback's predicted standard
     /// deviation in some control exceeds the room to its nearer bound
-    /// ([`crate::planning::evaluation::ClosedLoopPrediction::clamped_knots`]). Where this is not
+    /// ([`crate::planning::prediction::ClosedLoopPrediction::clamped_knots`]). Where this is not
     /// 0, `expected_cost` is that of a linear law the clamped plant does not execute (`vic
     /// simulate` measures what it does); `None` for other plans.
     #[serde(default, skip_serializing_if = "Option::is_none")]

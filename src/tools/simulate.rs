@@ -134,7 +134,7 @@ pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
     }
     // The executed law's own prediction (closed-loop covariance propagation); for the naive
     // delayed law, the plan's (that of the augmented policy it was planned as).
-    let predicted = crate::planning::evaluation::predicted_cost(&setup, &policy, feedback)
+    let predicted = crate::planning::prediction::predicted_cost(&setup, &policy, feedback)
         .unwrap_or(plan.summary.expected_cost);
     if o.json.json {
         let mut v = serde_json::to_value(&report)?;

@@ -17,11 +17,12 @@
 pub use crate::core::policy::Strategy;
 
 mod output;
-use crate::planning::evaluation::{predicted_cost, summarize};
+use crate::planning::evaluation::summarize;
 pub use crate::planning::montecarlo::Pulse;
 use crate::planning::montecarlo::{Trial, run_trials_disturbed};
 use crate::planning::plan::{Method, PlanError, PlanFile, plan, setup};
 use crate::planning::plan_file::commanded_stiffness;
+use crate::planning::prediction::predicted_cost;
 use crate::planning::scenario::{ConfigError, Scenario};
 use crate::planning::unit::Unit;
 pub use output::{pulse_from_flags, write_figure, write_outputs};
