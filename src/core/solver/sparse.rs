@@ -113,9 +113,63 @@ impl SparseColumns {
         }
     }
 
-    fn column(&self, j: usize) -> (&[usize], &[f64]) {
+    /// The rows and values of column `j`'s nonzeros, in ascending row order.
+    pub fn column(&self, j: usize) -> (&[usize], &[f64]) {
         let r = self.start[j]..self.start[j + 1];
         (&self.row[r.clone()], &self.val[r])
+    }
+
+    /// Row `i` of `S M` for a symmetric `S` given by `s_rows`, whose column `i` is row `i` of
+    /// `S` (`S` itself when it is symmetric to the bit), into `out` (`M`'s columns long): each
+    /// entry is [`ColumnProducts::right_mul`]'s (`0 + m_k s_ik`, then `+ m_k s_ik` in ascending
+    /// `k`; `+0` for an empty column), to the bit. Reading a row of `S` from a column is what
+    /// lets the backward pass take one row of a product where it needs it instead of forming
+    /// the whole `n × n` product (see `ilqg::backward`).
+    pub fn product_row(&self, s_rows: &DMatrix<f64>, i: usize, out: &mut [f64]) {
+        let n = s_rows.nrows();
+        debug_assert_eq!(n, self.nrows);
+        let s = &s_rows.as_slice()[i * n..(i + 1) * n];
+        for (c, o) in out.iter_mut().enumerate().take(self.ncols()) {
+            let (rows, vals) = self.column(c);
+            let mut terms = rows.iter().zip(vals);
+            *o = match terms.next() {
+                None => 0.0,
+                Some((&k, &a)) => terms.fold(0.0 + a * s[k], |v, (&k, &a)| v + a * s[k]),
+            };
+        }
+    }
+
+    /// `out += α Mᵀ (S N)` for a symmetric `S` (`s_rows` as in [`SparseColumns::product_row`]),
+    /// `M` this matrix and `N` sparse: [`ColumnProducts::tr_mul_add`] of `M` with `X = S N`, to
+    /// the bit, from the rows of `S N` that `M` reads (`rows` is scratch). For the delayed
+    /// plant's `Bᵀ (S A)` those are the `m` rows of the command entering the buffer, where
+    /// `S A` itself is `n × n`.
+    pub fn tr_mul_product_add(
+        &self,
+        alpha: f64,
+        s_rows: &DMatrix<f64>,
+        other: &SparseColumns,
+        rows: &mut Vec<f64>,
+        out: &mut DMatrix<f64>,
+    ) {
+        let q = other.ncols();
+        debug_assert_eq!((out.nrows(), out.ncols()), (self.ncols(), q));
+        for j in 0..self.ncols() {
+            let (idx, vals) = self.column(j);
+            rows.clear();
+            rows.resize(idx.len() * q, 0.0);
+            for (t, &i) in idx.iter().enumerate() {
+                other.product_row(s_rows, i, &mut rows[t * q..(t + 1) * q]);
+            }
+            for c in 0..q {
+                let dot: f64 = vals
+                    .iter()
+                    .enumerate()
+                    .map(|(t, &a)| a * rows[t * q + c])
+                    .sum();
+                out[(j, c)] += alpha * dot;
+            }
+        }
     }
 
     /// `out = first + S M` column by column, as `axpy`s on contiguous columns of `S`, which
@@ -329,6 +383,54 @@ pub(crate) mod tests {
             let v = ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0;
             if v.abs() < 0.5 { 0.0 } else { v }
         })
+    }
+
+    /// A row of `S M` read from the columns of `S` (or of `Sᵀ` for an `S` that is not
+    /// symmetric) is that row of `right_mul`'s product, and `Mᵀ (S N)` from those rows is
+    /// `tr_mul_add` on the whole product, bit for bit: with zeros of both signs in `S`, empty
+    /// and dense columns in `M` and `N`, and a dirty output.
+    #[test]
+    fn products_from_rows_are_the_whole_products_to_the_bit() {
+        for seed in 0..60 {
+            let (n, q) = (9, [9, 4, 1][seed as usize % 3]);
+            let signed = |v: f64| if v == 0.0 && seed % 2 == 0 { -0.0 } else { v };
+            let raw = pattern(n, n, seed + 300).map(signed);
+            let symmetric = seed % 4 != 3;
+            let s = if symmetric {
+                &raw + raw.transpose()
+            } else {
+                raw.clone()
+            };
+            let s_rows = if symmetric { s.clone() } else { s.transpose() };
+            let mut nm = pattern(n, q, seed + 400);
+            nm.column_mut(seed as usize % q).fill(0.0);
+            let mut m = pattern(n, 3, seed + 500);
+            m.column_mut(seed as usize % 3).fill(0.0);
+            let (mut sp_n, mut sp_m) = (SparseColumns::new(n, q), SparseColumns::new(n, 3));
+            sp_n.assign(&nm);
+            sp_m.assign(&m);
+            let mut whole = DMatrix::from_element(n, q, f64::NAN);
+            sp_n.right_mul(&s, &mut whole);
+            let mut row = vec![f64::NAN; q];
+            for i in 0..n {
+                sp_n.product_row(&s_rows, i, &mut row);
+                for (c, r) in row.iter().enumerate() {
+                    assert_eq!(
+                        r.to_bits(),
+                        whole[(i, c)].to_bits(),
+                        "seed {seed} ({i}, {c})"
+                    );
+                }
+            }
+            let start = pattern(3, q, seed + 600);
+            let (mut want, mut got) = (start.clone(), start);
+            sp_m.tr_mul_add(0.5, &whole, &mut want);
+            let mut scratch = Vec::new();
+            sp_m.tr_mul_product_add(0.5, &s_rows, &sp_n, &mut scratch, &mut got);
+            for (g, w) in got.iter().zip(want.iter()) {
+                assert_eq!(g.to_bits(), w.to_bits(), "seed {seed}: {g} vs {w}");
+            }
+        }
     }
 
     /// `right_mul` writes what clearing the product and `right_mul_add` write, and

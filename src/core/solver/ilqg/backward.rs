@@ -4,8 +4,9 @@
 use super::knot::{Knot, Value};
 use super::policy::policy;
 use super::*;
-use crate::core::dense::{copy, transpose};
+use crate::core::dense::{copy, symmetrize, transpose};
 use crate::core::solver::sparse::ColumnProducts;
+use std::mem::take;
 
 /// Whether the backward pass reads a knot's Jacobians in place, on the stack ([`super::knot`]),
 /// rather than by the nonzero pattern of `Trajectory::sparse` (which the linearisation then need
@@ -20,6 +21,12 @@ pub(super) fn reads_in_place(nx: usize, nu: usize) -> bool {
 pub(super) struct Backward {
     s_mat: DMatrix<f64>,
     s_vec: DVector<f64>,
+    /// The value Hessian a pass that updates `s_mat` in place writes before it takes its
+    /// place (the update reads `S_{k+1}` column by column as it writes `S_k`).
+    spare: DMatrix<f64>,
+    /// `S_{k+1}ᵀ` when `S_{k+1}` is not symmetric to the bit (a cost's terminal Hessian may
+    /// not be): its columns are the rows of `S_{k+1}` that the products read.
+    s_rows: DMatrix<f64>,
     sa: DMatrix<f64>,
     /// `(S A)ᵀ = Aᵀ S` (S is symmetric), so that `Aᵀ S A` is a product by A's columns.
     sat: DMatrix<f64>,
@@ -27,18 +34,38 @@ pub(super) struct Backward {
     lt: DMatrix<f64>,
     xt: DMatrix<f64>,
     sb: DMatrix<f64>,
-    scx: DMatrix<f64>,
     scu: DMatrix<f64>,
     sc: DVector<f64>,
     qx: DVector<f64>,
     qu: DVector<f64>,
-    qxx: DMatrix<f64>,
+    /// One column of `Q_xx` ([`Backward::q_column`]) and one row of a product `S M`.
+    qcol: DVector<f64>,
+    row: DVector<f64>,
+    /// Rows of `S A` or `S Cx` ([`tr_mul_product_add`](crate::core::solver::sparse::SparseColumns::tr_mul_product_add)).
+    rows: Vec<f64>,
     quu: DMatrix<f64>,
     qux: DMatrix<f64>,
     quu_reg: DMatrix<f64>,
     qux_reg: DMatrix<f64>,
     t_mn: DMatrix<f64>,
     t_m: DVector<f64>,
+}
+
+/// The next knot's value Hessian `S_{k+1}` as the sparse backward pass reads it: `s` by its
+/// columns, and `rows`, whose column `i` is row `i` of `s` (`s` itself, `S` being symmetric,
+/// but for a terminal cost Hessian that is not symmetric to the bit).
+#[derive(Clone, Copy)]
+struct Next<'a> {
+    s: &'a DMatrix<f64>,
+    rows: &'a DMatrix<f64>,
+}
+
+/// One knot's linearisation (dense and by its nonzeros) and cost derivatives.
+#[derive(Clone, Copy)]
+struct KnotInputs<'a> {
+    lin: &'a Linearization,
+    d: &'a CostDerivatives,
+    sp: &'a SparseLinearization,
 }
 
 impl Ilqg {
@@ -186,7 +213,7 @@ impl Ilqg {
         // `value_hessians[k]`, which the value update of knot k + 1 writes (no copy of a
         // 42×42 matrix per knot on the delayed plant); otherwise `s_mat`, updated in place.
         // `S_0` ends in `s_mat` either way ([`Ilqg::value_scale`]).
-        let mut s_mat = std::mem::take(&mut bw.s_mat);
+        let mut s_mat = take(&mut bw.s_mat);
         let chained = stochastic && horizon > 0;
         copy(
             &term.lxx,
@@ -203,16 +230,36 @@ impl Ilqg {
             dv2: 0.0,
         };
         let mut failed = false;
+        let (mut spare, mut s_rows) = (take(&mut bw.spare), take(&mut bw.s_rows));
         for k in (0..horizon).rev() {
             let running = traj.running[k];
             let (lin, sp) = (&traj.lin[k], &traj.sparse[k]);
-            let s_next = if chained {
-                &self.value_hessians[k]
-            } else {
-                &s_mat
+            // `S_{k+1}` and where `S_k` goes: without the chain, `spare`, which then takes
+            // `s_mat`'s place (the update reads `S_{k+1}` while it writes `S_k`).
+            let (s_next, s_here) = match (chained, k) {
+                (true, 0) => (&self.value_hessians[0], &mut s_mat),
+                (true, _) => {
+                    let (head, tail) = self.value_hessians.split_at_mut(k);
+                    (&tail[0], &mut head[k - 1])
+                }
+                (false, _) => (&s_mat, &mut spare),
             };
-            let q0 =
-                bw.q_function(s_next, (lin, &traj.derivs[k]), sp, running, stochastic) + pass.s0;
+            // Every later `S` is symmetric to the bit (the value update makes it so); a
+            // terminal Hessian need not be.
+            let transposed = k + 1 == horizon && !symmetric(s_next);
+            if transposed {
+                transpose(s_next, &mut s_rows);
+            }
+            let next = Next {
+                s: s_next,
+                rows: if transposed { &s_rows } else { s_next },
+            };
+            let knot = KnotInputs {
+                lin,
+                d: &traj.derivs[k],
+                sp,
+            };
+            let q0 = bw.q_function(next, knot, running, stochastic) + pass.s0;
             bw.regularize(&sp.b, lin, mu);
             if !policy::<MAX_QP>(
                 bw.quu_reg.as_slice(),
@@ -226,19 +273,28 @@ impl Ilqg {
                 failed = true;
                 break;
             }
-            let s_here = if chained && k > 0 {
-                &mut self.value_hessians[k - 1]
-            } else {
-                &mut s_mat
-            };
-            let (lqu, lquul) = bw.value_update(&self.ff[k], &self.gains[k], s_here);
+            let (lqu, lquul) = bw.value_update(
+                (next, knot, stochastic),
+                &self.ff[k],
+                &self.gains[k],
+                s_here,
+            );
+            if !chained {
+                std::mem::swap(&mut s_mat, &mut spare);
+            }
             pass.s0 = q0 + lqu + 0.5 * lquul;
             pass.dv1 += lqu;
             pass.dv2 += 0.5 * lquul;
         }
-        bw.s_mat = s_mat;
+        (bw.s_mat, bw.spare, bw.s_rows) = (s_mat, spare, s_rows);
         (!failed).then_some(pass)
     }
+}
+
+/// Whether `m` equals its transpose to the bit.
+fn symmetric(m: &DMatrix<f64>) -> bool {
+    let n = m.nrows();
+    (0..n).all(|j| (j + 1..n).all(|i| m[(i, j)].to_bits() == m[(j, i)].to_bits()))
 }
 
 /// `y = S c` taking `c` by its nonzeros: the noise columns live in the plant's rows (those of
@@ -264,17 +320,20 @@ impl Backward {
         Backward {
             s_mat: DMatrix::zeros(nx, nx),
             s_vec: DVector::zeros(nx),
+            spare: DMatrix::zeros(nx, nx),
+            s_rows: DMatrix::zeros(nx, nx),
             sa: DMatrix::zeros(nx, nx),
             sat: DMatrix::zeros(nx, nx),
             lt: DMatrix::zeros(nx, nu),
             xt: DMatrix::zeros(nx, nu),
             sb: DMatrix::zeros(nx, nu),
-            scx: DMatrix::zeros(nx, nx),
             scu: DMatrix::zeros(nx, nu),
             sc: DVector::zeros(nx),
             qx: DVector::zeros(nx),
             qu: DVector::zeros(nu),
-            qxx: DMatrix::zeros(nx, nx),
+            qcol: DVector::zeros(nx),
+            row: DVector::zeros(nx),
+            rows: Vec::with_capacity(nx * nx),
             quu: DMatrix::zeros(nu, nu),
             qux: DMatrix::zeros(nu, nx),
             quu_reg: DMatrix::zeros(nu, nu),
@@ -285,17 +344,15 @@ impl Backward {
     }
 
     /// The Q-function of a knot (Todorov & Li 2005) from the value `(S, s)` of the next knot, into
-    /// `qx, qu, qxx, quu, qux`; returns its constant term `running + ½ Σ c_iᵀ S c_i` (without
-    /// `s₀`). The products take A, B, Cx, Cu by their nonzeros `sp` (see `sparse`): n·nnz, not n³.
-    fn q_function(
-        &mut self,
-        s: &DMatrix<f64>,
-        (lin, d): (&Linearization, &CostDerivatives),
-        sp: &SparseLinearization,
-        running: f64,
-        stochastic: bool,
-    ) -> f64 {
+    /// `qx, qu, quu, qux`; returns its constant term `running + ½ Σ c_iᵀ S c_i` (without `s₀`).
+    /// The products take A, B, Cx, Cu by their nonzeros `sp` (see `sparse`): n·nnz, not n³.
+    /// `Q_xx`, the one `n × n` block, is formed column by column in [`Backward::value_update`],
+    /// which needs it only one column at a time: here `S A` and `S Cx` are read only in the
+    /// rows that `B` and `Cu` take ([`tr_mul_product_add`](crate::core::solver::sparse::SparseColumns::tr_mul_product_add)).
+    fn q_function(&mut self, next: Next, knot: KnotInputs, running: f64, stochastic: bool) -> f64 {
+        let KnotInputs { lin, d, sp } = knot;
         let (a, b) = (&sp.a, &sp.b);
+        let s = next.s;
         let mut q0 = running;
         copy(&d.lx, &mut self.qx);
         a.tr_mul_vec_add(1.0, self.s_vec.as_slice(), self.qx.as_mut_slice());
@@ -304,7 +361,6 @@ impl Backward {
         a.right_mul(s, &mut self.sa);
         b.right_mul(s, &mut self.sb);
         transpose(&self.sa, &mut self.sat);
-        a.right_mul_onto(&d.lxx, &self.sat, &mut self.qxx);
         copy(&d.luu, &mut self.quu);
         b.tr_mul_add(1.0, &self.sb, &mut self.quu);
         copy(&d.lux, &mut self.qux);
@@ -317,16 +373,52 @@ impl Backward {
                     let (cx, cu) = (&sp.cx[i], &sp.cu[i]);
                     cx.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qx.as_mut_slice());
                     cu.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qu.as_mut_slice());
-                    cx.right_mul(s, &mut self.scx);
                     cu.right_mul(s, &mut self.scu);
-                    // `Cxᵀ S Cx` from the rows of `S Cx` (no transpose of it).
-                    cx.tr_right_mul_add(&self.scx, &mut self.qxx);
                     cu.tr_mul_add(1.0, &self.scu, &mut self.quu);
-                    cu.tr_mul_add(1.0, &self.scx, &mut self.qux);
+                    cu.tr_mul_product_add(1.0, next.rows, cx, &mut self.rows, &mut self.qux);
                 }
             }
         }
         q0
+    }
+
+    /// Column `j` of `Q_xx = l_xx + Aᵀ S A + Σ Cx_iᵀ S Cx_i` into `qcol`: what forming `S A`,
+    /// its transpose and `l_xx + (S A)ᵀ A` gave, then each channel's `Cx_iᵀ (S Cx_i)` (from the
+    /// rows of `S Cx_i`), to the bit, from the rows of `S A` and `S Cx_i` that `A`'s and `Cx_i`'s
+    /// column `j` take. On the 42-state delayed plant a shift column takes one row.
+    fn q_column(&mut self, next: Next, knot: KnotInputs, stochastic: bool, j: usize) {
+        let KnotInputs { lin, d, sp } = knot;
+        let n = self.qcol.len();
+        let base = &d.lxx.as_slice()[j * n..(j + 1) * n];
+        let (q, row) = (self.qcol.as_mut_slice(), self.row.as_mut_slice());
+        let (rows, vals) = sp.a.column(j);
+        if rows.is_empty() {
+            q.copy_from_slice(base);
+        }
+        let sat = self.sat.as_slice();
+        for (t, (&i, &a)) in rows.iter().zip(vals).enumerate() {
+            let si = &sat[i * n..(i + 1) * n];
+            if t == 0 {
+                for ((q, b), r) in q.iter_mut().zip(base).zip(si) {
+                    *q = b + a * r;
+                }
+            } else {
+                for (q, r) in q.iter_mut().zip(si) {
+                    *q += a * r;
+                }
+            }
+        }
+        if stochastic && lin.noise == NoiseKind::Dependent {
+            for cx in &sp.cx {
+                let (rows, vals) = cx.column(j);
+                for (&i, &a) in rows.iter().zip(vals) {
+                    cx.product_row(next.rows, i, row);
+                    for (q, r) in q.iter_mut().zip(&*row) {
+                        *q += a * r;
+                    }
+                }
+            }
+        }
     }
 
     /// Regularisation on the value function (Tassa, Erez & Todorov 2012): S + μ I in the
@@ -348,10 +440,11 @@ impl Backward {
 
     /// Value function update (Tassa 2012 form, valid with regularisation and clamping):
     /// `s = Q_x + Lᵀ Q_uu l + Lᵀ Q_u + Q_uxᵀ l`, `S = Q_xx + Lᵀ Q_uu L + Lᵀ Q_ux + Q_uxᵀ L`.
-    /// Into `s_mat` (the value Hessian `S`); returns `(lᵀ Q_u, lᵀ Q_uu l)` for `s_0` and the
-    /// expected improvement.
+    /// Into `s_mat` (the value Hessian `S`, not `next`'s); returns `(lᵀ Q_u, lᵀ Q_uu l)` for
+    /// `s_0` and the expected improvement.
     fn value_update(
         &mut self,
+        (next, knot, stochastic): (Next, KnotInputs, bool),
         l: &DVector<f64>,
         gain: &DMatrix<f64>,
         s_mat: &mut DMatrix<f64>,
@@ -360,18 +453,18 @@ impl Backward {
         let (lqu, lquul) = self.value_terms_dynamic(l, gain);
         // S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L as 2m rank-one updates, each an axpy on
         // contiguous columns of the transposed thin factors (nalgebra's transposed products
-        // are plain dot loops). The first update reads `Q_xx` where the others read `S`: the
-        // same sums as a copy of `Q_xx` followed by every update, without that pass.
+        // are plain dot loops). Each column of `Q_xx` is formed just before its column of `S`
+        // (in L1, where a whole `Q_xx` was a pass over memory of its own), and the first
+        // update reads it where the others read `S`.
         transpose(gain, &mut self.lt);
         transpose(&self.qux, &mut self.xt);
         let n = s_mat.nrows();
-        let (gd, td) = (gain.as_slice(), self.t_mn.as_slice());
-        let (ltd, xtd) = (self.lt.as_slice(), self.xt.as_slice());
-        let qd = self.qxx.as_slice();
-        let sd = s_mat.as_mut_slice();
         for j in 0..n {
-            let col = &mut sd[j * n..(j + 1) * n];
-            let q = &qd[j * n..(j + 1) * n];
+            self.q_column(next, knot, stochastic, j);
+            let (gd, td) = (gain.as_slice(), self.t_mn.as_slice());
+            let (ltd, xtd) = (self.lt.as_slice(), self.xt.as_slice());
+            let q = self.qcol.as_slice();
+            let col = &mut s_mat.as_mut_slice()[j * n..(j + 1) * n];
             for r in 0..nu {
                 let (t, g) = (td[j * nu + r], gd[j * nu + r]);
                 let (lr, xr) = (&ltd[r * n..(r + 1) * n], &xtd[r * n..(r + 1) * n]);
@@ -390,13 +483,7 @@ impl Backward {
             }
         }
         // Symmetric against round-off: the average of the two triangles.
-        for j in 0..n {
-            for i in j + 1..n {
-                let m = 0.5 * (sd[j * n + i] + sd[i * n + j]);
-                sd[j * n + i] = m;
-                sd[i * n + j] = m;
-            }
-        }
+        symmetrize(s_mat);
         (lqu, lquul)
     }
 }

@@ -3,7 +3,7 @@
 //! QP (Tassa, Mansard & Todorov 2014), the gains and the value update.
 
 use super::SoocSolver;
-use crate::core::dense::{TransposedProduct, multiply, zero};
+use crate::core::dense::{TransposedProduct, multiply, symmetrize, zero};
 use crate::core::solver::Bounds;
 use crate::core::solver::boxqp::{MAX_QP, QpSolution, QpStatus, SmallCholesky, solve_box_qp};
 use nalgebra::{DMatrix, DVector, SMatrix};
@@ -112,14 +112,7 @@ impl Backward {
         self.vv.gemv(1.0, &self.kt_quu, ff, 1.0);
         self.vv.gemv_tr(1.0, gain, &self.qu, 1.0);
         self.vv.gemv_tr(1.0, &self.quz, ff, 1.0);
-        let nz = self.v.nrows();
-        for i in 0..nz {
-            for j in 0..i {
-                let s = 0.5 * (self.v[(i, j)] + self.v[(j, i)]);
-                self.v[(i, j)] = s;
-                self.v[(j, i)] = s;
-            }
-        }
+        symmetrize(&mut self.v);
         dv
     }
 }

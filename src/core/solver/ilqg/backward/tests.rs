@@ -104,13 +104,16 @@ impl Case {
         let mut sp = SparseLinearization::new(nx, nu, self.lin.c.ncols());
         sp.assign(&self.lin, None);
         let s_next = self.s_mat.clone();
-        let q0 = bw.q_function(
-            &s_next,
-            (&self.lin, &self.d),
-            &sp,
-            self.running,
-            self.stochastic,
-        );
+        let next = Next {
+            s: &s_next,
+            rows: &s_next,
+        };
+        let knot = KnotInputs {
+            lin: &self.lin,
+            d: &self.d,
+            sp: &sp,
+        };
+        let q0 = bw.q_function(next, knot, self.running, self.stochastic);
         bw.regularize(&sp.b, &self.lin, self.mu);
         let (mut l, mut gain) = (self.l.clone(), DMatrix::from_element(nu, nx, 7.0));
         policy::<MAX_QP>(
@@ -125,7 +128,8 @@ impl Case {
         .then(|| {
             // Over a dirty matrix: the update writes every entry of S.
             let mut s_mat = DMatrix::from_element(nx, nx, f64::NAN);
-            let (lqu, lquul) = bw.value_update(&l, &gain, &mut s_mat);
+            let (lqu, lquul) =
+                bw.value_update((next, knot, self.stochastic), &l, &gain, &mut s_mat);
             let parts = [&[q0][..], l.as_slice(), gain.as_slice()];
             let rest = [bw.s_vec.as_slice(), s_mat.as_slice(), &[lqu, lquul]];
             parts
