@@ -74,12 +74,23 @@ pub fn symmetrize(m: &mut DMatrix<f64>) {
     let d = m.as_mut_slice();
     let mut j = 0;
     while j + 4 <= n {
-        for i in 0..j {
-            for t in 0..4 {
-                let (lo, up) = (i * n + j + t, (j + t) * n + i);
-                let v = 0.5 * (d[lo] + d[up]);
-                d[lo] = v;
-                d[up] = v;
+        // Columns 0..j hold the entries below the diagonal in rows j..j + 4; columns
+        // j..j + 4, the ones above it.
+        let (left, right) = d.split_at_mut(j * n);
+        let (c0, rest) = right.split_at_mut(n);
+        let (c1, rest) = rest.split_at_mut(n);
+        let (c2, rest) = rest.split_at_mut(n);
+        let c3 = &mut rest[..n];
+        let upper = c0
+            .iter_mut()
+            .zip(c1.iter_mut())
+            .zip(c2.iter_mut())
+            .zip(c3.iter_mut());
+        for (col, (((u0, u1), u2), u3)) in left.chunks_exact_mut(n).zip(upper) {
+            for (l, u) in col[j..j + 4].iter_mut().zip([u0, u1, u2, u3]) {
+                let v = 0.5 * (*l + *u);
+                *l = v;
+                *u = v;
             }
         }
         // The 4×4 block on the diagonal.
