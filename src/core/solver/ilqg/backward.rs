@@ -465,6 +465,19 @@ impl Backward {
             let (ltd, xtd) = (self.lt.as_slice(), self.xt.as_slice());
             let q = self.qcol.as_slice();
             let col = &mut s_mat.as_mut_slice()[j * n..(j + 1) * n];
+            if nu == 2 {
+                // Both rank-one terms in one pass over the column (two controls: the single
+                // joint's torque and stiffness), each entry's operations as two passes do them.
+                let (t, g) = ((td[j * 2], td[j * 2 + 1]), (gd[j * 2], gd[j * 2 + 1]));
+                let (l0, l1) = ltd.split_at(n);
+                let (x0, x1) = xtd.split_at(n);
+                let terms = l0.iter().zip(l1).zip(x0.iter().zip(x1));
+                for ((s, q), ((l0, l1), (x0, x1))) in col.iter_mut().zip(q).zip(terms) {
+                    *s = q + (l0 * t.0 + x0 * g.0);
+                    *s += l1 * t.1 + x1 * g.1;
+                }
+                continue;
+            }
             for r in 0..nu {
                 let (t, g) = (td[j * nu + r], gd[j * nu + r]);
                 let (lr, xr) = (&ltd[r * n..(r + 1) * n], &xtd[r * n..(r + 1) * n]);
