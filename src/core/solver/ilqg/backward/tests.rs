@@ -78,7 +78,13 @@ impl Case {
             }
         };
         Case {
-            s_mat: &s + s.transpose(),
+            // Symmetric as every `S_k` the value update makes, but a terminal Hessian need
+            // not be: then the sparse pass reads the rows of `S` from its transpose.
+            s_mat: if (*seed >> 54).is_multiple_of(4) {
+                s
+            } else {
+                &s + s.transpose()
+            },
             s_vec: DVector::from_vec(entries(seed, nx)),
             lin,
             d,
@@ -104,9 +110,10 @@ impl Case {
         let mut sp = SparseLinearization::new(nx, nu, self.lin.c.ncols());
         sp.assign(&self.lin, None);
         let s_next = self.s_mat.clone();
+        let s_rows = s_next.transpose();
         let next = Next {
             s: &s_next,
-            rows: &s_next,
+            rows: if symmetric(&s_next) { &s_next } else { &s_rows },
         };
         let knot = KnotInputs {
             lin: &self.lin,
