@@ -250,14 +250,20 @@ const SMALL_DIM: usize = 5;
 /// plans keep their bits where matrixmultiply ran its FMA kernel; where it ran its plain AVX
 /// kernel (no FMA) this kernel is not used: without AVX2 and FMA (or with the wide kernels
 /// forbidden, [`crate::core::wide`]) the product is nalgebra's, allocation included. Smaller
-/// products (any dimension ≤ 5) are nalgebra's, as before.
+/// products (any dimension ≤ 5) are nalgebra's loops to the bit ([`small_product`]).
 pub fn multiply(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, accumulate: bool) {
     let (m, k) = a.shape();
     let n = b.ncols();
     assert_eq!(b.nrows(), k, "a b: a's columns differ from b's rows");
     assert_eq!(c.shape(), (m, n), "a b: c has the wrong shape");
     if m <= SMALL_DIM || n <= SMALL_DIM || k <= SMALL_DIM {
-        c.gemm(1.0, a, b, if accumulate { 1.0 } else { 0.0 });
+        #[cfg(target_arch = "x86_64")]
+        if crate::core::wide::enabled() {
+            // SAFETY: `enabled` is true only where the CPU reported AVX2.
+            unsafe { small_product_avx2(c, a, b, accumulate) };
+            return;
+        }
+        small_product(c, a, b, accumulate);
         return;
     }
     #[cfg(target_arch = "x86_64")]
@@ -269,6 +275,72 @@ pub fn multiply(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, accumu
     // Without FMA (or with the wide kernels forbidden) matrixmultiply's own kernels are faster
     // than a `mul_add` call per term, and round as they always did.
     c.gemm(1.0, a, b, if accumulate { 1.0 } else { 0.0 });
+}
+
+/// [`small_product`] compiled for AVX2 (see [`crate::core::wide`]; no FMA: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn small_product_avx2(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, accumulate: bool) {
+    small_product(c, a, b, accumulate);
+}
+
+/// nalgebra 0.35's `c.gemm(1, a, b, β)` for the products it keeps to itself (a dimension ≤ 5), to
+/// the bit, on contiguous columns: per column `j` of `c`, nalgebra's `gemv`, whose first term
+/// is `(1 · a_i0) b_0j`, alone for β = 0 or plus `1 · c_ij` for β = 1, and every later one
+/// `(1 · a_ik) b_kj + 1 · c_ij` (the products by 1 are exact, no operation is fused). nalgebra
+/// walks the same columns through run-time strides and does not vectorise them; here each
+/// column of `a` is one `axpy` over contiguous memory (the SOOC moment step's 4×4 products and
+/// the backward pass's `V B`, `Q_uu K` on the arm).
+#[inline(always)]
+fn small_product(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, accumulate: bool) {
+    let (m, k) = a.shape();
+    let (ad, bd) = (a.as_slice(), b.as_slice());
+    let cd = c.as_mut_slice();
+    if k == 0 {
+        if !accumulate {
+            cd.fill(0.0);
+        }
+        return;
+    }
+    // The short columns of the paper's plants with their length a constant (a loop over four
+    // entries with a run-time length costs more than nalgebra's unchecked one).
+    match m {
+        0 => {}
+        2 => small_columns::<2>(cd, ad, bd, k, accumulate),
+        4 => small_columns::<4>(cd, ad, bd, k, accumulate),
+        8 => small_columns::<8>(cd, ad, bd, k, accumulate),
+        _ => {
+            for (col, bj) in cd.chunks_exact_mut(m).zip(bd.chunks_exact(k)) {
+                let mut terms = ad.chunks_exact(m).zip(bj);
+                if let Some((a0, &b0)) = terms.next() {
+                    for (y, &x) in col.iter_mut().zip(a0) {
+                        *y = if accumulate { *y + x * b0 } else { x * b0 };
+                    }
+                }
+                for (ak, &v) in terms {
+                    for (y, &x) in col.iter_mut().zip(ak) {
+                        *y += x * v;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// [`small_product`] for columns of `M` entries (`k ≥ 1`).
+#[inline(always)]
+fn small_columns<const M: usize>(cd: &mut [f64], ad: &[f64], bd: &[f64], k: usize, acc: bool) {
+    let (a_cols, _) = ad.as_chunks::<M>();
+    let (c_cols, _) = cd.as_chunks_mut::<M>();
+    for (col, bj) in c_cols.iter_mut().zip(bd.chunks_exact(k)) {
+        let mut y = if acc { *col } else { [0.0; M] };
+        for (i, (ak, &v)) in a_cols.iter().zip(bj).enumerate() {
+            for (y, &x) in y.iter_mut().zip(ak) {
+                *y = if i == 0 && !acc { x * v } else { *y + x * v };
+            }
+        }
+        *col = y;
+    }
 }
 
 /// Rows and columns of `c` [`fused_product`] computes at once: eight independent chains of
@@ -462,6 +534,16 @@ mod tests {
             (7, 9, 6),
             (15, 6, 11),
             (12, 6, 7),
+            // nalgebra's own loops (a dimension ≤ 5): the SOOC step's and backward pass's.
+            (4, 4, 14),
+            (14, 4, 4),
+            (2, 2, 2),
+            (8, 4, 8),
+            (8, 8, 2),
+            (1, 5, 3),
+            (5, 1, 7),
+            (3, 0, 2),
+            (0, 3, 2),
         ];
         for &(m, k, n) in &shapes {
             for wide in [false, true] {
