@@ -10,7 +10,7 @@
 //! that declares where its Jacobians can be nonzero ([`StateSupport`]: the delayed plant) has them
 //! read there only, which is the same pattern at a fraction of the reads.
 
-use crate::core::dense::{copy, zero};
+use crate::core::dense::zero;
 use crate::core::dynamics::{Linearization, NoiseKind, StateSupport};
 use nalgebra::DMatrix;
 use std::ops::Range;
@@ -92,27 +92,6 @@ impl SparseColumns {
         self.start[ncols] = self.row.len();
     }
 
-    /// `out += Wᵀ M` for a dense `W` (nrows × p), without forming `Wᵀ`: the terms of
-    /// [`ColumnProducts::right_mul_add`] on `Wᵀ`, in the same order (to the bit), each column of
-    /// `Wᵀ` read as a row of `W`. For the noise Jacobians of the delayed plant (a few nonzeros
-    /// in the plant's block) this reads a few rows of `W` where a transpose wrote all of it.
-    pub fn tr_right_mul_add(&self, w: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        let (n, p) = (w.nrows(), w.ncols());
-        debug_assert_eq!(n, self.nrows);
-        debug_assert_eq!((out.nrows(), out.ncols()), (p, self.ncols()));
-        let wd = w.as_slice();
-        let od = out.as_mut_slice();
-        for j in 0..self.ncols() {
-            let col = &mut od[j * p..(j + 1) * p];
-            let (rows, vals) = self.column(j);
-            for (&i, &a) in rows.iter().zip(vals) {
-                for (o, w) in col.iter_mut().zip(wd[i..].iter().step_by(n)) {
-                    *o += a * w;
-                }
-            }
-        }
-    }
-
     /// The rows and values of column `j`'s nonzeros, in ascending row order.
     pub fn column(&self, j: usize) -> (&[usize], &[f64]) {
         let r = self.start[j]..self.start[j + 1];
@@ -172,10 +151,10 @@ impl SparseColumns {
         }
     }
 
-    /// `out = first + S M` column by column, as `axpy`s on contiguous columns of `S`, which
-    /// vectorise. Each column's first term is added to `first`'s column as it is written
-    /// (what a pass that wrote `first` and then added every term gives, to the bit), so
-    /// [`ColumnProducts::right_mul`] and [`ColumnProducts::right_mul_onto`] save that pass.
+    /// `out = S M` or `out += S M` column by column, as `axpy`s on contiguous columns of `S`,
+    /// which vectorise. From zero, each column's first term is written as `0 + a s` (what a
+    /// cleared column plus every term gives, to the bit), so [`ColumnProducts::right_mul`]
+    /// saves the clearing pass.
     fn mul_columns(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>, first: First) {
         let p = s.nrows();
         debug_assert_eq!(s.ncols(), self.nrows);
@@ -197,16 +176,6 @@ impl SparseColumns {
                         *o = 0.0 + a * s;
                     }
                 }
-                First::Base(base) => {
-                    let base = &base.as_slice()[j * p..(j + 1) * p];
-                    let Some((&i, &a)) = terms.next() else {
-                        col.copy_from_slice(base);
-                        continue;
-                    };
-                    for ((o, s), b) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]).zip(base) {
-                        *o = b + a * s;
-                    }
-                }
             }
             for (&i, &a) in terms {
                 for (o, s) in col.iter_mut().zip(&sd[i * p..(i + 1) * p]) {
@@ -219,13 +188,11 @@ impl SparseColumns {
 
 /// What a column of [`SparseColumns::mul_columns`] starts from.
 #[derive(Clone, Copy)]
-enum First<'a> {
+enum First {
     /// The output as it is (`out += S M`).
     Out,
     /// Zero (`out = S M`).
     Zero,
-    /// Another matrix of the output's size (`out = base + S M`).
-    Base(&'a DMatrix<f64>),
 }
 
 /// The products of the backward pass with a Jacobian `M` (A, B or a noise Jacobian) taken by its
@@ -245,13 +212,6 @@ pub trait ColumnProducts {
     /// `out += S M` for a dense `S` (p × nrows); `out` is p × ncols.
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>);
 
-    /// `out = base + S M`: `base` copied into `out`, then [`ColumnProducts::right_mul_add`]
-    /// (to the bit).
-    fn right_mul_onto(&self, base: &DMatrix<f64>, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        copy(base, out);
-        self.right_mul_add(s, out);
-    }
-
     /// `out += α Mᵀ X` for a dense `X` (nrows × q); `out` is ncols × q.
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>);
 }
@@ -265,9 +225,6 @@ impl<T: ColumnProducts> ColumnProducts for &T {
     }
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         (**self).right_mul_add(s, out)
-    }
-    fn right_mul_onto(&self, base: &DMatrix<f64>, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        (**self).right_mul_onto(base, s, out)
     }
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         (**self).tr_mul_add(alpha, x, out)
@@ -293,14 +250,6 @@ impl ColumnProducts for SparseColumns {
 
     fn right_mul_add(&self, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         self.mul_columns(s, out, First::Out);
-    }
-
-    /// Without the copy of `base`: each column's first term is added to `base`'s column as
-    /// it is written (on the delayed single joint the copy of the cost's 42×42 Hessian was a
-    /// full pass over both matrices at every knot).
-    fn right_mul_onto(&self, base: &DMatrix<f64>, s: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        debug_assert_eq!(base.shape(), out.shape());
-        self.mul_columns(s, out, First::Base(base));
     }
 
     fn tr_mul_add(&self, alpha: f64, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
@@ -433,9 +382,8 @@ pub(crate) mod tests {
         }
     }
 
-    /// `right_mul` writes what clearing the product and `right_mul_add` write, and
-    /// `right_mul_onto` what copying the base and `right_mul_add` write, bit for bit (signs of
-    /// zeros included), over empty, sparse and dense columns and a dirty `out`.
+    /// `right_mul` writes what clearing the product and `right_mul_add` write, bit for bit
+    /// (signs of zeros included), over empty, sparse and dense columns and a dirty `out`.
     #[test]
     fn the_product_without_clearing_is_the_cleared_one_to_the_bit() {
         for seed in 0..50 {
@@ -454,23 +402,6 @@ pub(crate) mod tests {
             sp.right_mul_add(&s, &mut want);
             let mut got = DMatrix::from_element(5, 6, f64::NAN);
             sp.right_mul(&s, &mut got);
-            same(&got, &want);
-            // A base with zeros of both signs, tiny and huge entries.
-            let base = pattern(5, 6, seed + 200).map(|v| match (v * 8.0) as i64 {
-                0 => -0.0,
-                1 => v * 1e-300,
-                -1 => v * 1e300,
-                _ => v,
-            });
-            let mut want = base.clone();
-            sp.right_mul_add(&s, &mut want);
-            let mut got = DMatrix::from_element(5, 6, f64::NAN);
-            sp.right_mul_onto(&base, &s, &mut got);
-            same(&got, &want);
-            // `Wᵀ M` from `W` itself, over a base.
-            let w = s.transpose();
-            let mut got = base.clone();
-            sp.tr_right_mul_add(&w, &mut got);
             same(&got, &want);
         }
     }
