@@ -120,9 +120,9 @@ impl SparseColumns {
 
     /// `out += α Mᵀ (S N)` for a symmetric `S` (`s_rows` as in [`SparseColumns::product_row`]),
     /// `M` this matrix and `N` sparse: [`ColumnProducts::tr_mul_add`] of `M` with `X = S N`, to
-    /// the bit, from the rows of `S N` that `M` reads (`rows` is scratch). For the delayed
-    /// plant's `Bᵀ (S A)` those are the `m` rows of the command entering the buffer, where
-    /// `S A` itself is `n × n`.
+    /// the bit, from the rows of `S N` that `M` reads (`rows` is scratch, within the `n × n`
+    /// it is given room for). For the delayed plant's noise term `Cuᵀ (S Cx)` those are the
+    /// plant's rows, where `S Cx` itself is `n × n`.
     pub fn tr_mul_product_add(
         &self,
         alpha: f64,

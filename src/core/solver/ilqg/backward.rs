@@ -41,7 +41,7 @@ pub(super) struct Backward {
     /// One column of `Q_xx` ([`Backward::q_column`]) and one row of a product `S M`.
     qcol: DVector<f64>,
     row: DVector<f64>,
-    /// Rows of `S A` or `S Cx` ([`tr_mul_product_add`](crate::core::solver::sparse::SparseColumns::tr_mul_product_add)).
+    /// Rows of `S Cx` ([`tr_mul_product_add`](crate::core::solver::sparse::SparseColumns::tr_mul_product_add)).
     rows: Vec<f64>,
     quu: DMatrix<f64>,
     qux: DMatrix<f64>,
@@ -347,8 +347,9 @@ impl Backward {
     /// `qx, qu, quu, qux`; returns its constant term `running + ½ Σ c_iᵀ S c_i` (without `s₀`).
     /// The products take A, B, Cx, Cu by their nonzeros `sp` (see `sparse`): n·nnz, not n³.
     /// `Q_xx`, the one `n × n` block, is formed column by column in [`Backward::value_update`],
-    /// which needs it only one column at a time: here `S A` and `S Cx` are read only in the
-    /// rows that `B` and `Cu` take ([`tr_mul_product_add`](crate::core::solver::sparse::SparseColumns::tr_mul_product_add)).
+    /// which needs it only one column at a time: here `S A` is formed and transposed for it,
+    /// and `S Cx` is read only in the rows that `Cu` takes
+    /// ([`tr_mul_product_add`](crate::core::solver::sparse::SparseColumns::tr_mul_product_add)).
     fn q_function(&mut self, next: Next, knot: KnotInputs, running: f64, stochastic: bool) -> f64 {
         let KnotInputs { lin, d, sp } = knot;
         let (a, b) = (&sp.a, &sp.b);
@@ -382,10 +383,10 @@ impl Backward {
         q0
     }
 
-    /// Column `j` of `Q_xx = l_xx + Aᵀ S A + Σ Cx_iᵀ S Cx_i` into `qcol`: what forming `S A`,
-    /// its transpose and `l_xx + (S A)ᵀ A` gave, then each channel's `Cx_iᵀ (S Cx_i)` (from the
-    /// rows of `S Cx_i`), to the bit, from the rows of `S A` and `S Cx_i` that `A`'s and `Cx_i`'s
-    /// column `j` take. On the 42-state delayed plant a shift column takes one row.
+    /// Column `j` of `Q_xx = l_xx + Aᵀ S A + Σ Cx_iᵀ S Cx_i` into `qcol`, to the bit what the
+    /// whole matrix `l_xx + (S A)ᵀ A` plus each channel's `Cx_iᵀ (S Cx_i)` gave: the columns of
+    /// `(S A)ᵀ` that `A`'s column `j` takes (one on the 42-state delayed plant's shift columns),
+    /// then the rows of `S Cx_i` that `Cx_i`'s column `j` takes (none outside the plant).
     fn q_column(&mut self, next: Next, knot: KnotInputs, stochastic: bool, j: usize) {
         let KnotInputs { lin, d, sp } = knot;
         let n = self.qcol.len();
