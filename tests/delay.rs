@@ -13,7 +13,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 use vic::core::delay::Delayed;
-use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
+use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization, NoiseFree};
 use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 
 const DT: f64 = 0.01;
@@ -153,6 +153,10 @@ fn noise_gain<D: Dynamics>(d: &D, k: usize, x: &[f64], u: &[f64]) -> DMatrix<f64
     let mut g = DMatrix::from_element(d.nx(), d.nw(), f64::NAN);
     d.noise_gain(k, x, u, &mut g);
     g
+}
+
+fn step_bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
 }
 
 fn linearize<D: Dynamics>(d: &D, k: usize, x: &[f64], u: &[f64]) -> Linearization {
@@ -407,7 +411,10 @@ fn delayed_linearization_matches_finite_differences() {
 /// the entries it leaves alone are the ones every linearisation writes the same. Also when the
 /// last call was noise-free and left the noise Jacobians as they were (emulated by junk in
 /// them). And every nonzero of `A` and of the `Cx_i` lies in the rows `state_support` gives,
-/// so reading the nonzeros there finds them all.
+/// so reading the nonzeros there finds them all. The fused calls (`step_linearized` into a
+/// poisoned buffer, `step_relinearized` into one that holds another point's) give the same
+/// linearisation and the step to the bit, and the model without its noise (`NoiseFree`) the
+/// same `A` and `B` into a buffer without noise channels, marked noise-free.
 #[test]
 fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero() {
     let mut rng = StdRng::seed_from_u64(9);
@@ -447,6 +454,44 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                     delayed.relinearize(k, &x2, &u2, &mut lin);
                     assert_eq!(bits(&lin), bits(&fresh), "{name}: after a noise-free call");
                 }
+                let mut step = vec![f64::NAN; delayed.nx()];
+                delayed.step(k, &x2, &u2, &mut step);
+                let step = step_bits(&step);
+                let mut next = vec![f64::NAN; delayed.nx()];
+                let mut lin = linearize(&delayed, k, &x1, &u1);
+                delayed.step_relinearized(k, &x2, &u2, &mut next, &mut lin);
+                assert_eq!(bits(&lin), bits(&fresh), "{name}: fused relinearisation");
+                assert_eq!(
+                    step_bits(&next),
+                    step,
+                    "{name}: fused relinearisation's step"
+                );
+                let mut lin = linearize(&delayed, k, &x1, &u1);
+                for m in [&mut lin.a, &mut lin.b, &mut lin.c] {
+                    m.fill(f64::NAN);
+                }
+                next.fill(f64::NAN);
+                delayed.step_linearized(k, &x2, &u2, &mut next, &mut lin);
+                assert_eq!(bits(&lin), bits(&fresh), "{name}: fused linearisation");
+                assert_eq!(step_bits(&next), step, "{name}: fused linearisation's step");
+                let quiet = NoiseFree(Delayed::new(base.clone(), d));
+                assert_eq!(quiet.nw(), 0);
+                let mut lin = Linearization::new(delayed.nx(), delayed.nu(), 0);
+                lin.a.fill(f64::NAN);
+                lin.b.fill(f64::NAN);
+                quiet.linearize(k, &x2, &u2, &mut lin);
+                let plain =
+                    |l: &Linearization| step_bits(&[l.a.as_slice(), l.b.as_slice()].concat());
+                assert_eq!(plain(&lin), plain(&fresh), "{name}: without the noise");
+                assert_eq!(lin.noise, vic::core::dynamics::NoiseKind::None, "{name}");
+                next.fill(f64::NAN);
+                quiet.step_relinearized(k, &x1, &u1, &mut next, &mut lin);
+                let other = linearize(&delayed, k, &x1, &u1);
+                assert_eq!(
+                    plain(&lin),
+                    plain(&other),
+                    "{name}: without the noise, fused"
+                );
                 for (what, m, rows) in std::iter::once(("A", &fresh.a, &support.a))
                     .chain(fresh.cx.iter().map(|cx| ("Cx", cx, &support.cx)))
                 {

@@ -88,7 +88,9 @@ pub trait Dynamics: Send + Sync {
     fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]);
     /// Noise gain `G = √Δ F` (n×p) of the step.
     fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>);
-    /// Linearisation of the step around (x, u).
+    /// Linearisation of the step around (x, u). A `lin` made without noise channels
+    /// (`Linearization::new(nx, nu, 0)`, as [`NoiseFree`] asks for) receives the deterministic
+    /// part only, and its noise kind is [`NoiseKind::None`].
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization);
     /// [`Dynamics::linearize`] into a `lin` that holds this model's linearisation at knot `k`
     /// from an earlier call (at another state and control), with the same result. A model whose
@@ -121,6 +123,21 @@ pub trait Dynamics: Send + Sync {
     ) {
         self.step(k, x, u, next);
         self.linearize(k, x, u, lin);
+    }
+    /// [`Dynamics::step_linearized`] into a `lin` that holds this model's linearisation at knot
+    /// `k` from an earlier call, as [`Dynamics::relinearize`] is to [`Dynamics::linearize`]:
+    /// the solvers' rollouts after the first linearisation of a trajectory. Default: the step
+    /// and [`Dynamics::relinearize`].
+    fn step_relinearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.step(k, x, u, next);
+        self.relinearize(k, x, u, lin);
     }
     /// Whether one linearisation costs enough (microseconds or more) that the solvers should
     /// linearise the knots of a trajectory in parallel. Default true; cheap models (a few states,
@@ -317,9 +334,79 @@ impl Dynamics for DiscreteDynamics {
         self.noise_linearization(x, u, lin);
     }
 
+    fn step_relinearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        // Every entry is written anyway: a relinearisation is a linearisation.
+        self.step_linearized(k, x, u, next, lin);
+    }
+
     fn parallel_linearization(&self) -> bool {
         // One flow with a vector dual number: well under a microsecond for the paper's limbs.
         false
+    }
+}
+
+/// A model without its noise: the deterministic problem of the same plant (`nw() = 0`), whose
+/// solves neither read nor compute the noise's linearisation. The undelayed first guess of the
+/// delayed planner is such a solve; computing the noise Jacobians it never read was a tenth of
+/// its time.
+pub struct NoiseFree<D>(pub D);
+
+impl<D: Dynamics> Dynamics for NoiseFree<D> {
+    fn nx(&self) -> usize {
+        self.0.nx()
+    }
+    fn nu(&self) -> usize {
+        self.0.nu()
+    }
+    fn nw(&self) -> usize {
+        0
+    }
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.0.step(k, x, u, next);
+    }
+    fn noise_gain(&self, _k: usize, _x: &[f64], _u: &[f64], out: &mut DMatrix<f64>) {
+        debug_assert_eq!(out.ncols(), 0, "a noise-free model has no noise channels");
+    }
+    // The linearisations go to `lin`s without noise channels (the solvers size them by `nw()`),
+    // which the inner model fills with its deterministic part only (see `Dynamics::linearize`).
+    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.0.linearize(k, x, u, lin);
+    }
+    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.0.relinearize(k, x, u, lin);
+    }
+    fn state_support(&self, support: &mut StateSupport) -> bool {
+        self.0.state_support(support)
+    }
+    fn step_linearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.0.step_linearized(k, x, u, next, lin);
+    }
+    fn step_relinearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.0.step_relinearized(k, x, u, next, lin);
+    }
+    fn parallel_linearization(&self) -> bool {
+        self.0.parallel_linearization()
     }
 }
 
@@ -328,7 +415,7 @@ impl DiscreteDynamics {
     /// depends on the state or controls at all.
     fn noise_linearization(&self, x: &[f64], u: &[f64], lin: &mut Linearization) {
         let (nx, nu, nw) = (self.nx(), self.nu(), self.nw());
-        if nw == 0 {
+        if nw == 0 || lin.c.ncols() == 0 {
             lin.noise = NoiseKind::None;
             return;
         }

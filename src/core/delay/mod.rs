@@ -61,6 +61,16 @@ impl<D: Dynamics> Delayed<D> {
         x
     }
 
+    /// The commands in flight of `next`: those of `x` shifted by one, the new command `u` at
+    /// the back.
+    fn shift(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        if self.steps > 0 {
+            let (n, m, total) = (self.base.nx(), self.base.nu(), self.nx());
+            next[n..total - m].copy_from_slice(&x[n + m..total]);
+            next[total - m..].copy_from_slice(u);
+        }
+    }
+
     /// The control that acts on the plant in augmented state `x` given the new command `u`.
     fn acting<'a>(&self, x: &'a [f64], u: &'a [f64]) -> &'a [f64] {
         if self.steps == 0 {
@@ -84,15 +94,10 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
     }
 
     fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
-        let (n, m) = (self.base.nx(), self.base.nu());
+        let n = self.base.nx();
         self.base
             .step(k, &x[..n], self.acting(x, u), &mut next[..n]);
-        if self.steps > 0 {
-            // Shift the commands in flight; the new one joins at the back.
-            let total = self.nx();
-            next[n..total - m].copy_from_slice(&x[n + m..total]);
-            next[total - m..].copy_from_slice(u);
-        }
+        self.shift(x, u, next);
     }
 
     fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
@@ -110,11 +115,33 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
     }
 
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.write_linearization(k, x, u, lin, true);
+        self.write_linearization(k, x, u, lin, true, None);
     }
 
     fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.write_linearization(k, x, u, lin, false);
+        self.write_linearization(k, x, u, lin, false, None);
+    }
+
+    fn step_linearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.write_linearization(k, x, u, lin, true, Some(next));
+    }
+
+    fn step_relinearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.write_linearization(k, x, u, lin, false, Some(next));
     }
 
     fn state_support(&self, support: &mut StateSupport) -> bool {
@@ -146,7 +173,9 @@ impl<D: Dynamics> Delayed<D> {
     /// outside the plant's blocks are the zeros and ones written here anyway, so only the
     /// blocks are (clearing 42² entries of `A` and of each noise Jacobian at every knot cost
     /// about a tenth of a stochastic solve of the delayed single joint). The noise Jacobians are
-    /// cleared when the noise kind changed: a noise-free call leaves them as they were.
+    /// cleared when the noise kind changed: a noise-free call leaves them as they were. With
+    /// `next` the step is taken on the way ([`Dynamics::step_linearized`]): the plant's step
+    /// comes from its own fused call, bit for bit its [`Dynamics::step`].
     fn write_linearization(
         &self,
         k: usize,
@@ -154,6 +183,7 @@ impl<D: Dynamics> Delayed<D> {
         u: &[f64],
         lin: &mut Linearization,
         clear: bool,
+        next: Option<&mut [f64]>,
     ) {
         let (n, m) = (self.base.nx(), self.base.nu());
         let total = self.nx();
@@ -165,7 +195,15 @@ impl<D: Dynamics> Delayed<D> {
             Ok(g) => &mut g.0,
             Err(_) => own.insert(Linearization::new(n, m, self.base.nw())),
         };
-        self.base.linearize(k, &x[..n], self.acting(x, u), base);
+        match next {
+            Some(next) => {
+                let acting = self.acting(x, u);
+                self.base
+                    .step_linearized(k, &x[..n], acting, &mut next[..n], base);
+                self.shift(x, u, next);
+            }
+            None => self.base.linearize(k, &x[..n], self.acting(x, u), base),
+        }
         if clear {
             zero(&mut lin.a);
             zero(&mut lin.b);
@@ -184,7 +222,11 @@ impl<D: Dynamics> Delayed<D> {
                 lin.b[(total - m + j, j)] = 1.0;
             }
         }
-        if base.noise == NoiseKind::None {
+        if base.noise == NoiseKind::None || lin.c.ncols() == 0 {
+            // A noise-free `lin` (see `Dynamics::linearize`) takes the deterministic part only.
+            if lin.c.ncols() == 0 {
+                lin.noise = NoiseKind::None;
+            }
             return;
         }
         if clear_noise {
@@ -244,6 +286,27 @@ impl<T: Dynamics + ?Sized> Dynamics for Offset<'_, T> {
     }
     fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         self.inner.relinearize(k + self.offset, x, u, lin);
+    }
+    fn step_linearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.inner.step_linearized(k + self.offset, x, u, next, lin);
+    }
+    fn step_relinearized(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        lin: &mut Linearization,
+    ) {
+        self.inner
+            .step_relinearized(k + self.offset, x, u, next, lin);
     }
     fn state_support(&self, support: &mut StateSupport) -> bool {
         self.inner.state_support(support)

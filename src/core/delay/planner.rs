@@ -26,7 +26,7 @@
 
 use super::Offset;
 use crate::core::cost::{Cost, CostDerivatives};
-use crate::core::dynamics::{Dynamics, Linearization};
+use crate::core::dynamics::{Dynamics, Linearization, NoiseFree};
 use crate::core::solver::ilqg::IlqgError;
 use crate::core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
 use nalgebra::{DMatrix, DVector};
@@ -52,10 +52,7 @@ pub fn undelayed_guess(
     }
     let in_flight = std::iter::repeat_n(pending, delay);
     let x_d = state_after(plain.dynamics, &plain.x0, in_flight);
-    let (dynamics, cost) = (
-        Offset::new(plain.dynamics, delay),
-        Offset::new(plain.cost, delay),
-    );
+    let (dynamics, cost) = tail_of(plain, delay);
     let tail = tail_problem(&dynamics, &cost, x_d, steps - delay, &plain.bounds);
     let sol = plain_solver(&tail, options).try_solve(&tail, &u_init[delay..])?;
     let mut u = vec![DVector::zeros(plain.dynamics.nu()); steps];
@@ -110,10 +107,7 @@ impl DelayedPlanner {
         options: &IlqgOptions,
     ) -> Result<Self, IlqgError> {
         let delay = delay_of(plain, delayed)?;
-        let (dynamics, cost) = (
-            Offset::new(plain.dynamics, delay),
-            Offset::new(plain.cost, delay),
-        );
+        let (dynamics, cost) = tail_of(plain, delay);
         let tail = tail_problem(
             &dynamics,
             &cost,
@@ -194,7 +188,7 @@ impl DelayedPlanner {
         let (n, m) = (plain.dynamics.nx(), plain.dynamics.nu());
         let in_flight = delayed.x0[n..].chunks_exact(m);
         let x_d = state_after(plain.dynamics, &delayed.x0[..n], in_flight);
-        let (dynamics, cost) = (Offset::new(plain.dynamics, d), Offset::new(plain.cost, d));
+        let (dynamics, cost) = tail_of(plain, d);
         let tail = tail_problem(&dynamics, &cost, x_d, plain.horizon - d, &plain.bounds);
         let sol = match start {
             Start::Cold(u) => self.tail.try_solve(&tail, u)?,
@@ -342,6 +336,21 @@ fn state_after<'a>(
 }
 
 /// The undelayed problem over knots `d..N` from `x_d`.
+/// The plant and cost of `plain` from knot `delay` on, the plant without its noise: the tail
+/// problem is solved deterministically.
+fn tail_of<'a>(
+    plain: &Problem<'a>,
+    delay: usize,
+) -> (
+    NoiseFree<Offset<'a, dyn Dynamics + 'a>>,
+    Offset<'a, dyn Cost + 'a>,
+) {
+    (
+        NoiseFree(Offset::new(plain.dynamics, delay)),
+        Offset::new(plain.cost, delay),
+    )
+}
+
 fn tail_problem<'a>(
     dynamics: &'a dyn Dynamics,
     cost: &'a dyn Cost,

@@ -54,15 +54,21 @@ pub(super) fn rollout(
             tail[0].as_mut_slice(),
         );
         if fused {
-            let lin = &mut traj.lin[k];
-            problem.dynamics.step_linearized(k, x, u, next, lin);
+            // After the trajectory's first linearisation every knot holds one of this model's
+            // (a rollout stopped early leaves new ones in its first knots): the model and the
+            // cost then write only what can change.
+            let (lin, d) = (&mut traj.lin[k], &mut traj.derivs[k]);
+            if traj.relinearizable {
+                problem.dynamics.step_relinearized(k, x, u, next, lin);
+                problem.cost.running_derivatives_again(k, x, u, d);
+            } else {
+                problem.dynamics.step_linearized(k, x, u, next, lin);
+                problem.cost.running_derivatives(k, x, u, d);
+            }
             if pattern {
                 let support = traj.supported.then_some(&traj.support);
                 traj.sparse[k].assign(lin, support);
             }
-            problem
-                .cost
-                .running_derivatives(k, x, u, &mut traj.derivs[k]);
         } else {
             problem.dynamics.step(k, x, u, next);
         }
