@@ -12,8 +12,8 @@ use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
-use vic::core::delay::Delayed;
-use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization, NoiseFree};
+use vic::core::delay::{Delayed, NoiseFree};
+use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
 use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 
 const DT: f64 = 0.01;

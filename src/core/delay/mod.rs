@@ -13,15 +13,16 @@
 //! state it sees; keeping only that block and ignoring the in-flight commands (no predictor) is
 //! the paper's Eq. 13. For `d = 0` the wrapper is the plain model.
 
-use crate::core::cost::{Cost, CostDerivatives};
 use crate::core::dense::zero;
 use crate::core::dynamics::{Dynamics, Linearization, NoiseKind, StateSupport};
 use nalgebra::DMatrix;
 use std::sync::Mutex;
 
 mod planner;
+mod tail;
 
 pub use planner::{DelayedPlanner, DelayedSolution, undelayed_guess};
+pub use tail::{NoiseFree, Offset};
 
 /// A discrete model whose commands act `steps` steps after they are issued.
 pub struct Delayed<D: Dynamics> {
@@ -247,93 +248,5 @@ impl<D: Dynamics> Delayed<D> {
                 lin.cx[i].view_mut((0, n), (n, m)).copy_from(&base.cu[i]);
             }
         }
-    }
-}
-
-/// A model or cost read `offset` knots later: knot `k` of the wrapper is knot `k + offset` of
-/// the inner one (its reference and exogenous inputs). The tail of a horizon as a problem of its
-/// own, for [`undelayed_guess`] and for replanning from a later knot.
-pub struct Offset<'a, T: ?Sized> {
-    inner: &'a T,
-    offset: usize,
-}
-
-impl<'a, T: ?Sized> Offset<'a, T> {
-    /// Knot `k` of the result is knot `k + offset` of `inner`.
-    pub fn new(inner: &'a T, offset: usize) -> Self {
-        Offset { inner, offset }
-    }
-}
-
-impl<T: Dynamics + ?Sized> Dynamics for Offset<'_, T> {
-    fn nx(&self) -> usize {
-        self.inner.nx()
-    }
-    fn nu(&self) -> usize {
-        self.inner.nu()
-    }
-    fn nw(&self) -> usize {
-        self.inner.nw()
-    }
-    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
-        self.inner.step(k + self.offset, x, u, next);
-    }
-    fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
-        self.inner.noise_gain(k + self.offset, x, u, out);
-    }
-    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.inner.linearize(k + self.offset, x, u, lin);
-    }
-    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.inner.relinearize(k + self.offset, x, u, lin);
-    }
-    fn step_linearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        self.inner.step_linearized(k + self.offset, x, u, next, lin);
-    }
-    fn step_relinearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        self.inner
-            .step_relinearized(k + self.offset, x, u, next, lin);
-    }
-    fn state_support(&self, support: &mut StateSupport) -> bool {
-        self.inner.state_support(support)
-    }
-    fn parallel_linearization(&self) -> bool {
-        self.inner.parallel_linearization()
-    }
-}
-
-impl<T: Cost + ?Sized> Cost for Offset<'_, T> {
-    fn running(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
-        self.inner.running(k + self.offset, x, u)
-    }
-    fn terminal(&self, x: &[f64]) -> f64 {
-        self.inner.terminal(x)
-    }
-    fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
-        self.inner.running_derivatives(k + self.offset, x, u, d);
-    }
-    fn running_derivatives_again(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
-        self.inner
-            .running_derivatives_again(k + self.offset, x, u, d);
-    }
-    fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
-        self.inner.terminal_derivatives(x, d);
-    }
-    fn nonnegative(&self) -> bool {
-        self.inner.nonnegative()
     }
 }

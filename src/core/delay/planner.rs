@@ -24,9 +24,9 @@
 //! backward pass of the augmented plant at μ = 0 (the linearised problems are the same LQ
 //! problem; `tests/delayed_planner.rs` compares the two), at a fraction of its cost.
 
-use super::Offset;
+use super::{NoiseFree, Offset};
 use crate::core::cost::{Cost, CostDerivatives};
-use crate::core::dynamics::{Dynamics, Linearization, NoiseFree};
+use crate::core::dynamics::{Dynamics, Linearization};
 use crate::core::solver::ilqg::IlqgError;
 use crate::core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
 use nalgebra::{DMatrix, DVector};
