@@ -14,6 +14,7 @@ use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
 use vic::core::solver::{Ilqg, IlqgOptions, Problem, Solution};
 use vic::planning::method::Method;
 use vic::planning::plan::{self, Setup};
+use vic::planning::receding::{TAIL_SHARE, TailFirst};
 use vic::planning::scenario::Scenario;
 
 fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
@@ -284,6 +285,21 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
     );
     group.bench_function("two_link_divergent_sooc_warm_shift2", |b| {
         b.iter(|| black_box(solver.solve(&problem, warm)))
+    });
+
+    // The same re-solve with the last 30 % of the horizon solved alone first
+    // (`planning::receding`), on workspaces kept between samples.
+    let mut tail_first = TailFirst::new(&next, horizon, TAIL_SHARE, s.solver.sooc_options());
+    let r = tail_first.resolve(&next, warm).expect("re-solves");
+    eprintln!(
+        "two_link_divergent_sooc_warm_shift2_tail_first: {:?}, {} + {} iterations, {:.1} ms (single run)",
+        r.solution.stop,
+        r.tail_iterations,
+        r.solution.iterations,
+        r.total_time.as_secs_f64() * 1e3
+    );
+    group.bench_function("two_link_divergent_sooc_warm_shift2_tail_first", |b| {
+        b.iter(|| black_box(tail_first.resolve(&next, warm)))
     });
 
     // What the central controller's replanner solves at that moment: the remaining 98 knots from

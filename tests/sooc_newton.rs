@@ -235,6 +235,7 @@ use vic::core::solver::sooc_newton::{
 };
 use vic::planning::montecarlo::run_trials;
 use vic::planning::plan::{self, Setup, predict_open_loop, setup};
+use vic::planning::receding::{TAIL_SHARE, TailFirst};
 use vic::planning::scenario::Scenario;
 
 fn scenario(stem: &str) -> (Scenario, Setup) {
@@ -702,6 +703,71 @@ fn warm_start_from_a_shifted_plan_reaches_the_cold_start_cost() {
         warm.expected_cost,
         cold.expected_cost
     );
+}
+
+/// Tail first (`planning::receding`): the plan shifted by 2 knots, its last 30 % re-solved alone
+/// from the moment state the shifted plan reaches there, then the whole horizon. The tail only
+/// chooses the start, so the result must be a converged solve of the whole problem, at the
+/// plain warm start's optimum (to 1e-9 of `J`: the landscape has other optima within 1e-4),
+/// and the point of it is less work: fewer knot-steps (steps times the knots each expands)
+/// than the plain warm start. With no tail it is the plain warm start, to the bit.
+#[test]
+fn tail_first_re_solve_reaches_the_plain_warm_starts_optimum_in_fewer_knot_steps() {
+    let (_, setup, plan) = divergent();
+    let n = setup.dynamics.nx();
+    let horizon = setup.u_init.len();
+    let planned = Setup {
+        u_init: plan.u.clone(),
+        ..setup.clone()
+    };
+    let x2: Vec<f64> = plan.z[2].rows(0, n).iter().copied().collect();
+    let next = planned.shifted(2, &x2);
+    let direct = solve_from(&next, &next.u_init);
+    let options = SoocOptions::default();
+    let none = TailFirst::new(&next, horizon, 0.0, options.clone())
+        .resolve(&next, &next.u_init)
+        .expect("re-solves");
+    assert_eq!(none.tail_knots, 0);
+    let bits = |u: &[DVector<f64>]| -> Vec<u64> {
+        u.iter()
+            .flat_map(|v| v.iter().map(|x| x.to_bits()))
+            .collect()
+    };
+    assert_eq!(
+        bits(&none.solution.u),
+        bits(&direct.u),
+        "no tail: the plain warm start"
+    );
+
+    let tail = TailFirst::new(&next, horizon, TAIL_SHARE, options)
+        .resolve(&next, &next.u_init)
+        .expect("re-solves");
+    let knot_steps = tail.tail_iterations * tail.tail_knots + tail.solution.iterations * horizon;
+    eprintln!(
+        "shifted by 2: plain warm start {} steps over {horizon} knots, J = {:.12e}; tail first \
+         {} steps over {} knots, then {} over {horizon}, J = {:.12e} ({knot_steps} knot-steps \
+         against {})",
+        direct.iterations,
+        direct.expected_cost,
+        tail.tail_iterations,
+        tail.tail_knots,
+        tail.solution.iterations,
+        tail.solution.expected_cost,
+        direct.iterations * horizon
+    );
+    assert!(tail.tail_error.is_none(), "{:?}", tail.tail_error);
+    assert_eq!(tail.tail_knots, 30);
+    assert_eq!(direct.stop, SoocStop::Converged);
+    assert_eq!(tail.solution.stop, SoocStop::Converged);
+    assert!(tail.solution.optimality.met());
+    let gap = (tail.solution.expected_cost - direct.expected_cost).abs() / direct.expected_cost;
+    assert!(
+        gap <= 1e-9,
+        "tail first J {} against {} ({gap:e})",
+        tail.solution.expected_cost,
+        direct.expected_cost
+    );
+    assert!(knot_steps < direct.iterations * horizon);
 }
 
 /// The replanner's cheaper Newton model (`SoocOptions::flow_third_derivatives` off) buys about

@@ -10,6 +10,7 @@ pub mod montecarlo;
 pub mod plan;
 pub mod plan_file;
 pub mod prediction;
+pub mod receding;
 pub mod reference;
 pub mod scenario;
 pub mod setup;
