@@ -8,7 +8,7 @@ use nalgebra::DVector;
 use std::path::Path;
 use vic::core::cost::TrackingCost;
 use vic::core::delay::{Delayed, DelayedPlanner, Offset};
-use vic::core::dynamics::DiscreteDynamics;
+use vic::core::dynamics::{DiscreteDynamics, Dynamics};
 use vic::core::solver::{Ilqg, IlqgError, Problem};
 use vic::planning::plan::{self, DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
@@ -160,6 +160,79 @@ fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
         warm.guess_iterations,
         recold.guess_iterations
     );
+}
+
+/// With the scenario's noise, a warm replan two knots on re-solves the augmented plant from its
+/// previous plan shifted ([`Ilqg::resolve_shifted`]): to the bit what ILQG on the augmented
+/// plant alone does from the same plan (which the planner's first plan is, from the undelayed
+/// guess), and not what a start from the new undelayed guess gives. Its expected cost is that
+/// of a cold plan from the same state to within 1 % (the stochastic stops on this plant are
+/// many nearly equal ones, see the thirty-sixth session of `docs/BENCHMARKS.md`).
+#[test]
+fn with_noise_a_warm_replan_starts_from_the_last_plan_shifted() {
+    let (s, setup, delayed) = load(&[]);
+    let (d, n) = (s.task.delay_steps(), setup.x0.len());
+    let cost = DelayedCost::new(&setup.cost, n);
+    let (start, later) = (
+        at(&setup, &delayed, &cost, 0),
+        at(&setup, &delayed, &cost, 2),
+    );
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let (plain, augmented) = problems(&s, &setup, &start, &x0);
+    let options = &s.solver.options;
+    assert!(options.stochastic && augmented.dynamics.nw() > 0);
+    let mut planner = DelayedPlanner::new(&plain, &augmented, options).expect("sizes fit");
+    let cold = planner
+        .solve(&plain, &augmented, &setup.u_init)
+        .expect("plans");
+    let guess = vic::core::delay::undelayed_guess(
+        &plain,
+        setup.u_init[0].as_slice(),
+        d,
+        options,
+        &setup.u_init,
+    )
+    .expect("guess");
+    let mut alone = Ilqg::new(&augmented, options.clone());
+    let first = alone.try_solve(&augmented, &guess).expect("solves");
+    assert_eq!(
+        first.u, cold.solution.u,
+        "the first plan is ILQG's from the guess"
+    );
+
+    // Two knots on, from the augmented state the plan's commands lead to.
+    let mut x2 = x0.clone();
+    for k in 0..2 {
+        let mut next = vec![0.0; x2.len()];
+        delayed.step(k, &x2, cold.solution.u[k].as_slice(), &mut next);
+        x2 = next;
+    }
+    let (plain2, augmented2) = problems(&s, &setup, &later, &x2);
+    let warm = planner
+        .resolve_shifted(&plain2, &augmented2, 2)
+        .expect("replans");
+    let reference = alone.resolve_shifted(&augmented2, 2).expect("re-solves");
+    assert_eq!(warm.solution.u, reference.u);
+    assert_eq!(warm.solution.iterations, reference.iterations);
+    let mut fresh = DelayedPlanner::new(&plain2, &augmented2, options).expect("sizes fit");
+    let recold = fresh
+        .solve(&plain2, &augmented2, &setup.u_init)
+        .expect("plans");
+    println!(
+        "with noise, two knots on: warm {} iterations, E = {:.6}; cold {} + {} iterations, E = {:.6}",
+        warm.solution.iterations,
+        warm.solution.expected_cost,
+        recold.guess_iterations,
+        recold.solution.iterations,
+        recold.solution.expected_cost
+    );
+    assert_ne!(
+        warm.solution.u, recold.solution.u,
+        "not the cold plan's start"
+    );
+    assert!(warm.solution.stop.converged());
+    let gap = (warm.solution.expected_cost - recold.solution.expected_cost).abs();
+    assert!(gap <= 0.01 * recold.solution.expected_cost, "{gap}");
 }
 
 #[test]

@@ -421,6 +421,11 @@ impl Ilqg {
         })
     }
 
+    /// Whether the workspace holds a solution that [`Ilqg::resolve_shifted`] can shift.
+    pub fn has_solution(&self) -> bool {
+        self.solved
+    }
+
     /// Re-solves after the plan has advanced `shift` knots (receding-horizon replanning): the
     /// previous solution is shifted, its last knot repeated, and rolled out from the new
     /// `problem.x0` under its own feedback gains, `u_k = ū_{k+s} + L_{k+s} (x_k − x̄_{k+s})`
