@@ -9,7 +9,7 @@ use std::path::Path;
 use vic::core::cost::TrackingCost;
 use vic::core::delay::{Delayed, DelayedPlanner, Offset};
 use vic::core::dynamics::{DiscreteDynamics, Dynamics};
-use vic::core::solver::{Ilqg, IlqgError, Problem};
+use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem};
 use vic::planning::plan::{self, DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
 
@@ -72,6 +72,13 @@ fn problems<'a>(
     (plain, augmented)
 }
 
+/// The undelayed first guess for the augmented plant, the commands in flight the scenario's
+/// first.
+fn guess(setup: &Setup, plain: &Problem, d: usize, options: &IlqgOptions) -> Vec<DVector<f64>> {
+    vic::core::delay::undelayed_guess(plain, setup.u_init[0].as_slice(), d, options, &setup.u_init)
+        .expect("guess")
+}
+
 #[test]
 fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
     let (s, setup, delayed) = load(&["noise.kind=none"]);
@@ -94,14 +101,7 @@ fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
     let cold = planner
         .solve(&plain, &augmented, &setup.u_init)
         .expect("plans");
-    let guess = vic::core::delay::undelayed_guess(
-        &plain,
-        setup.u_init[0].as_slice(),
-        d,
-        options,
-        &setup.u_init,
-    )
-    .expect("guess");
+    let guess = guess(&setup, &plain, d, options);
     let mut full = Ilqg::new(&augmented, options.clone());
     let by_hand = full.try_solve(&augmented, &guess).expect("solves");
     assert_eq!(by_hand.iterations, 0, "{:?}", by_hand.stop);
@@ -185,14 +185,7 @@ fn with_noise_a_warm_replan_starts_from_the_last_plan_shifted() {
     let cold = planner
         .solve(&plain, &augmented, &setup.u_init)
         .expect("plans");
-    let guess = vic::core::delay::undelayed_guess(
-        &plain,
-        setup.u_init[0].as_slice(),
-        d,
-        options,
-        &setup.u_init,
-    )
-    .expect("guess");
+    let guess = guess(&setup, &plain, d, options);
     let mut alone = Ilqg::new(&augmented, options.clone());
     let first = alone.try_solve(&augmented, &guess).expect("solves");
     assert_eq!(
