@@ -348,7 +348,6 @@ fn state_after<'a>(
     x
 }
 
-/// The undelayed problem over knots `d..N` from `x_d`.
 /// The plant and cost of `plain` from knot `delay` on, the plant without its noise: the tail
 /// problem is solved deterministically.
 fn tail_of<'a>(
@@ -364,6 +363,7 @@ fn tail_of<'a>(
     )
 }
 
+/// The undelayed problem over knots `d..N` from `x_d`.
 fn tail_problem<'a>(
     dynamics: &'a dyn Dynamics,
     cost: &'a dyn Cost,

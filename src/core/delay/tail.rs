@@ -8,7 +8,7 @@ use nalgebra::DMatrix;
 
 /// A model or cost read `offset` knots later: knot `k` of the wrapper is knot `k + offset` of
 /// the inner one (its reference and exogenous inputs). The tail of a horizon as a problem of its
-/// own, for [`undelayed_guess`] and for replanning from a later knot.
+/// own, for [`undelayed_guess`](super::undelayed_guess) and for replanning from a later knot.
 pub struct Offset<'a, T: ?Sized> {
     inner: &'a T,
     offset: usize,
