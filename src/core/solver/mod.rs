@@ -14,6 +14,15 @@ pub use ilqg::{Convergence, Ilqg, IlqgError, IlqgOptions, Solution, StopReason};
 use crate::core::cost::Cost;
 use crate::core::dynamics::Dynamics;
 
+/// Reads a figure that is `+∞` by design in some states (a test not made yet, a model that was
+/// not the exact one) from a plan file: JSON has no infinity and `serde_json` writes a non-finite
+/// number as `null`, so `null` reads back as `+∞` (a plan stopped early was written but could not
+/// be read again).
+pub(crate) fn infinite_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+}
+
 /// Constant lower and upper limits on every control component (`±∞` for none).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bounds {

@@ -15,7 +15,9 @@ use serde::{Deserialize, Serialize};
 ///   (a short, heavily damped step improves little anywhere).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Convergence {
-    /// `max_k |l_k| / (|ū_k| + 1)` of the last backward pass.
+    /// `max_k |l_k| / (|ū_k| + 1)` of the last backward pass; `+∞` before the first one
+    /// succeeded (`null` in JSON).
+    #[serde(deserialize_with = "crate::core::solver::infinite_if_null")]
     pub feedforward_step: f64,
     pub gradient_tolerance: f64,
     /// The relative improvement tested last: predicted for a full Newton step by the last

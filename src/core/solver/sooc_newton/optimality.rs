@@ -19,7 +19,9 @@ pub struct Optimality {
     /// (in the divergent field without noise an early torque's curvature is ≈ 2·10⁹ at
     /// `J ≈ 0.27`).
     pub projected_gradient: f64,
-    /// `-ΔJ_pred / |J|`: the decrease the Newton model predicts for its full step.
+    /// `-ΔJ_pred / |J|`: the decrease the Newton model predicts for its full step; `+∞` when the
+    /// last model was not the exact one (`null` in JSON).
+    #[serde(deserialize_with = "crate::core::solver::infinite_if_null")]
     pub predicted_decrease: f64,
     /// The tolerances they were tested against.
     pub gradient_tolerance: f64,
