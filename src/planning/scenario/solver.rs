@@ -15,7 +15,7 @@ pub struct SolverSection {
     /// SOOC: fractions of the noise solved in turn, ending at 1 (default [1.0]: the stagewise
     /// Newton solver converges from the deterministic plan directly; intermediate stages only
     /// add iterations on the type-2 arm: 22 Newton steps at [1.0], 44 over [0.1, 0.3, 1.0], same
-    /// optimum. The light VSA keeps [0.1, 0.3, 1.0] in its file).
+    /// optimum).
     pub noise_continuation: Vec<f64>,
     /// SOOC: what a backward pass does with a stage whose Newton model is indefinite (default
     /// `regularize`: raise μ for every stage; `saddle_free`: convexify that stage alone).

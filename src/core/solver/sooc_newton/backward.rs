@@ -293,9 +293,9 @@ pub(super) struct Backstep {
 /// descent direction of `J` (the saddle-free Newton step of Dauphin et al. 2014, stage by stage),
 /// and along negative curvature it moves by `|g / λ|` instead of stopping. Measured: the same
 /// optima in fewer steps where few stages are indefinite (two_link_divergent 52 → 42, the single
-/// joint 88 → 54), more steps on the torque-only arm (251 → 339); it does not make the light VSA
-/// converge, where the line search rejects short-μ steps even with every stage convex (the
-/// model's range, not its indefiniteness, is what limits the steps there).
+/// joint 88 → 54), more steps on the torque-only arm (251 → 339). On the light VSA (B/10) it is
+/// what converges at all: about 4300 steps to J = 1.224e5, where one μ for every stage still
+/// creeps at 1.97e5 after 2000 (docs/BENCHMARKS.md, thirty-ninth session).
 fn convexify(quu: &mut DMatrix<f64>, curvature: &[f64], reg: &[f64]) {
     let m = curvature.len();
     let s: [f64; MAX_QP] = std::array::from_fn(|j| {
