@@ -195,8 +195,10 @@ pub(super) fn notes(figure: Figure) -> &'static str {
              ellipse's claim is not reproduced: B/10 misses the target about as often as B (with \
              20 trials either comes out ahead) and spreads less (docs/BENCHMARKS.md, \"The light VSA converged\": 200 trials for each \
              of three seeds). The paper's order came out here only from the unconverged B/10 plan \
-             a noise continuation stopped at, at twice the converged expected cost. The claim is \
-             still checked and reported; the tests do not require it."
+             a noise continuation stopped at, at twice the converged expected cost; with the motor \
+             torque limited to 300 N m (B's plan uses 293) it comes back, on a B/10 plan that does \
+             not converge in 8000 steps. The claim is still checked and reported; the tests do \
+             not require it."
         }
         Figure::Fig2 => {
             "Columns 1 and 3 are the same SOOC plan: an open-loop plan uses no feedback, so the \
