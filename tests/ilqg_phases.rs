@@ -12,23 +12,13 @@
 //! the box QP was skipped for Newton steps inside the box). It therefore pins the arithmetic bit for
 //! bit, on this kind of machine (the libm's sin/cos variant included).
 
+mod common;
+
+use common::scenario as load;
+
 use nalgebra::DVector;
-use std::path::Path;
 use vic::core::cost::{Cost, CostDerivatives};
 use vic::core::solver::{Ilqg, Problem};
-use vic::planning::plan::{self, Setup};
-use vic::planning::scenario::Scenario;
-
-/// A scenario of `config/` with overrides, and its plan setup.
-fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("config")
-        .join(file);
-    let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    let s = Scenario::load(&path, &o).expect("scenario loads");
-    let setup = plan::setup(&s).expect("scenario sets up");
-    (s, setup)
-}
 
 /// (cost, expected cost, accepted iterations) of a solve.
 fn solve(file: &str, overrides: &[&str], delay: Option<usize>) -> (f64, f64, usize) {

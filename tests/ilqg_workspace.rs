@@ -4,26 +4,17 @@
 
 mod common;
 
+use common::scenario as load;
+
 use common::alloc::{Counting, allocations};
 use nalgebra::DVector;
-use std::path::Path;
 use vic::core::delay::{Delayed, Offset};
 use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem, StopReason};
-use vic::planning::plan::{self, DelayedCost, Setup};
+use vic::planning::plan::{DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
-
-fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("config")
-        .join(file);
-    let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    let s = Scenario::load(&path, &o).expect("scenario loads");
-    let setup = plan::setup(&s).expect("scenario sets up");
-    (s, setup)
-}
 
 fn problem<'a>(s: &Scenario, setup: &'a Setup) -> Problem<'a> {
     setup.problem(s.task.steps)

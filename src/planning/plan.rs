@@ -230,7 +230,12 @@ pub fn plan_sooc(
     // Warm start from the deterministic optimum, then optimise the open-loop moments.
     let mut det = solver_for(plain, &s.solver.options, "deterministic", progress);
     det.options.stochastic = false;
-    let first = det.solve(plain, &setup.u_init);
+    let first = det
+        .try_solve_held_first(plain, &setup.u_init)
+        .map_err(|source| PlanError::Ilqg {
+            phase: "deterministic",
+            source,
+        })?;
     // The deterministic optimum has almost no stiffness (it buys nothing without noise),
     // and from there the open-loop problem starts in an unstable field with a huge
     // variance. Start the stiffness from the configured initial value instead. Without noise
@@ -319,7 +324,7 @@ pub fn solve_in_phases(
     let failed = |phase| move |source| PlanError::Ilqg { phase, source };
     if !options.stochastic || problem.dynamics.nw() == 0 {
         return solver_for(problem, options, "ilqg", progress)
-            .try_solve(problem, u_init)
+            .try_solve_held_first(problem, u_init)
             .map_err(failed("ilqg"));
     }
     // One workspace for both phases (a solve starts from nothing but its initial controls):
@@ -327,7 +332,7 @@ pub fn solve_in_phases(
     let mut solver = solver_for(problem, options, "deterministic", progress);
     solver.options.stochastic = false;
     let first = solver
-        .try_solve(problem, u_init)
+        .try_solve_held_first(problem, u_init)
         .map_err(failed("deterministic"))?;
     let stochastic = phase_progress(progress, "stochastic");
     solver.options.stochastic = options.stochastic;

@@ -9,7 +9,19 @@ pub mod trial;
 
 use std::path::Path;
 use vic::core::model::{Plant, SingleJoint, TwoLink};
+use vic::planning::plan::{self, Setup};
 use vic::planning::scenario::Scenario;
+
+/// A scenario of `config/` with `--set` overrides (`section.key=value`), and its plan setup.
+pub fn scenario(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(file);
+    let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let s = Scenario::load(&path, &o).expect("scenario loads");
+    let setup = plan::setup(&s).expect("scenario sets up");
+    (s, setup)
+}
 
 fn plant(file: &str) -> Plant {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

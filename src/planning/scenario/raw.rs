@@ -252,6 +252,9 @@ pub(super) struct RawSolver {
     pub third_derivatives_below: Option<f64>,
     /// SOOC: every other Newton step keeps the previous point's third derivatives.
     pub keep_third_derivatives: bool,
+    /// Deterministic solves hold an impedance's stiffness at its lower limit first, then free
+    /// it (default true).
+    pub hold_stiffness_first: bool,
 }
 
 impl Default for RawSolver {
@@ -271,6 +274,7 @@ impl Default for RawSolver {
             indefinite: Indefinite::default(),
             third_derivatives_below: None,
             keep_third_derivatives: false,
+            hold_stiffness_first: true,
         }
     }
 }

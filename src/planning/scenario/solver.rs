@@ -2,6 +2,7 @@
 
 use super::error::{ConfigError, FileCheck};
 use super::raw::RawSolver;
+use crate::core::model::{Actuator, ArmModel};
 use crate::core::solver::IlqgOptions;
 use crate::core::solver::sooc_newton::{Indefinite, SoocOptions};
 use crate::planning::method::Method;
@@ -72,6 +73,8 @@ impl RawSolver {
             stochastic: self.stochastic,
             damp_short_steps: self.damp_short_steps,
             shrink_below_step: IlqgOptions::default().shrink_below_step,
+            // Set from the actuator by `held_first` once the model is known.
+            held_first: Vec::new(),
         }
     }
 
@@ -111,5 +114,16 @@ impl RawSolver {
             third_derivatives_below: self.third_derivatives_below,
             keep_third_derivatives: self.keep_third_derivatives,
         })
+    }
+}
+
+/// The controls a deterministic solve holds at their lower limits first
+/// ([`IlqgOptions::held_first`]): an impedance's stiffnesses, which act only through the
+/// deviation from the reference. Not a VSA's: its springs carry the motor torque to the link, so
+/// at zero stiffness nothing moves it.
+pub(super) fn held_first(model: &ArmModel, hold_stiffness_first: bool) -> Vec<usize> {
+    match model.actuator {
+        Actuator::Impedance { .. } if hold_stiffness_first => (model.dof()..model.nu()).collect(),
+        _ => Vec::new(),
     }
 }

@@ -21,12 +21,15 @@ use std::time::{Duration, Instant};
 
 mod backward;
 mod convergence;
+mod held;
 mod knot;
+mod options;
 mod policy;
 mod rollout;
 mod search;
 
 pub use convergence::Convergence;
+pub use options::IlqgOptions;
 
 use backward::Backward;
 use rollout::{ensure_linearized, rollout};
@@ -34,47 +37,6 @@ use rollout::{ensure_linearized, rollout};
 /// Regularisation, relative to the mean diagonal of the value Hessian `S_0`, below which the
 /// backward pass's model is trusted for a convergence verdict.
 const TRUSTED_MU: f64 = 1e-3;
-
-/// Solver settings. Defaults suit the paper's problems.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct IlqgOptions {
-    /// Iteration limit (default 200).
-    pub max_iterations: usize,
-    /// Stop when a step improves (or is predicted to improve) the cost by less than this fraction
-    /// (default 1e-6).
-    pub tolerance: f64,
-    /// Stop when every feedforward step `|l_k| / (|ū_k| + 1)` is below this (default 1e-6).
-    pub gradient_tolerance: f64,
-    /// Initial Levenberg–Marquardt regularisation μ added to `Q_uu` (default 0: exact Newton).
-    pub mu_init: f64,
-    /// Below this μ is set to 0 (default 1e-6).
-    pub mu_min: f64,
-    /// Give up above this μ (default 1e10).
-    pub mu_max: f64,
-    /// Raise μ after an accepted step shorter than `shrink_below_step` (default true, 0.5).
-    pub damp_short_steps: bool,
-    pub shrink_below_step: f64,
-    /// Include the noise terms in the backward pass and the line search (default true). False
-    /// gives deterministic DDP on the same plant.
-    pub stochastic: bool,
-}
-
-impl Default for IlqgOptions {
-    fn default() -> Self {
-        IlqgOptions {
-            max_iterations: 200,
-            tolerance: 1e-6,
-            gradient_tolerance: 1e-6,
-            mu_init: 0.0,
-            mu_min: 1e-6,
-            mu_max: 1e10,
-            damp_short_steps: true,
-            shrink_below_step: 0.5,
-            stochastic: true,
-        }
-    }
-}
 
 /// Why the solver stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -327,6 +289,8 @@ pub struct Ilqg {
     dims: (usize, usize, usize, usize),
     /// Whether `nominal` holds the result of a previous solve (for warm starts).
     solved: bool,
+    /// Iterations of a held first solve, counted on in the progress of the free one.
+    iterations_before: usize,
     /// The regularisation and noise switch of the last backward pass of the last solve.
     last_pass: (f64, bool),
 }
@@ -353,6 +317,7 @@ impl Ilqg {
             noise_scratch: DMatrix::zeros(nx, nw),
             dims: (nx, nu, nw, h),
             solved: false,
+            iterations_before: 0,
             last_pass: (0.0, false),
         }
     }
@@ -573,7 +538,7 @@ impl Ilqg {
     fn notify(&mut self, iteration: usize, merit: f64, mu: f64, alpha: f64) {
         if let Some(cb) = self.on_iteration.as_mut() {
             cb(&Progress {
-                iteration,
+                iteration: self.iterations_before + iteration,
                 merit,
                 mu,
                 alpha,
