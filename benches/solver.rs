@@ -46,7 +46,7 @@ fn bench_plain(c: &mut Criterion, name: &str, file: &str, overrides: &[&str]) {
         if phases {
             solver.options = deterministic.clone();
             solver
-                .try_solve_into(&problem, &setup.u_init, first)
+                .try_solve_held_first_into(&problem, &setup.u_init, first)
                 .expect("solves");
             solver.options = options.clone();
             solver
@@ -54,7 +54,7 @@ fn bench_plain(c: &mut Criterion, name: &str, file: &str, overrides: &[&str]) {
                 .expect("solves");
         } else {
             solver
-                .try_solve_into(&problem, &setup.u_init, out)
+                .try_solve_held_first_into(&problem, &setup.u_init, out)
                 .expect("solves");
         }
     };
@@ -95,6 +95,21 @@ fn solvers(c: &mut Criterion) {
     );
     bench_plain(c, "two_link_divergent_ilqg", "two_link_divergent.toml", &[]);
     bench_plain(c, "single_joint_ilqg", "icub_elbow.toml", &[]);
+    // The same two with the stiffness free from the first guess on (the baseline of
+    // `Ilqg::try_solve_held_first`, measured in the same run).
+    let free = ["solver.hold_stiffness_first=false"];
+    bench_plain(
+        c,
+        "two_link_divergent_ilqg_free_stiffness",
+        "two_link_divergent.toml",
+        &free,
+    );
+    bench_plain(
+        c,
+        "single_joint_ilqg_free_stiffness",
+        "icub_elbow.toml",
+        &free,
+    );
 
     // The single joint with a 200 ms delay, deterministic: the central process's replanning load.
     let (s, setup) = load("single_joint_delay.toml", &["noise.kind=none"]);
@@ -253,6 +268,15 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
     );
     group.bench_function("two_link_divergent_sooc_cold", |b| {
         b.iter(|| black_box(plan::plan_sooc(&s, &setup, &plain, &None)))
+    });
+    // Its deterministic first phase with the stiffness free from the first guess on.
+    let (s_free, setup_free) = load(
+        "two_link_divergent.toml",
+        &["solver.hold_stiffness_first=false"],
+    );
+    let plain_free = setup_free.problem(s_free.task.steps);
+    group.bench_function("two_link_divergent_sooc_cold_free_stiffness", |b| {
+        b.iter(|| black_box(plan::plan_sooc(&s_free, &setup_free, &plain_free, &None)))
     });
 
     // The plan as the warm start, moved along with everything else.
