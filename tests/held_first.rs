@@ -9,7 +9,7 @@ mod common;
 use common::scenario as load;
 
 use std::sync::{Arc, Mutex};
-use vic::core::solver::Ilqg;
+use vic::core::solver::{Ilqg, StopReason};
 
 /// On the impedance scenarios the scenario's first guess (inverse-dynamics torques, the
 /// configured stiffness) solved deterministically: held first and free reach the same cost to
@@ -117,6 +117,29 @@ fn stochastic_solves_vsas_and_the_switch_off_are_not_held() {
             a.expected_cost.to_bits(),
             b.expected_cost.to_bits(),
             "{file}"
+        );
+    }
+}
+
+/// The iteration limit bounds both solves together: the free solve gets what the held one left
+/// (none when the held solve used them all, and the plan is then the held solve's, stopped at the
+/// limit).
+#[test]
+fn the_iteration_limit_counts_both_solves() {
+    let (s, setup) = load("two_link_divergent.toml", &["solver.stochastic=false"]);
+    let problem = setup.problem(s.task.steps);
+    for limit in [1, 2, 4] {
+        let mut options = s.solver.options.clone();
+        options.max_iterations = limit;
+        let mut solver = Ilqg::new(&problem, options);
+        let sol = solver
+            .try_solve_held_first(&problem, &setup.u_init)
+            .expect("solves");
+        assert_eq!(sol.iterations, limit, "limit {limit}");
+        assert_eq!(sol.stop, StopReason::MaxIterations, "limit {limit}");
+        assert_eq!(
+            solver.options.max_iterations, limit,
+            "the limit is restored"
         );
     }
 }

@@ -28,7 +28,8 @@ impl Ilqg {
     /// [`Ilqg::try_solve`]): when it is deterministic (no noise in the backward pass, where a
     /// stiffness also buys robustness) and [`IlqgOptions::held_first`](super::IlqgOptions) names
     /// controls with finite lower limits, first with those held there, then all free from that
-    /// optimum. The free solve's plan and stop; both solves' iterations, merit history and time.
+    /// optimum, within one iteration limit. The free solve's plan and stop; both solves'
+    /// iterations, merit history and time.
     /// If the held start cannot be rolled out (a plant that the held controls do not keep
     /// finite), the free solve starts from `u_init` as without holding. Otherwise
     /// [`Ilqg::try_solve`].
@@ -87,9 +88,13 @@ impl Ilqg {
         let iterations = out.iterations;
         let mut history = std::mem::take(&mut out.history);
         let first = std::mem::take(&mut out.u);
+        // The iteration limit is the whole solve's: the free solve gets what the held one left.
+        let limit = self.options.max_iterations;
+        self.options.max_iterations = limit - iterations;
         self.iterations_before = iterations;
         let free = self.try_solve_into(problem, &first, out);
         self.iterations_before = 0;
+        self.options.max_iterations = limit;
         free?;
         out.iterations += iterations;
         history.extend_from_slice(&out.history);
