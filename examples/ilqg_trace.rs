@@ -1,5 +1,6 @@
 //! Prints ILQG's progress on a scenario, iteration by iteration (step length, μ, merit):
-//! `cargo run --release --example ilqg_trace -- config/single_joint_delay.toml task.delay_ms=0`.
+//! `cargo run --release --example ilqg_trace -- config/single_joint_delay.toml task.delay_ms=0`
+//! (`HELD=1`: from the first guess as the plans' deterministic phases solve, see below).
 
 use nalgebra::DVector;
 use std::path::Path;
@@ -43,7 +44,14 @@ fn main() {
             p.iteration, p.alpha, p.mu, p.merit
         )
     }));
-    let mut sol = solver.try_solve(&problem, &u_init).expect("solves");
+    // HELD=1: as the plans' deterministic phases solve from a first guess, an impedance's
+    // stiffness held at its lower limit first (`Ilqg::try_solve_held_first`).
+    let mut sol = if std::env::var("HELD").is_ok() {
+        solver.try_solve_held_first(&problem, &u_init)
+    } else {
+        solver.try_solve(&problem, &u_init)
+    }
+    .expect("solves");
     let (later_dynamics, later_cost) = (
         vic::core::delay::Offset::new(&delayed.dynamics, 2),
         vic::core::delay::Offset::new(&delayed.cost, 2),
