@@ -2,13 +2,16 @@
 //! (`Ilqg::try_solve_held_first`): they must end where the free solve from the same first guess
 //! ends (the deterministic problem has one optimum here: both stop within the solver's
 //! tolerance of it), in fewer iterations, with the progress counted on across both solves;
-//! stochastic solves and actuators whose stiffness carries the torque are not held.
+//! stochastic solves and actuators whose stiffness carries the torque are not held; a held start
+//! that cannot be rolled out falls back to the free solve.
 
 mod common;
 
 use common::scenario as load;
 
+use nalgebra::DMatrix;
 use std::sync::{Arc, Mutex};
+use vic::core::dynamics::{Dynamics, Linearization};
 use vic::core::solver::{Ilqg, StopReason};
 
 /// On the impedance scenarios the scenario's first guess (inverse-dynamics torques, the
@@ -142,4 +145,60 @@ fn the_iteration_limit_counts_both_solves() {
             "the limit is restored"
         );
     }
+}
+
+/// The scenario's plant, except that a step with the stiffness below 1 N m/rad leaves the
+/// finite numbers: a plant that the held stiffness (0) cannot roll out.
+struct NeedsStiffness<'a>(&'a dyn Dynamics);
+
+impl Dynamics for NeedsStiffness<'_> {
+    fn nx(&self) -> usize {
+        self.0.nx()
+    }
+    fn nu(&self) -> usize {
+        self.0.nu()
+    }
+    fn nw(&self) -> usize {
+        self.0.nw()
+    }
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.0.step(k, x, u, next);
+        if u[1] < 1.0 {
+            next.fill(f64::NAN);
+        }
+    }
+    fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
+        self.0.noise_gain(k, x, u, out);
+    }
+    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.0.linearize(k, x, u, lin);
+    }
+}
+
+/// When the held start cannot be rolled out, the solve is the free one from the first guess, to
+/// the bit (and not an error).
+#[test]
+fn a_held_start_that_diverges_falls_back_to_the_free_solve() {
+    let (s, setup) = load("icub_elbow.toml", &["solver.stochastic=false"]);
+    let plant = NeedsStiffness(&setup.dynamics);
+    let mut problem = setup.problem(s.task.steps);
+    problem.dynamics = &plant;
+    assert!(!s.solver.options.held_first.is_empty());
+    let mut options = s.solver.options.clone();
+    options.max_iterations = 10;
+    let free = Ilqg::new(&problem, options.clone())
+        .try_solve(&problem, &setup.u_init)
+        .expect("the free start rolls out");
+    let held = Ilqg::new(&problem, options)
+        .try_solve_held_first(&problem, &setup.u_init)
+        .expect("falls back");
+    let bits = |v: &[nalgebra::DVector<f64>]| -> Vec<u64> {
+        v.iter()
+            .flat_map(|x| x.iter().map(|e| e.to_bits()))
+            .collect()
+    };
+    assert!(free.iterations > 0);
+    assert_eq!(held.iterations, free.iterations);
+    assert_eq!(bits(&held.u), bits(&free.u));
+    assert_eq!(held.cost.to_bits(), free.cost.to_bits());
 }
