@@ -13,7 +13,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 use vic::core::delay::{Delayed, NoiseFree};
-use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
+use vic::core::dynamics::{Column, DiscreteDynamics, Dynamics, Linearization};
 use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 
 const DT: f64 = 0.01;
@@ -410,8 +410,9 @@ fn delayed_linearization_matches_finite_differences() {
 /// linearisation at another state and control is the fresh linearisation there, bit for bit:
 /// the entries it leaves alone are the ones every linearisation writes the same. Also when the
 /// last call was noise-free and left the noise Jacobians as they were (emulated by junk in
-/// them). And every nonzero of `A` and of the `Cx_i` lies in the rows `state_support` gives,
-/// so reading the nonzeros there finds them all. The fused calls (`step_linearized` into a
+/// them). And every nonzero of `A`, `B` and the noise Jacobians lies where `state_support`
+/// says, and its unit columns hold their one, so reading the nonzeros there (and taking the
+/// unit columns' ones unread) finds them all. The fused calls (`step_linearized` into a
 /// poisoned buffer, `step_relinearized` into one that holds another point's) give the same
 /// linearisation and the step to the bit, and the model without its noise (`NoiseFree`) the
 /// same `A` and `B` into a buffer without noise channels, marked noise-free.
@@ -492,19 +493,29 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                     plain(&other),
                     "{name}: without the noise, fused"
                 );
-                for (what, m, rows) in std::iter::once(("A", &fresh.a, &support.a))
-                    .chain(fresh.cx.iter().map(|cx| ("Cx", cx, &support.cx)))
-                {
+                let ranges = |r: &[std::ops::Range<usize>]| -> Vec<Column> {
+                    r.iter().cloned().map(Column::Rows).collect()
+                };
+                let (cx, cu) = (ranges(&support.cx), ranges(&support.cu));
+                let jacobians = [("A", &fresh.a, &support.a), ("B", &fresh.b, &support.b)]
+                    .into_iter()
+                    .chain(fresh.cx.iter().map(|m| ("Cx", m, &cx)))
+                    .chain(fresh.cu.iter().map(|m| ("Cu", m, &cu)));
+                for (what, m, columns) in jacobians {
+                    assert_eq!(columns.len(), m.ncols(), "{name}: {what}");
                     for ((i, j), v) in m
                         .iter()
                         .enumerate()
                         .map(|(e, v)| ((e % m.nrows(), e / m.nrows()), v))
                     {
                         assert!(
-                            *v == 0.0 || rows[j].contains(&i),
-                            "{name}: {what} ({i}, {j}) = {v} outside rows {:?}",
-                            rows[j]
+                            *v == 0.0 || columns[j].contains(i),
+                            "{name}: {what} ({i}, {j}) = {v} outside {:?}",
+                            columns[j]
                         );
+                        if columns[j] == Column::Unit(i) {
+                            assert_eq!(*v, 1.0, "{name}: {what} ({i}, {j}) of a unit column");
+                        }
                     }
                 }
             }

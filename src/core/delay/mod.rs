@@ -14,7 +14,7 @@
 //! the paper's Eq. 13. For `d = 0` the wrapper is the plain model.
 
 use crate::core::dense::zero;
-use crate::core::dynamics::{Dynamics, Linearization, NoiseKind, StateSupport};
+use crate::core::dynamics::{Column, Dynamics, Linearization, NoiseKind, StateSupport};
 use nalgebra::DMatrix;
 use std::sync::Mutex;
 
@@ -148,19 +148,31 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
     fn state_support(&self, support: &mut StateSupport) -> bool {
         // What `write_linearization` writes: the plant's Jacobians in the plant's rows of the
         // first n + m columns (its own state and the command acting now), then column
-        // n + m + i holds the shift's one in row n + i; the noise acts in the plant's rows.
+        // n + m + i holds the shift's one in row n + i, and B the new command's ones in the
+        // last m rows; the noise acts in the plant's rows, through the plant's columns.
         let (n, m) = (self.base.nx(), self.base.nu());
         let total = self.nx();
         let plant = if self.steps == 0 { n } else { n + m };
         support.a.clear();
+        support.b.clear();
         support.cx.clear();
+        support.cu.clear();
         for j in 0..total {
             if j < plant {
-                support.a.push(0..n);
+                support.a.push(Column::Rows(0..n));
                 support.cx.push(0..n);
             } else {
-                support.a.push(j - m..j - m + 1);
+                support.a.push(Column::Unit(j - m));
                 support.cx.push(0..0);
+            }
+        }
+        for j in 0..m {
+            if self.steps == 0 {
+                support.b.push(Column::Rows(0..n));
+                support.cu.push(0..n);
+            } else {
+                support.b.push(Column::Unit(total - m + j));
+                support.cu.push(0..0);
             }
         }
         true
@@ -171,8 +183,8 @@ impl<D: Dynamics> Delayed<D> {
     /// The augmented linearisation: the plant's Jacobians in the plant's rows, the shift of the
     /// commands in flight below. With `clear` every entry is written; without, `lin` holds this
     /// model's linearisation from an earlier call ([`Dynamics::relinearize`]), whose entries
-    /// outside the plant's blocks are the zeros and ones written here anyway, so only the
-    /// blocks are (clearing 42² entries of `A` and of each noise Jacobian at every knot cost
+    /// outside the plant's blocks are the zeros and ones a clearing call wrote, so only the
+    /// blocks are written (clearing 42² entries of `A` and of each noise Jacobian at every knot cost
     /// about a tenth of a stochastic solve of the delayed single joint). The noise Jacobians are
     /// cleared when the noise kind changed: a noise-free call leaves them as they were. With
     /// `next` the step is taken on the way ([`Dynamics::step_linearized`]): the plant's step
@@ -205,9 +217,18 @@ impl<D: Dynamics> Delayed<D> {
             }
             None => self.base.linearize(k, &x[..n], self.acting(x, u), base),
         }
-        if clear {
+        if clear && self.steps > 0 {
+            // The shift register's ones (its unit columns in `state_support`), written once:
+            // a relinearisation finds them in place, and touching them again was a cache line
+            // per column of a 42×42 `A` at every knot.
             zero(&mut lin.a);
             zero(&mut lin.b);
+            for i in 0..total - n - m {
+                lin.a[(n + i, n + m + i)] = 1.0;
+            }
+            for j in 0..m {
+                lin.b[(total - m + j, j)] = 1.0;
+            }
         }
         let clear_noise = clear || lin.noise != base.noise;
         lin.noise = base.noise;
@@ -216,12 +237,6 @@ impl<D: Dynamics> Delayed<D> {
             lin.b.copy_from(&base.b);
         } else {
             lin.a.view_mut((0, n), (n, m)).copy_from(&base.b);
-            for i in 0..total - n - m {
-                lin.a[(n + i, n + m + i)] = 1.0;
-            }
-            for j in 0..m {
-                lin.b[(total - m + j, j)] = 1.0;
-            }
         }
         if base.noise == NoiseKind::None || lin.c.ncols() == 0 {
             // A noise-free `lin` (see `Dynamics::linearize`) takes the deterministic part only.

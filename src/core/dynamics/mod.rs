@@ -55,26 +55,76 @@ impl Linearization {
     }
 }
 
-/// The rows of each column of `A` and of every `Cx_i` that can hold a nonzero, at any knot,
-/// state and control: the entries outside are exactly zero always. The delay-augmented plant's
-/// columns hold the plant's rows or a single one of the shift register (3 of 42 rows at most
-/// for the single joint with 200 ms of delay), so that reading its Jacobians' nonzeros by the
-/// support touches 46 entries of `A` instead of 42².
+/// Where one column of a Jacobian can be nonzero, at any knot, state and control.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Column {
+    /// In these rows only: the entries outside are exactly zero.
+    Rows(Range<usize>),
+    /// Exactly `1` in this row and zero elsewhere, always: a shift register's column, whose
+    /// entry a reader need not look up (on the delayed plant that lookup was one cache line of a
+    /// 42×42 Jacobian per column, a tenth of a stochastic plan).
+    Unit(usize),
+}
+
+impl Column {
+    /// Whether row `i` can hold a nonzero.
+    pub fn contains(&self, i: usize) -> bool {
+        match self {
+            Column::Rows(r) => r.contains(&i),
+            Column::Unit(r) => *r == i,
+        }
+    }
+
+    /// Whether the column lies within `nrows` rows.
+    pub fn fits(&self, nrows: usize) -> bool {
+        match self {
+            Column::Rows(r) => r.start <= r.end && r.end <= nrows,
+            Column::Unit(r) => *r < nrows,
+        }
+    }
+}
+
+/// Where each column of `A`, `B` and of every `Cx_i`, `Cu_i` can hold a nonzero, at any knot,
+/// state and control. The delay-augmented plant's columns of `A` hold the plant's rows or a
+/// single one of the shift register (3 of 42 rows at most for the single joint with 200 ms of
+/// delay), its `B` is the register's input (a unit column per control) and its `Cu_i` are zero,
+/// so that reading its Jacobians' nonzeros by the support touches 8 entries of `A` instead of 42²
+/// and takes the 38 ones of the shift as known.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct StateSupport {
-    /// Column `j` of `A` can be nonzero in rows `a[j]` only.
-    pub a: Vec<Range<usize>>,
+    /// Column `j` of `A`.
+    pub a: Vec<Column>,
+    /// Column `j` of `B`.
+    pub b: Vec<Column>,
     /// Column `j` of every `Cx_i` can be nonzero in rows `cx[j]` only.
     pub cx: Vec<Range<usize>>,
+    /// Column `j` of every `Cu_i` can be nonzero in rows `cu[j]` only.
+    pub cu: Vec<Range<usize>>,
 }
 
 impl StateSupport {
-    /// Empty, with room for an `nx`-state model's columns (refilled without allocating).
-    pub fn with_capacity(nx: usize) -> Self {
+    /// Empty, with room for an `nx`-state, `nu`-control model's columns (refilled without
+    /// allocating).
+    pub fn with_capacity(nx: usize, nu: usize) -> Self {
         StateSupport {
             a: Vec::with_capacity(nx),
+            b: Vec::with_capacity(nu),
             cx: Vec::with_capacity(nx),
+            cu: Vec::with_capacity(nu),
         }
+    }
+
+    /// Whether every column is there and lies within an `nx`-state, `nu`-control model's
+    /// Jacobians (a model's support that does not is ignored).
+    pub fn fits(&self, nx: usize, nu: usize) -> bool {
+        let ranges = |r: &[Range<usize>], cols: usize| {
+            r.len() == cols && r.iter().all(|r| Column::Rows(r.clone()).fits(nx))
+        };
+        self.a.len() == nx
+            && self.b.len() == nu
+            && self.a.iter().chain(&self.b).all(|c| c.fits(nx))
+            && ranges(&self.cx, nx)
+            && ranges(&self.cu, nu)
     }
 }
 
@@ -103,9 +153,10 @@ pub trait Dynamics: Send + Sync {
     fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         self.linearize(k, x, u, lin);
     }
-    /// Where `A` and the noise Jacobians `Cx_i` can be nonzero, if the model knows: `false`
-    /// (the default) when any entry may be; else `true`, with `support` filled ([`StateSupport`]).
-    /// The solvers then read a linearisation's nonzeros only there.
+    /// Where `A`, `B` and the noise Jacobians can be nonzero, if the model knows: `false` (the
+    /// default) when any entry may be; else `true`, with `support` filled ([`StateSupport`]).
+    /// The solvers then read a linearisation's nonzeros only there, and take its unit columns
+    /// without reading them.
     fn state_support(&self, support: &mut StateSupport) -> bool {
         let _ = support;
         false

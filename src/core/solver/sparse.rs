@@ -11,7 +11,7 @@
 //! read there only, which is the same pattern at a fraction of the reads.
 
 use crate::core::dense::zero;
-use crate::core::dynamics::{Linearization, NoiseKind, StateSupport};
+use crate::core::dynamics::{Column, Linearization, NoiseKind, StateSupport};
 use nalgebra::DMatrix;
 use std::ops::Range;
 
@@ -65,15 +65,38 @@ impl SparseColumns {
     /// [`SparseColumns::assign`] reading column `j` in rows `rows[j]` only, when given: the
     /// caller knows the entries outside are zero ([`StateSupport`]), and the result is the same.
     pub fn assign_within(&mut self, m: &DMatrix<f64>, rows: Option<&[Range<usize>]>) {
-        debug_assert_eq!((m.nrows(), m.ncols()), (self.nrows, self.ncols()));
         debug_assert!(rows.is_none_or(|r| r.len() == m.ncols()));
+        self.assign_columns(m, |j| match rows {
+            Some(r) => Column::Rows(r[j].clone()),
+            None => Column::Rows(0..m.nrows()),
+        });
+    }
+
+    /// [`SparseColumns::assign`] reading column `j` where `columns[j]` says it can be nonzero,
+    /// and a unit column's one without reading it: the caller knows the entries outside are
+    /// zero and the unit entries one ([`StateSupport`]), and the result is the same.
+    pub fn assign_support(&mut self, m: &DMatrix<f64>, columns: &[Column]) {
+        debug_assert_eq!(columns.len(), m.ncols());
+        self.assign_columns(m, |j| columns[j].clone());
+    }
+
+    fn assign_columns(&mut self, m: &DMatrix<f64>, column: impl Fn(usize) -> Column) {
+        debug_assert_eq!((m.nrows(), m.ncols()), (self.nrows, self.ncols()));
         let data = m.as_slice();
         let n = self.nrows;
         self.row.clear();
         self.val.clear();
         for j in 0..m.ncols() {
             self.start[j] = self.row.len();
-            let within = rows.map_or(0..n, |r| r[j].clone());
+            let within = match column(j) {
+                Column::Rows(r) => r,
+                Column::Unit(i) => {
+                    debug_assert_eq!(data[j * n + i], 1.0, "unit column {j}");
+                    self.row.push(i);
+                    self.val.push(1.0);
+                    continue;
+                }
+            };
             let first = within.start;
             let column = &data[j * n..(j + 1) * n][within];
             for (b, block) in column.chunks(8).enumerate() {
@@ -303,16 +326,24 @@ impl SparseLinearization {
     }
 
     /// Refills from a dense linearisation (the noise Jacobians only when state-dependent),
-    /// reading `A` and the `Cx_i` only within the model's `support` when it has one.
+    /// reading the Jacobians only within the model's `support` when it has one.
     pub fn assign(&mut self, lin: &Linearization, support: Option<&StateSupport>) {
-        self.a.assign_within(&lin.a, support.map(|s| &s.a[..]));
-        self.b.assign(&lin.b);
+        match support {
+            Some(s) => {
+                self.a.assign_support(&lin.a, &s.a);
+                self.b.assign_support(&lin.b, &s.b);
+            }
+            None => {
+                self.a.assign(&lin.a);
+                self.b.assign(&lin.b);
+            }
+        }
         if lin.noise == NoiseKind::Dependent {
             for (s, d) in self.cx.iter_mut().zip(&lin.cx) {
                 s.assign_within(d, support.map(|s| &s.cx[..]));
             }
             for (s, d) in self.cu.iter_mut().zip(&lin.cu) {
-                s.assign(d);
+                s.assign_within(d, support.map(|s| &s.cu[..]));
             }
         }
     }
@@ -469,6 +500,41 @@ pub(crate) mod tests {
                     .all(|(b, v)| b == v || (b.is_nan() && v.is_nan()))
             );
             assert!(same.filter(|(_, v)| **v != 0.0).count() == nonzeros);
+        }
+    }
+
+    /// A refill by a support with unit columns (a shift register's, as the delayed plant
+    /// declares) holds what a refill of the whole matrix holds, the units' ones included, and
+    /// a refill by ranges reads nothing outside them (junk there is not picked up).
+    #[test]
+    fn a_refill_by_the_support_is_the_whole_refill() {
+        let (n, c) = (12, 7);
+        let mut m = pattern(n, c, 11);
+        m.view_mut((4, 0), (n - 4, 3)).fill(0.0);
+        let mut columns = vec![Column::Rows(0..4); 3];
+        for j in 3..c {
+            m.column_mut(j).fill(0.0);
+            m[(j + 2, j)] = 1.0;
+            columns.push(Column::Unit(j + 2));
+        }
+        let (mut whole, mut by_support) = (SparseColumns::new(n, c), SparseColumns::new(n, c));
+        whole.assign(&m);
+        by_support.assign_support(&m, &columns);
+        for j in 0..c {
+            assert_eq!(whole.column(j), by_support.column(j), "column {j}");
+        }
+        let mut junk = m.clone();
+        junk.view_mut((4, 0), (n - 4, 3)).fill(7.0);
+        let rows: Vec<Range<usize>> = (0..c)
+            .map(|j| if j < 3 { 0..4 } else { j + 2..j + 3 })
+            .collect();
+        by_support.assign_within(&junk, Some(&rows));
+        for j in 0..c {
+            assert_eq!(
+                whole.column(j),
+                by_support.column(j),
+                "column {j} by ranges"
+            );
         }
     }
 }

@@ -171,7 +171,7 @@ impl Trajectory {
                 .collect(),
             linearized: false,
             relinearizable: false,
-            support: StateSupport::with_capacity(nx),
+            support: StateSupport::with_capacity(nx, nu),
             supported: false,
         }
     }
@@ -179,14 +179,10 @@ impl Trajectory {
     /// Forgets what belonged to the last solve's plant and reads this one's support (kept only
     /// if it fits the plant's size).
     fn start_solve(&mut self, problem: &Problem) {
-        let nx = problem.dynamics.nx();
+        let (nx, nu) = (problem.dynamics.nx(), problem.dynamics.nu());
         self.relinearizable = false;
-        let fits = |rows: &[std::ops::Range<usize>]| {
-            rows.len() == nx && rows.iter().all(|r| r.start <= r.end && r.end <= nx)
-        };
-        self.supported = problem.dynamics.state_support(&mut self.support)
-            && fits(&self.support.a)
-            && fits(&self.support.cx);
+        self.supported =
+            problem.dynamics.state_support(&mut self.support) && self.support.fits(nx, nu);
     }
 }
 
