@@ -188,6 +188,10 @@ impl crate::core::cost::Cost for DelayedCost<'_> {
     fn terminal_derivatives(&self, x: &[f64], d: &mut crate::core::cost::CostDerivatives) {
         self.inner.terminal_derivatives(x, d);
     }
+    fn hessian_support(&self) -> Option<std::ops::Range<usize>> {
+        // The plant's components: the commands in flight cost nothing.
+        self.inner.hessian_support()
+    }
     fn nonnegative(&self) -> bool {
         self.inner.nonnegative()
     }

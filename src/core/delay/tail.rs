@@ -89,6 +89,9 @@ impl<T: Cost + ?Sized> Cost for Offset<'_, T> {
     fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
         self.inner.terminal_derivatives(x, d);
     }
+    fn hessian_support(&self) -> Option<std::ops::Range<usize>> {
+        self.inner.hessian_support()
+    }
     fn nonnegative(&self) -> bool {
         self.inner.nonnegative()
     }

@@ -60,12 +60,14 @@ struct Next<'a> {
     rows: &'a DMatrix<f64>,
 }
 
-/// One knot's linearisation (dense and by its nonzeros) and cost derivatives.
+/// One knot's linearisation (dense and by its nonzeros) and cost derivatives, with the columns
+/// of `l_xx` that can be nonzero.
 #[derive(Clone, Copy)]
 struct KnotInputs<'a> {
     lin: &'a Linearization,
     d: &'a CostDerivatives,
     sp: &'a SparseLinearization,
+    hessian: &'a std::ops::Range<usize>,
 }
 
 impl Ilqg {
@@ -258,6 +260,7 @@ impl Ilqg {
                 lin,
                 d: &traj.derivs[k],
                 sp,
+                hessian: &traj.hessian,
             };
             let q0 = bw.q_function(next, knot, running, stochastic) + pass.s0;
             bw.regularize(&sp.b, lin, mu);
@@ -351,7 +354,7 @@ impl Backward {
     /// and `S Cx` is read only in the rows that `Cu` takes
     /// ([`tr_mul_product_add`](crate::core::solver::sparse::SparseColumns::tr_mul_product_add)).
     fn q_function(&mut self, next: Next, knot: KnotInputs, running: f64, stochastic: bool) -> f64 {
-        let KnotInputs { lin, d, sp } = knot;
+        let KnotInputs { lin, d, sp, .. } = knot;
         let (a, b) = (&sp.a, &sp.b);
         let s = next.s;
         let mut q0 = running;
@@ -388,20 +391,41 @@ impl Backward {
     /// `(S A)ᵀ` that `A`'s column `j` takes (one on the 42-state delayed plant's shift columns),
     /// then the rows of `S Cx_i` that `Cx_i`'s column `j` takes (none outside the plant).
     fn q_column(&mut self, next: Next, knot: KnotInputs, stochastic: bool, j: usize) {
-        let KnotInputs { lin, d, sp } = knot;
+        let KnotInputs {
+            lin,
+            d,
+            sp,
+            hessian,
+        } = knot;
         let n = self.qcol.len();
-        let base = &d.lxx.as_slice()[j * n..(j + 1) * n];
+        // A column of `l_xx` outside the cost's support is +0 (not read: see
+        // `Cost::hessian_support`), and `0 + x` is what adding it gives, to the bit.
+        let base = hessian
+            .contains(&j)
+            .then(|| &d.lxx.as_slice()[j * n..(j + 1) * n]);
         let (q, row) = (self.qcol.as_mut_slice(), self.row.as_mut_slice());
         let (rows, vals) = sp.a.column(j);
         if rows.is_empty() {
-            q.copy_from_slice(base);
+            match base {
+                Some(base) => q.copy_from_slice(base),
+                None => q.fill(0.0),
+            }
         }
         let sat = self.sat.as_slice();
         for (t, (&i, &a)) in rows.iter().zip(vals).enumerate() {
             let si = &sat[i * n..(i + 1) * n];
             if t == 0 {
-                for ((q, b), r) in q.iter_mut().zip(base).zip(si) {
-                    *q = b + a * r;
+                match base {
+                    Some(base) => {
+                        for ((q, b), r) in q.iter_mut().zip(base).zip(si) {
+                            *q = b + a * r;
+                        }
+                    }
+                    None => {
+                        for (q, r) in q.iter_mut().zip(si) {
+                            *q = 0.0 + a * r;
+                        }
+                    }
                 }
             } else {
                 for (q, r) in q.iter_mut().zip(si) {

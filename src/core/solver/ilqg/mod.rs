@@ -150,6 +150,9 @@ struct Trajectory {
     /// nonzeros are then read there only.
     support: StateSupport,
     supported: bool,
+    /// Where the cost's `l_xx` can be nonzero ([`Cost::hessian_support`], all of the state
+    /// when the cost does not say).
+    hessian: std::ops::Range<usize>,
 }
 
 impl Trajectory {
@@ -173,6 +176,7 @@ impl Trajectory {
             relinearizable: false,
             support: StateSupport::with_capacity(nx, nu),
             supported: false,
+            hessian: 0..nx,
         }
     }
 
@@ -183,6 +187,10 @@ impl Trajectory {
         self.relinearizable = false;
         self.supported =
             problem.dynamics.state_support(&mut self.support) && self.support.fits(nx, nu);
+        self.hessian = match problem.cost.hessian_support() {
+            Some(r) if r.start <= r.end && r.end <= nx => r,
+            _ => 0..nx,
+        };
     }
 }
 

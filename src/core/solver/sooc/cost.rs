@@ -98,6 +98,11 @@ impl Cost for MomentCost<'_> {
             .copy_from_slice(&self.terminal_weights);
     }
 
+    fn hessian_support(&self) -> Option<std::ops::Range<usize>> {
+        // The mean's: the expected cost is linear in the covariance.
+        self.inner.hessian_support()
+    }
+
     fn nonnegative(&self) -> bool {
         self.nonnegative
     }
