@@ -410,8 +410,8 @@ fn delayed_linearization_matches_finite_differences() {
 /// linearisation at another state and control is the fresh linearisation there, bit for bit:
 /// the entries it leaves alone are the ones every linearisation writes the same. Also when the
 /// last call was noise-free and left the noise Jacobians as they were (emulated by junk in
-/// them). And every nonzero of `A`, `B` and the noise Jacobians lies where `state_support`
-/// says, and its unit columns hold their one, so reading the nonzeros there (and taking the
+/// them). And every nonzero of `A`, `B`, the noise columns and their Jacobians lies where
+/// `state_support` says, and its unit columns hold their one, so reading the nonzeros there (and taking the
 /// unit columns' ones unread) finds them all. The fused calls (`step_linearized` into a
 /// poisoned buffer, `step_relinearized` into one that holds another point's) give the same
 /// linearisation and the step to the bit, and the model without its noise (`NoiseFree`) the
@@ -497,8 +497,10 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                     r.iter().cloned().map(Column::Rows).collect()
                 };
                 let (cx, cu) = (ranges(&support.cx), ranges(&support.cu));
+                let c = vec![Column::Rows(support.c.clone()); fresh.c.ncols()];
                 let jacobians = [("A", &fresh.a, &support.a), ("B", &fresh.b, &support.b)]
                     .into_iter()
+                    .chain(std::iter::once(("c", &fresh.c, &c)))
                     .chain(fresh.cx.iter().map(|m| ("Cx", m, &cx)))
                     .chain(fresh.cu.iter().map(|m| ("Cu", m, &cu)));
                 for (what, m, columns) in jacobians {

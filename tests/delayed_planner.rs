@@ -6,9 +6,9 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::core::cost::TrackingCost;
+use vic::core::cost::{Cost, CostDerivatives, TrackingCost};
 use vic::core::delay::{Delayed, DelayedPlanner, Offset};
-use vic::core::dynamics::{DiscreteDynamics, Dynamics};
+use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
 use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem};
 use vic::planning::plan::{self, DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
@@ -261,4 +261,90 @@ fn wrong_problems_and_a_replan_before_a_plan_are_errors() {
         planner.solve(&plain, &short, &setup.u_init),
         Err(IlqgError::SizeMismatch { .. })
     ));
+}
+
+/// The augmented plant with what it declares of its structure hidden: no state support (the
+/// solver then reads its Jacobians' nonzeros everywhere, keeps whole value Hessians and reads
+/// them in every row), and a cost that does not say where its Hessian lives.
+struct Hidden<'a>(&'a Delayed<DiscreteDynamics>);
+
+impl Dynamics for Hidden<'_> {
+    fn nx(&self) -> usize {
+        self.0.nx()
+    }
+    fn nu(&self) -> usize {
+        self.0.nu()
+    }
+    fn nw(&self) -> usize {
+        self.0.nw()
+    }
+    fn step(&self, k: usize, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.0.step(k, x, u, next)
+    }
+    fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut nalgebra::DMatrix<f64>) {
+        self.0.noise_gain(k, x, u, out)
+    }
+    fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+        self.0.linearize(k, x, u, lin)
+    }
+}
+
+struct HiddenCost<'a>(&'a DelayedCost<'a>);
+
+impl Cost for HiddenCost<'_> {
+    fn running(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
+        self.0.running(k, x, u)
+    }
+    fn terminal(&self, x: &[f64]) -> f64 {
+        self.0.terminal(x)
+    }
+    fn running_derivatives(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
+        self.0.running_derivatives(k, x, u, d)
+    }
+    fn terminal_derivatives(&self, x: &[f64], d: &mut CostDerivatives) {
+        self.0.terminal_derivatives(x, d)
+    }
+    fn nonnegative(&self) -> bool {
+        self.0.nonnegative()
+    }
+}
+
+/// What the delayed plant and its cost declare of their structure (the shift register's unit
+/// columns, the rows of the noise, the cost Hessian's support) only saves reads and writes: the
+/// stochastic ILQG solve on the augmented plant with the noise is the solve without them, to
+/// the bit (commands, gains, costs and iterations).
+#[test]
+fn the_declared_structure_changes_no_plan() {
+    let (s, setup, delayed) = load(&[]);
+    let n = setup.x0.len();
+    let cost = DelayedCost::new(&setup.cost, n);
+    assert!(cost.hessian_support().is_some());
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let plain = setup.problem(s.task.steps);
+    let u0 = guess(&setup, &plain, delayed.steps(), &s.solver.options);
+    let (hidden, hidden_cost) = (Hidden(&delayed), HiddenCost(&cost));
+    let solve = |dynamics: &dyn Dynamics, cost: &dyn Cost| {
+        let problem = Problem {
+            dynamics,
+            cost,
+            x0: x0.clone(),
+            horizon: s.task.steps,
+            bounds: setup.bounds.clone(),
+        };
+        let mut solver = Ilqg::new(&problem, s.solver.options.clone());
+        let sol = solver.try_solve(&problem, &u0).expect("solves");
+        let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let u: Vec<_> = sol.u.iter().flat_map(|u| bits(u.as_slice())).collect();
+        let gains: Vec<_> = sol.gains.iter().flat_map(|g| bits(g.as_slice())).collect();
+        (
+            u,
+            gains,
+            sol.cost.to_bits(),
+            sol.expected_cost.to_bits(),
+            sol.iterations,
+        )
+    };
+    let declared = solve(&delayed, &cost);
+    assert!(declared.4 > 3, "{} iterations", declared.4);
+    assert!(declared == solve(&hidden, &hidden_cost));
 }

@@ -166,6 +166,7 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
                 support.cx.push(0..0);
             }
         }
+        support.c = 0..n;
         for j in 0..m {
             if self.steps == 0 {
                 support.b.push(Column::Rows(0..n));

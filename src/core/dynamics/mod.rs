@@ -100,6 +100,10 @@ pub struct StateSupport {
     pub cx: Vec<Range<usize>>,
     /// Column `j` of every `Cu_i` can be nonzero in rows `cu[j]` only.
     pub cu: Vec<Range<usize>>,
+    /// The noise columns `c_i` can be nonzero in these rows only (the plant's, on the delayed
+    /// plant): the stochastic merit reads the value Hessians there only, and the solver keeps
+    /// only those rows and columns of them per knot.
+    pub c: Range<usize>,
 }
 
 impl StateSupport {
@@ -111,6 +115,7 @@ impl StateSupport {
             b: Vec::with_capacity(nu),
             cx: Vec::with_capacity(nx),
             cu: Vec::with_capacity(nu),
+            c: 0..0,
         }
     }
 
@@ -125,6 +130,7 @@ impl StateSupport {
             && self.a.iter().chain(&self.b).all(|c| c.fits(nx))
             && ranges(&self.cx, nx)
             && ranges(&self.cu, nu)
+            && Column::Rows(self.c.clone()).fits(nx)
     }
 }
 

@@ -211,20 +211,17 @@ impl Ilqg {
         let bw = &mut self.bw;
         let traj = &self.nominal;
         let term = &traj.derivs[horizon];
-        // The value Hessian `S_{k+1}` the knot reads: in a stochastic pass the merit's
-        // `value_hessians[k]`, which the value update of knot k + 1 writes (no copy of a
-        // 42×42 matrix per knot on the delayed plant); otherwise `s_mat`, updated in place.
-        // `S_0` ends in `s_mat` either way ([`Ilqg::value_scale`]).
+        // The value Hessian `S_{k+1}` the knot reads is `s_mat`, and `S_k` goes to `spare`,
+        // which then takes its place; `S_0` ends in `s_mat` ([`Ilqg::value_scale`]). A
+        // stochastic pass keeps each `S_{k+1}` for the merit in the rows where the noise acts
+        // only: the delayed plant's 2 of 42 (a whole 42×42 matrix per knot was a stream of
+        // 2 MB written per pass).
         let mut s_mat = take(&mut bw.s_mat);
-        let chained = stochastic && horizon > 0;
-        copy(
-            &term.lxx,
-            if chained {
-                &mut self.value_hessians[horizon - 1]
-            } else {
-                &mut s_mat
-            },
-        );
+        let noise = traj.noise_rows();
+        copy(&term.lxx, &mut s_mat);
+        if stochastic && horizon > 0 {
+            keep_block(&s_mat, &noise, &mut self.value_hessians[horizon - 1]);
+        }
         copy(&term.lx, &mut bw.s_vec);
         let mut pass = BackwardPass {
             s0: traj.terminal,
@@ -236,16 +233,8 @@ impl Ilqg {
         for k in (0..horizon).rev() {
             let running = traj.running[k];
             let (lin, sp) = (&traj.lin[k], &traj.sparse[k]);
-            // `S_{k+1}` and where `S_k` goes: without the chain, `spare`, which then takes
-            // `s_mat`'s place (the update reads `S_{k+1}` while it writes `S_k`).
-            let (s_next, s_here) = match (chained, k) {
-                (true, 0) => (&self.value_hessians[0], &mut s_mat),
-                (true, _) => {
-                    let (head, tail) = self.value_hessians.split_at_mut(k);
-                    (&tail[0], &mut head[k - 1])
-                }
-                (false, _) => (&s_mat, &mut spare),
-            };
+            // The update reads `S_{k+1}` while it writes `S_k`.
+            let (s_next, s_here) = (&s_mat, &mut spare);
             // Every later `S` is symmetric to the bit (the value update makes it so); a
             // terminal Hessian need not be.
             let transposed = k + 1 == horizon && !symmetric(s_next);
@@ -282,8 +271,9 @@ impl Ilqg {
                 &self.gains[k],
                 s_here,
             );
-            if !chained {
-                std::mem::swap(&mut s_mat, &mut spare);
+            std::mem::swap(&mut s_mat, &mut spare);
+            if stochastic && k > 0 {
+                keep_block(&s_mat, &noise, &mut self.value_hessians[k - 1]);
             }
             pass.s0 = q0 + lqu + 0.5 * lquul;
             pass.dv1 += lqu;
@@ -291,6 +281,16 @@ impl Ilqg {
         }
         (bw.s_mat, bw.spare, bw.s_rows) = (s_mat, spare, s_rows);
         (!failed).then_some(pass)
+    }
+}
+
+/// Copies the rows and columns `rows` of `s` into the same entries of `kept`.
+fn keep_block(s: &DMatrix<f64>, rows: &std::ops::Range<usize>, kept: &mut DMatrix<f64>) {
+    let n = s.nrows();
+    let (sd, kd) = (s.as_slice(), kept.as_mut_slice());
+    for j in rows.clone() {
+        let r = j * n + rows.start..j * n + rows.end;
+        kd[r.clone()].copy_from_slice(&sd[r]);
     }
 }
 

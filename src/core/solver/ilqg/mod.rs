@@ -180,6 +180,16 @@ impl Trajectory {
         }
     }
 
+    /// The rows where the model's noise columns can be nonzero (all of them unless its support
+    /// says): those of the value Hessians the stochastic merit reads.
+    fn noise_rows(&self) -> std::ops::Range<usize> {
+        if self.supported {
+            self.support.c.clone()
+        } else {
+            0..self.x[0].len()
+        }
+    }
+
     /// Forgets what belonged to the last solve's plant and reads this one's support (kept only
     /// if it fits the plant's size).
     fn start_solve(&mut self, problem: &Problem) {
@@ -287,7 +297,8 @@ pub struct Ilqg {
     ff: Vec<DVector<f64>>,
     gains: Vec<DMatrix<f64>>,
     bw: Backward,
-    /// `S_{k+1}` of the last backward pass, per step (for the merit).
+    /// `S_{k+1}` of the last stochastic backward pass, per step (for the merit), in the rows
+    /// and columns where the noise acts (`Trajectory::noise_rows`).
     value_hessians: Vec<DMatrix<f64>>,
     noise_scratch: DMatrix<f64>,
     dims: (usize, usize, usize, usize),
@@ -557,6 +568,9 @@ impl Ilqg {
 
     /// The value Hessians `S_{k+1}` that the last stochastic backward pass left for each knot
     /// `k` (the line search's merit reads them; a deterministic pass leaves them as they were).
+    /// Only their rows and columns where the noise can act are kept: all of them unless the
+    /// model declares those rows ([`StateSupport::c`]: the delayed plant's are the plant's),
+    /// and the entries outside are stale.
     pub fn value_hessians(&self) -> &[DMatrix<f64>] {
         &self.value_hessians
     }

@@ -116,6 +116,10 @@ impl Ilqg {
             return traj.cost;
         }
         let g = &mut self.noise_scratch;
+        // The rows where the noise can act (the delayed plant's: the plant's), the only ones
+        // of the value Hessians kept (see `backward`).
+        let rows = traj.noise_rows();
+        let (first, len) = (rows.start, rows.len());
         let mut noise = 0.0;
         for k in 0..problem.horizon {
             problem
@@ -123,14 +127,12 @@ impl Ilqg {
                 .noise_gain(k, traj.x[k].as_slice(), traj.u[k].as_slice(), g);
             let s = &self.value_hessians[k];
             for i in 0..g.ncols() {
-                let c = g.column(i);
+                let c = g.view((first, i), (len, 1));
                 let mut q = 0.0;
-                for a in 0..c.len() {
-                    // The noise lives in the plant's rows (the delayed plant's commands in
-                    // flight carry none): a zero entry would add exactly 0 after a dot
-                    // product over the whole state, so it is skipped.
+                for a in 0..len {
+                    // A zero entry would add exactly 0, so it is skipped.
                     if c[a] != 0.0 {
-                        q += c[a] * s.column(a).dot(&c);
+                        q += c[a] * s.view((first, first + a), (len, 1)).dot(&c);
                     }
                 }
                 noise += 0.5 * q;
