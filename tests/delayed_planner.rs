@@ -265,8 +265,10 @@ fn wrong_problems_and_a_replan_before_a_plan_are_errors() {
 
 /// The augmented plant with what it declares of its structure hidden: no state support (the
 /// solver then reads its Jacobians' nonzeros everywhere, keeps whole value Hessians and reads
-/// them in every row), and a cost that does not say where its Hessian lives.
-struct Hidden<'a>(&'a Delayed<DiscreteDynamics>);
+/// them in every row), and a cost that does not say where its Hessian lives. With a nonzero
+/// `.1`, its `A` also has that in every entry the plant's is zero (approximate Jacobians,
+/// for a workspace to hold entries where a plant with a support has none).
+struct Hidden<'a>(&'a Delayed<DiscreteDynamics>, f64);
 
 impl Dynamics for Hidden<'_> {
     fn nx(&self) -> usize {
@@ -285,7 +287,11 @@ impl Dynamics for Hidden<'_> {
         self.0.noise_gain(k, x, u, out)
     }
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.0.linearize(k, x, u, lin)
+        self.0.linearize(k, x, u, lin);
+        lin.a
+            .iter_mut()
+            .filter(|v| **v == 0.0)
+            .for_each(|v| *v = self.1);
     }
 }
 
@@ -322,7 +328,7 @@ fn the_declared_structure_changes_no_plan() {
     let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
     let plain = setup.problem(s.task.steps);
     let u0 = guess(&setup, &plain, delayed.steps(), &s.solver.options);
-    let (hidden, hidden_cost) = (Hidden(&delayed), HiddenCost(&cost));
+    let (hidden, hidden_cost) = (Hidden(&delayed, 0.0), HiddenCost(&cost));
     let solve = |dynamics: &dyn Dynamics, cost: &dyn Cost| {
         let problem = Problem {
             dynamics,
@@ -347,4 +353,81 @@ fn the_declared_structure_changes_no_plan() {
     let declared = solve(&delayed, &cost);
     assert!(declared.4 > 3, "{} iterations", declared.4);
     assert!(declared == solve(&hidden, &hidden_cost));
+}
+
+/// A workspace keeps its linearisations from one solve to the next when the plant declares the
+/// same support (they are refilled, not cleared): a noisy solve on the augmented plant in a
+/// workspace that last solved another plant with the same support (another forearm mass, read
+/// some knots late), or the same problem, is the solve in a fresh workspace, to the bit; and so
+/// is one after a plant that declares nothing.
+#[test]
+fn a_workspace_refilled_across_solves_gives_the_fresh_plans() {
+    let (s, setup, delayed) = load(&[]);
+    let (_, other_setup, other) = load(&["plant.mass=1.3"]);
+    let n = setup.x0.len();
+    let (cost, other_cost) = (
+        DelayedCost::new(&setup.cost, n),
+        DelayedCost::new(&other_setup.cost, n),
+    );
+    let late = (Offset::new(&other, 3), Offset::new(&other_cost, 3));
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let plain = setup.problem(s.task.steps);
+    let u0 = guess(&setup, &plain, delayed.steps(), &s.solver.options);
+    fn problem<'a>(
+        (dynamics, cost): (&'a dyn Dynamics, &'a dyn Cost),
+        x0: &[f64],
+        s: &Scenario,
+        setup: &Setup,
+    ) -> Problem<'a> {
+        Problem {
+            dynamics,
+            cost,
+            x0: x0.to_vec(),
+            horizon: s.task.steps,
+            bounds: setup.bounds.clone(),
+        }
+    }
+    let problem = |parts| problem(parts, &x0, &s, &setup);
+    let (here, there) = (problem((&delayed, &cost)), problem((&late.0, &late.1)));
+    let hidden = (Hidden(&other, 1e-6), HiddenCost(&other_cost));
+    let elsewhere = problem((&hidden.0, &hidden.1));
+    let bits = |sol: &vic::core::solver::Solution| {
+        let mut all: Vec<u64> = sol
+            .u
+            .iter()
+            .flat_map(|u| u.iter().map(|v| v.to_bits()))
+            .collect();
+        all.extend(sol.gains.iter().flat_map(|g| g.iter().map(|v| v.to_bits())));
+        all.extend([
+            sol.cost.to_bits(),
+            sol.expected_cost.to_bits(),
+            sol.iterations as u64,
+        ]);
+        all
+    };
+    let fresh = |p: &Problem| {
+        let mut solver = Ilqg::new(p, s.solver.options.clone());
+        bits(&solver.try_solve(p, &u0).expect("solves"))
+    };
+    let (want_here, want_there) = (fresh(&here), fresh(&there));
+    assert_ne!(want_here, want_there);
+    let mut solver = Ilqg::new(&here, s.solver.options.clone());
+    for (p, want, what) in [
+        (&here, &want_here, "first"),
+        (
+            &there,
+            &want_there,
+            "after another plant with the same support",
+        ),
+        (&here, &want_here, "again, after it"),
+        (
+            &elsewhere,
+            &fresh(&elsewhere),
+            "a plant that declares nothing",
+        ),
+        (&here, &want_here, "after that one"),
+    ] {
+        let got = bits(&solver.try_solve(p, &u0).expect("solves"));
+        assert!(&got == want, "{what}");
+    }
 }

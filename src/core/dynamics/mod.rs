@@ -162,7 +162,11 @@ pub trait Dynamics: Send + Sync {
     /// Where `A`, `B` and the noise Jacobians can be nonzero, if the model knows: `false` (the
     /// default) when any entry may be; else `true`, with `support` filled ([`StateSupport`]).
     /// The solvers then read a linearisation's nonzeros only there, and take its unit columns
-    /// without reading them.
+    /// without reading them. A model that declares a support promises more of
+    /// [`Dynamics::relinearize`]: into a buffer that holds a linearisation of *any* model with
+    /// the same support (the entries the support fixes are then in place), it gives the fresh
+    /// linearisation; the solvers keep such buffers from one solve to the next instead of
+    /// clearing them.
     fn state_support(&self, support: &mut StateSupport) -> bool {
         let _ = support;
         false

@@ -136,20 +136,28 @@ struct Trajectory {
     /// Whether `lin`, `sparse` and `derivs` belong to `x` and `u` (set by [`rollout::linearize`] and
     /// by a complete fused rollout, cleared when a rollout starts).
     linearized: bool,
-    /// Whether every `lin[k]` and `derivs[k]` hold the linearisation of this solve's plant and
-    /// the derivatives of its cost at knot `k` (from any state), so that
-    /// [`Dynamics::relinearize`] and [`Cost::running_derivatives_again`] may refill them: set by
-    /// a complete linearisation, cleared when a solve starts (another solve may bring another
-    /// plant or cost).
+    /// Whether every `lin[k]` holds a linearisation of this solve's plant at knot `k` (from any
+    /// state), or of any plant with the same support, so that [`Dynamics::relinearize`] may
+    /// refill it: set by a complete linearisation, kept when the next solve's plant declares
+    /// the same support (it then writes every entry the support leaves open, and the others
+    /// are fixed by it), cleared otherwise (another solve may bring another plant).
     ///
     /// [`Dynamics::relinearize`]: crate::core::dynamics::Dynamics::relinearize
-    /// [`Cost::running_derivatives_again`]: crate::core::cost::Cost::running_derivatives_again
     relinearizable: bool,
+    /// Whether every `derivs[k]` holds the derivatives of this solve's cost at knot `k` (from
+    /// any state), so that [`Cost::running_derivatives_again`] may refill them: set by a
+    /// complete linearisation, cleared when a solve starts (another solve may bring another
+    /// cost).
+    ///
+    /// [`Cost::running_derivatives_again`]: crate::core::cost::Cost::running_derivatives_again
+    differentiated: bool,
     /// Where the plant's `A` and `Cx_i` can be nonzero, when it says
     /// ([`Dynamics::state_support`](crate::core::dynamics::Dynamics::state_support)): the
     /// nonzeros are then read there only.
     support: StateSupport,
     supported: bool,
+    /// The support of the last solve's plant (kept to compare with the next one's).
+    last_support: StateSupport,
     /// Where the cost's `l_xx` can be nonzero ([`Cost::hessian_support`], all of the state
     /// when the cost does not say).
     hessian: std::ops::Range<usize>,
@@ -174,8 +182,10 @@ impl Trajectory {
                 .collect(),
             linearized: false,
             relinearizable: false,
+            differentiated: false,
             support: StateSupport::with_capacity(nx, nu),
             supported: false,
+            last_support: StateSupport::with_capacity(nx, nu),
             hessian: 0..nx,
         }
     }
@@ -190,13 +200,19 @@ impl Trajectory {
         }
     }
 
-    /// Forgets what belonged to the last solve's plant and reads this one's support (kept only
-    /// if it fits the plant's size).
+    /// Forgets what belonged to the last solve's plant and cost and reads this one's support
+    /// (kept only if it fits the plant's size). The linearisations stay refillable when the
+    /// last plant declared the same support: the delayed planner's solves and replans then
+    /// skip clearing 42² entries of `A` and of each noise Jacobian at every knot (a twentieth
+    /// of a noisy delayed plan).
     fn start_solve(&mut self, problem: &Problem) {
         let (nx, nu) = (problem.dynamics.nx(), problem.dynamics.nu());
-        self.relinearizable = false;
+        let refillable = self.relinearizable && self.supported;
+        std::mem::swap(&mut self.support, &mut self.last_support);
         self.supported =
             problem.dynamics.state_support(&mut self.support) && self.support.fits(nx, nu);
+        self.relinearizable = refillable && self.supported && self.support == self.last_support;
+        self.differentiated = false;
         self.hessian = match problem.cost.hessian_support() {
             Some(r) if r.start <= r.end && r.end <= nx => r,
             _ => 0..nx,

@@ -60,9 +60,12 @@ pub(super) fn rollout(
             let (lin, d) = (&mut traj.lin[k], &mut traj.derivs[k]);
             if traj.relinearizable {
                 problem.dynamics.step_relinearized(k, x, u, next, lin);
-                problem.cost.running_derivatives_again(k, x, u, d);
             } else {
                 problem.dynamics.step_linearized(k, x, u, next, lin);
+            }
+            if traj.differentiated {
+                problem.cost.running_derivatives_again(k, x, u, d);
+            } else {
                 problem.cost.running_derivatives(k, x, u, d);
             }
             if pattern {
@@ -91,6 +94,7 @@ pub(super) fn rollout(
         problem.cost.terminal_derivatives(end, &mut traj.derivs[h]);
         traj.linearized = true;
         traj.relinearizable = true;
+        traj.differentiated = true;
     }
     Ok(())
 }
@@ -106,7 +110,7 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
     let h = problem.horizon;
     let (xs, us) = (&traj.x, &traj.u);
     let pattern = !reads_in_place(problem.dynamics.nx(), problem.dynamics.nu());
-    let again = traj.relinearizable;
+    let (again, differentiated) = (traj.relinearizable, traj.differentiated);
     let support = traj.supported.then_some(&traj.support);
     let knot = |k: usize,
                 lin: &mut Linearization,
@@ -121,7 +125,7 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
         if pattern {
             sparse.assign(lin, support);
         }
-        if again {
+        if differentiated {
             problem.cost.running_derivatives_again(k, x, u, d);
         } else {
             problem.cost.running_derivatives(k, x, u, d);
@@ -150,6 +154,7 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
         .terminal_derivatives(xs[h].as_slice(), &mut traj.derivs[h]);
     traj.linearized = true;
     traj.relinearizable = true;
+    traj.differentiated = true;
 }
 
 /// [`linearize`] unless a fused rollout already did.
