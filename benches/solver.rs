@@ -219,6 +219,35 @@ fn solvers(c: &mut Criterion) {
         })
     });
 
+    // The same plan with the scenario's state-dependent noise (as `vic plan --method ilqg`
+    // plans it): the undelayed tail problem, then stochastic ILQG on the 42-state plant from
+    // its solution (issue 12's target row: ≤ 20 ms).
+    let (s, setup) = load("single_joint_delay.toml", &[]);
+    let delayed = Delayed::new(setup.dynamics.clone(), d);
+    let cost = plan::DelayedCost::new(&setup.cost, nx);
+    let problem = Problem {
+        dynamics: &delayed,
+        cost: &cost,
+        x0: delayed.initial_state(&setup.x0, setup.u_init[0].as_slice()),
+        horizon: s.task.steps,
+        bounds: setup.bounds.clone(),
+    };
+    let plain = setup.problem(s.task.steps);
+    let mut planner = DelayedPlanner::new(&plain, &problem, &s.solver.options).expect("fits");
+    let sol = planner
+        .solve(&plain, &problem, &setup.u_init)
+        .expect("plans");
+    eprintln!(
+        "single_joint_delay_200ms_noise: {} iterations on the undelayed plant, {} stochastic on the 42-state plant, {:.3} ms (single run), expected cost {:.10}",
+        sol.guess_iterations,
+        sol.solution.iterations,
+        sol.solution.solve_time.as_secs_f64() * 1e3,
+        sol.solution.expected_cost
+    );
+    group.bench_function("single_joint_delay_200ms_noise", |b| {
+        b.iter(|| black_box(planner.solve(&plain, &problem, &setup.u_init)))
+    });
+
     // SOOC at full noise from the configured warm start, capped at a few iterations: the cost of
     // one iteration on the moment dynamics (z = (m, vech P): 14 dims for the type-2 arm, 44 for
     // the VSA).

@@ -27,6 +27,11 @@ pub struct SparseColumns {
     /// faulting in and clearing memory it never read.
     row: Vec<usize>,
     val: Vec<f64>,
+    /// The columns from the first to the last that holds a nonzero (empty when none does). The
+    /// products `Mᵀ v` skip the empty columns outside: a skipped column would add `α · (−0)`
+    /// (an empty sum is `−0`), which changes nothing for a positive or `+0` factor. The delayed
+    /// plant's noise Jacobians `Cx_i` hold nonzeros in 4 of 42 columns, its `Cu_i` in none.
+    occupied: Range<usize>,
 }
 
 impl SparseColumns {
@@ -37,6 +42,7 @@ impl SparseColumns {
             start: vec![0; ncols + 1],
             row: Vec::with_capacity(nrows * ncols),
             val: Vec::with_capacity(nrows * ncols),
+            occupied: 0..0,
         }
     }
 
@@ -113,6 +119,21 @@ impl SparseColumns {
         }
         let ncols = self.ncols();
         self.start[ncols] = self.row.len();
+        let held = |j: &usize| self.start[j + 1] > self.start[*j];
+        self.occupied = match (0..ncols).find(held) {
+            Some(first) => first..(first..ncols).rfind(held).map_or(first, |j| j + 1),
+            None => 0..0,
+        };
+    }
+
+    /// The columns `Mᵀ v` must visit for a factor `α`: the occupied ones when `α` is `+0` or
+    /// positive and finite (`α · (−0) = −0` then), else all (see `occupied`).
+    fn visited(&self, alpha: f64) -> Range<usize> {
+        if alpha.is_sign_positive() && alpha.is_finite() {
+            self.occupied.clone()
+        } else {
+            0..self.ncols()
+        }
     }
 
     /// The rows and values of column `j`'s nonzeros, in ascending row order.
@@ -156,7 +177,7 @@ impl SparseColumns {
     ) {
         let q = other.ncols();
         debug_assert_eq!((out.nrows(), out.ncols()), (self.ncols(), q));
-        for j in 0..self.ncols() {
+        for j in self.visited(alpha) {
             let (idx, vals) = self.column(j);
             rows.clear();
             rows.resize(idx.len() * q, 0.0);
@@ -264,7 +285,8 @@ impl ColumnProducts for SparseColumns {
     }
 
     fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]) {
-        for (j, yj) in y.iter_mut().enumerate().take(self.ncols()) {
+        let cols = self.visited(alpha);
+        for (j, yj) in y.iter_mut().enumerate().take(cols.end).skip(cols.start) {
             let (rows, vals) = self.column(j);
             let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * v[i]).sum();
             *yj += alpha * dot;
@@ -282,10 +304,11 @@ impl ColumnProducts for SparseColumns {
         let xd = x.as_slice();
         let rows_out = out.nrows();
         let od = out.as_mut_slice();
+        let cols = self.visited(alpha);
         for c in 0..x.ncols() {
             let xc = &xd[c * n..(c + 1) * n];
             let oc = &mut od[c * rows_out..(c + 1) * rows_out];
-            for (j, o) in oc.iter_mut().enumerate() {
+            for (j, o) in oc.iter_mut().enumerate().take(cols.end).skip(cols.start) {
                 let (rows, vals) = self.column(j);
                 let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * xc[i]).sum();
                 *o += alpha * dot;
@@ -535,6 +558,78 @@ pub(crate) mod tests {
                 by_support.column(j),
                 "column {j} by ranges"
             );
+        }
+    }
+
+    /// Skipping the empty columns outside the occupied ones changes no bit of `y += α Mᵀ v`,
+    /// `out += α Mᵀ X` and `out += α Mᵀ (S N)` (outputs holding zeros of both signs, factors of
+    /// both signs and zero), against every column visited; nor for a matrix with no nonzero.
+    #[test]
+    fn skipping_empty_columns_changes_no_bit() {
+        let (n, c) = (6, 9);
+        for (seed, occupied) in [(1, 2..5), (2, 0..0), (3, 0..9), (4, 8..9)] {
+            let mut m = pattern(n, c, seed);
+            for j in (0..c).filter(|j| !occupied.contains(j)) {
+                m.column_mut(j).fill(0.0);
+            }
+            let mut sp = SparseColumns::new(n, c);
+            sp.assign(&m);
+            let v: Vec<f64> = pattern(n, 1, seed + 10).iter().copied().collect();
+            let x = pattern(n, 3, seed + 20);
+            let s = {
+                let a = pattern(n, n, seed + 30);
+                &a + a.transpose()
+            };
+            let other = {
+                let mut o = SparseColumns::new(n, 2);
+                o.assign(&pattern(n, 2, seed + 40));
+                o
+            };
+            for alpha in [1.0, 0.5, 0.0, -0.0, -1.0] {
+                let start: Vec<f64> = (0..c).map(|j| [0.0, -0.0, 1.5][j % 3]).collect();
+                let (mut y, mut want) = (start.clone(), start.clone());
+                sp.tr_mul_vec_add(alpha, &v, &mut y);
+                for (j, w) in want.iter_mut().enumerate() {
+                    let (rows, vals) = sp.column(j);
+                    let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * v[i]).sum();
+                    *w += alpha * dot;
+                }
+                let bits = |y: &[f64]| y.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&y), bits(&want), "Mᵀ v, seed {seed}, α {alpha}");
+                let dirty = DMatrix::from_fn(c, 3, |i, j| [0.0, -0.0, 2.0][(i + j) % 3]);
+                let (mut out, mut want) = (dirty.clone(), dirty.clone());
+                sp.tr_mul_add(alpha, &x, &mut out);
+                for q in 0..3 {
+                    for j in 0..c {
+                        let (rows, vals) = sp.column(j);
+                        let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * x[(i, q)]).sum();
+                        want[(j, q)] += alpha * dot;
+                    }
+                }
+                assert_eq!(
+                    bits(out.as_slice()),
+                    bits(want.as_slice()),
+                    "Mᵀ X, α {alpha}"
+                );
+                let dirty = DMatrix::from_fn(c, 2, |i, j| [0.0, -0.0, 2.0][(i + j) % 3]);
+                let (mut out, mut want) = (dirty.clone(), dirty.clone());
+                let mut rows = Vec::new();
+                sp.tr_mul_product_add(alpha, &s, &other, &mut rows, &mut out);
+                let mut sn = DMatrix::zeros(n, 2);
+                other.right_mul(&s, &mut sn);
+                for q in 0..2 {
+                    for j in 0..c {
+                        let (idx, vals) = sp.column(j);
+                        let dot: f64 = idx.iter().zip(vals).map(|(&i, &a)| a * sn[(i, q)]).sum();
+                        want[(j, q)] += alpha * dot;
+                    }
+                }
+                assert_eq!(
+                    bits(out.as_slice()),
+                    bits(want.as_slice()),
+                    "Mᵀ S N, α {alpha}"
+                );
+            }
         }
     }
 }

@@ -377,8 +377,11 @@ impl Backward {
                     let (cx, cu) = (&sp.cx[i], &sp.cu[i]);
                     cx.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qx.as_mut_slice());
                     cu.tr_mul_vec_add(1.0, self.sc.as_slice(), self.qu.as_mut_slice());
-                    cu.right_mul(s, &mut self.scu);
-                    cu.tr_mul_add(1.0, &self.scu, &mut self.quu);
+                    if cu.nnz() > 0 {
+                        // Else `S Cu` is zero and adds nothing (the delayed plant's `Cu_i`).
+                        cu.right_mul(s, &mut self.scu);
+                        cu.tr_mul_add(1.0, &self.scu, &mut self.quu);
+                    }
                     cu.tr_mul_product_add(1.0, next.rows, cx, &mut self.rows, &mut self.qux);
                 }
             }
