@@ -498,11 +498,11 @@ impl Ilqg {
         let mut stop = StopReason::MaxIterations;
         let mut finish_after_backward = false;
         let mut record = Convergence::untested(&self.options, reg.mu);
-        // Whether to linearise the next full step on the way: while the full steps of a
-        // deterministic solve are accepted (the next one likely is too). Not for stochastic
-        // solves: there a full step after a full step was rejected 3 times in 4 on the iCub
-        // elbow and the VSA arm (μ falls after a full step and the next one overshoots).
-        let mut full_steps = !stochastic;
+        // Which step length to linearise on the way: in a deterministic solve, the one accepted
+        // last (the next step likely has it too). Not in stochastic solves: there a full step
+        // after a full step was rejected 3 times in 4 on the iCub elbow and the VSA arm (μ
+        // falls after a full step and the next one overshoots).
+        let mut fuse = (!stochastic).then_some(1.0);
 
         for _ in 0..self.options.max_iterations {
             let Some(pass) = self.regularized_backward_pass(problem, &mut reg, stochastic) else {
@@ -526,8 +526,8 @@ impl Ilqg {
                 stop = StopReason::SmallImprovement;
                 break;
             }
-            let step = self.line_search(problem, &pass, merit_now, stochastic, full_steps);
-            full_steps = !stochastic && step.as_ref().is_some_and(|s| s.alpha == 1.0);
+            let step = self.line_search(problem, &pass, merit_now, stochastic, fuse);
+            fuse = step.as_ref().map(|s| s.alpha).filter(|_| !stochastic);
             match step {
                 Some(step) => {
                     std::mem::swap(&mut self.nominal, &mut self.candidate);

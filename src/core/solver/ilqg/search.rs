@@ -61,24 +61,24 @@ impl Ilqg {
     /// passes the nominal's: it would be rejected anyway, so the steps taken are the same, and
     /// the long steps the early iterations reject cost a fraction of a rollout.
     ///
-    /// With `fuse_full_step` the full step (α = 1) is linearised on the way ([`rollout`]): the
-    /// caller asks for it while full steps are being accepted, since a rejected trial's
-    /// Jacobians are wasted (they cost about two rollouts of the arm).
+    /// The trial of step length `fuse` is linearised on the way ([`rollout`]): the caller asks
+    /// for the length it expects to be accepted, since a rejected trial's Jacobians are wasted
+    /// (they cost about two rollouts of the arm).
     pub(super) fn line_search(
         &mut self,
         problem: &Problem,
         pass: &BackwardPass,
         merit_now: f64,
         stochastic: bool,
-        fuse_full_step: bool,
+        fuse: Option<f64>,
     ) -> Option<Step> {
         let limit = if !stochastic && problem.cost.nonnegative() {
             merit_now
         } else {
             f64::INFINITY
         };
-        for (i, alpha) in ALPHAS.into_iter().enumerate() {
-            if !self.roll_candidate(problem, alpha, limit, fuse_full_step && i == 0) {
+        for alpha in ALPHAS {
+            if !self.roll_candidate(problem, alpha, limit, fuse == Some(alpha)) {
                 continue;
             }
             let merit_new = self.merit(problem, stochastic, true);
