@@ -21,7 +21,8 @@ pub struct SparseColumns {
     nrows: usize,
     /// Entries of column `j` are `start[j]..start[j + 1]`.
     start: Vec<usize>,
-    /// The nonzeros' rows and values, column after column. Room for every entry is reserved but
+    /// The nonzeros' rows and values, column after column. Room is reserved ahead (for every
+    /// entry, or for what a model's support allows: [`SparseLinearization::make_room`]) but
     /// only the nonzeros are ever written: the 42-state delayed plant stores 46 of 1764 entries of
     /// `A` per knot, and a workspace that touched all of them spent a fifth of a stochastic plan
     /// faulting in and clearing memory it never read.
@@ -44,6 +45,23 @@ impl SparseColumns {
             val: Vec::with_capacity(nrows * ncols),
             occupied: 0..0,
         }
+    }
+
+    /// An `nrows × ncols` matrix without room for its nonzeros: see [`SparseColumns::make_room`].
+    pub fn without_room(nrows: usize, ncols: usize) -> Self {
+        SparseColumns {
+            nrows,
+            start: vec![0; ncols + 1],
+            row: Vec::new(),
+            val: Vec::new(),
+            occupied: 0..0,
+        }
+    }
+
+    /// Room for `nnz` nonzeros in all (allocates only if there is less).
+    pub fn make_room(&mut self, nnz: usize) {
+        self.row.reserve_exact(nnz.saturating_sub(self.row.len()));
+        self.val.reserve_exact(nnz.saturating_sub(self.val.len()));
     }
 
     /// Number of columns.
@@ -339,12 +357,54 @@ pub struct SparseLinearization {
 }
 
 impl SparseLinearization {
+    /// A linearisation's patterns without room for any nonzero yet: see
+    /// [`SparseLinearization::make_room`].
     pub fn new(nx: usize, nu: usize, nw: usize) -> Self {
         SparseLinearization {
-            a: SparseColumns::new(nx, nx),
-            b: SparseColumns::new(nx, nu),
-            cx: (0..nw).map(|_| SparseColumns::new(nx, nx)).collect(),
-            cu: (0..nw).map(|_| SparseColumns::new(nx, nu)).collect(),
+            a: SparseColumns::without_room(nx, nx),
+            b: SparseColumns::without_room(nx, nu),
+            cx: (0..nw)
+                .map(|_| SparseColumns::without_room(nx, nx))
+                .collect(),
+            cu: (0..nw)
+                .map(|_| SparseColumns::without_room(nx, nu))
+                .collect(),
+        }
+    }
+
+    /// Room for every nonzero a model with this `support` can have, or for every entry when
+    /// it has none: the refills then allocate nothing. Room once made is kept. The delayed
+    /// plant's 46 nonzeros of `A` and 8 of each `Cx_i` take 1 KB a knot where room for every
+    /// entry took 84 KB: the backward pass's few lines per knot lay scattered over 40 MB of
+    /// address space, and a plan spent about a tenth of its time on the page-table misses
+    /// (measured by backing the heap with huge pages: 0.88 of the time).
+    pub fn make_room(&mut self, support: Option<&StateSupport>) {
+        let len = |c: &Column| match c {
+            Column::Rows(r) => r.len(),
+            Column::Unit(_) => 1,
+        };
+        let (nx, nu) = (self.a.nrows, self.b.ncols());
+        match support {
+            Some(s) => {
+                self.a.make_room(s.a.iter().map(len).sum());
+                self.b.make_room(s.b.iter().map(len).sum());
+                for m in &mut self.cx {
+                    m.make_room(s.cx.iter().map(|r| r.len()).sum());
+                }
+                for m in &mut self.cu {
+                    m.make_room(s.cu.iter().map(|r| r.len()).sum());
+                }
+            }
+            None => {
+                self.a.make_room(nx * nx);
+                self.b.make_room(nx * nu);
+                for m in &mut self.cx {
+                    m.make_room(nx * nx);
+                }
+                for m in &mut self.cu {
+                    m.make_room(nx * nu);
+                }
+            }
         }
     }
 
@@ -373,263 +433,4 @@ impl SparseLinearization {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-
-    /// A random `r × c` matrix with about half its entries exactly zero.
-    pub(crate) fn pattern(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
-        let mut s = seed;
-        DMatrix::from_fn(r, c, |_, _| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let v = ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0;
-            if v.abs() < 0.5 { 0.0 } else { v }
-        })
-    }
-
-    /// A row of `S M` read from the columns of `S` (or of `Sᵀ` for an `S` that is not
-    /// symmetric) is that row of `right_mul`'s product, and `Mᵀ (S N)` from those rows is
-    /// `tr_mul_add` on the whole product, bit for bit: with zeros of both signs in `S`, empty
-    /// and dense columns in `M` and `N`, and a dirty output.
-    #[test]
-    fn products_from_rows_are_the_whole_products_to_the_bit() {
-        for seed in 0..60 {
-            let (n, q) = (9, [9, 4, 1][seed as usize % 3]);
-            let signed = |v: f64| if v == 0.0 && seed % 2 == 0 { -0.0 } else { v };
-            let raw = pattern(n, n, seed + 300).map(signed);
-            let symmetric = seed % 4 != 3;
-            let s = if symmetric {
-                &raw + raw.transpose()
-            } else {
-                raw.clone()
-            };
-            let s_rows = if symmetric { s.clone() } else { s.transpose() };
-            let mut nm = pattern(n, q, seed + 400);
-            nm.column_mut(seed as usize % q).fill(0.0);
-            let mut m = pattern(n, 3, seed + 500);
-            m.column_mut(seed as usize % 3).fill(0.0);
-            let (mut sp_n, mut sp_m) = (SparseColumns::new(n, q), SparseColumns::new(n, 3));
-            sp_n.assign(&nm);
-            sp_m.assign(&m);
-            let mut whole = DMatrix::from_element(n, q, f64::NAN);
-            sp_n.right_mul(&s, &mut whole);
-            let mut row = vec![f64::NAN; q];
-            for i in 0..n {
-                sp_n.product_row(&s_rows, i, &mut row);
-                for (c, r) in row.iter().enumerate() {
-                    assert_eq!(
-                        r.to_bits(),
-                        whole[(i, c)].to_bits(),
-                        "seed {seed} ({i}, {c})"
-                    );
-                }
-            }
-            let start = pattern(3, q, seed + 600);
-            let (mut want, mut got) = (start.clone(), start);
-            sp_m.tr_mul_add(0.5, &whole, &mut want);
-            let mut scratch = Vec::new();
-            sp_m.tr_mul_product_add(0.5, &s_rows, &sp_n, &mut scratch, &mut got);
-            for (g, w) in got.iter().zip(want.iter()) {
-                assert_eq!(g.to_bits(), w.to_bits(), "seed {seed}: {g} vs {w}");
-            }
-        }
-    }
-
-    /// `right_mul` writes what clearing the product and `right_mul_add` write, bit for bit
-    /// (signs of zeros included), over empty, sparse and dense columns and a dirty `out`.
-    #[test]
-    fn the_product_without_clearing_is_the_cleared_one_to_the_bit() {
-        for seed in 0..50 {
-            let mut m = pattern(9, 6, seed);
-            m.column_mut(seed as usize % 6).fill(0.0);
-            m.column_mut((seed as usize + 1) % 6).fill(-0.0);
-            let s = pattern(5, 9, seed + 100).map(|v| if v == 0.0 { -0.0 } else { v * 1e6 });
-            let mut sp = SparseColumns::new(9, 6);
-            sp.assign(&m);
-            let same = |got: &DMatrix<f64>, want: &DMatrix<f64>| {
-                for (g, w) in got.iter().zip(want.iter()) {
-                    assert_eq!(g.to_bits(), w.to_bits(), "seed {seed}: {g} vs {w}");
-                }
-            };
-            let mut want = DMatrix::zeros(5, 6);
-            sp.right_mul_add(&s, &mut want);
-            let mut got = DMatrix::from_element(5, 6, f64::NAN);
-            sp.right_mul(&s, &mut got);
-            same(&got, &want);
-        }
-    }
-
-    #[test]
-    fn products_match_dense() {
-        let m = pattern(7, 5, 1);
-        let s = pattern(6, 7, 2);
-        let x = pattern(7, 3, 3);
-        let v = pattern(7, 1, 4);
-        let mut sp = SparseColumns::new(7, 5);
-        sp.assign(&m);
-        assert!(sp.nnz() < 35);
-        let mut out = DMatrix::from_element(6, 5, 3.0);
-        sp.right_mul(&s, &mut out);
-        assert!((&out - &s * &m).norm() < 1e-12);
-        sp.right_mul_add(&s, &mut out);
-        assert!((&out - 2.0 * &s * &m).norm() < 1e-12);
-        let mut acc = DMatrix::from_element(5, 3, 1.0);
-        sp.tr_mul_add(2.0, &x, &mut acc);
-        let want = DMatrix::from_element(5, 3, 1.0) + 2.0 * m.transpose() * &x;
-        assert!((&acc - want).norm() < 1e-12);
-        let mut y = vec![0.5; 5];
-        sp.tr_mul_vec_add(-1.0, v.as_slice(), &mut y);
-        let want = DMatrix::from_element(5, 1, 0.5) - m.transpose() * &v;
-        assert!(
-            y.iter()
-                .zip(want.iter())
-                .all(|(a, b)| (a - b).abs() < 1e-12)
-        );
-    }
-
-    /// Columns of many 8-row blocks (and a last partial one), refilled with a sparser, a
-    /// denser and a pattern of single nonzeros among negative zeros, with NaNs and infinities:
-    /// exactly the entries `!= 0.0`, in row order, each time.
-    #[test]
-    fn refills_hold_exactly_the_nonzeros() {
-        let mut sp = SparseColumns::new(150, 4);
-        for seed in [5, 6, 7] {
-            let mut m = pattern(150, 4, seed);
-            if seed == 5 {
-                m.view_mut((0, 0), (100, 4)).fill(0.0);
-            }
-            if seed == 7 {
-                // One entry per block at most, the rest negative zeros, and the special values.
-                m = m.map(|v| if v.abs() < 0.95 { -0.0 } else { v });
-                m[(3, 0)] = f64::NAN;
-                m[(149, 1)] = f64::INFINITY;
-                m[(8, 2)] = -f64::MIN_POSITIVE / 4.0;
-            }
-            sp.assign(&m);
-            let nonzeros = m.iter().filter(|v| **v != 0.0).count();
-            assert_eq!(sp.nnz(), nonzeros);
-            let mut back = DMatrix::zeros(150, 4);
-            for j in 0..4 {
-                let (rows, vals) = sp.column(j);
-                assert!(rows.windows(2).all(|w| w[0] < w[1]));
-                for (&i, &v) in rows.iter().zip(vals) {
-                    back[(i, j)] = v;
-                }
-            }
-            let same = back.iter().zip(m.iter());
-            assert!(
-                same.clone()
-                    .all(|(b, v)| b == v || (b.is_nan() && v.is_nan()))
-            );
-            assert!(same.filter(|(_, v)| **v != 0.0).count() == nonzeros);
-        }
-    }
-
-    /// A refill by a support with unit columns (a shift register's, as the delayed plant
-    /// declares) holds what a refill of the whole matrix holds, the units' ones included, and
-    /// a refill by ranges reads nothing outside them (junk there is not picked up).
-    #[test]
-    fn a_refill_by_the_support_is_the_whole_refill() {
-        let (n, c) = (12, 7);
-        let mut m = pattern(n, c, 11);
-        m.view_mut((4, 0), (n - 4, 3)).fill(0.0);
-        let mut columns = vec![Column::Rows(0..4); 3];
-        for j in 3..c {
-            m.column_mut(j).fill(0.0);
-            m[(j + 2, j)] = 1.0;
-            columns.push(Column::Unit(j + 2));
-        }
-        let (mut whole, mut by_support) = (SparseColumns::new(n, c), SparseColumns::new(n, c));
-        whole.assign(&m);
-        by_support.assign_support(&m, &columns);
-        for j in 0..c {
-            assert_eq!(whole.column(j), by_support.column(j), "column {j}");
-        }
-        let mut junk = m.clone();
-        junk.view_mut((4, 0), (n - 4, 3)).fill(7.0);
-        let rows: Vec<Range<usize>> = (0..c)
-            .map(|j| if j < 3 { 0..4 } else { j + 2..j + 3 })
-            .collect();
-        by_support.assign_within(&junk, Some(&rows));
-        for j in 0..c {
-            assert_eq!(
-                whole.column(j),
-                by_support.column(j),
-                "column {j} by ranges"
-            );
-        }
-    }
-
-    /// Skipping the empty columns outside the occupied ones changes no bit of `y += α Mᵀ v`,
-    /// `out += α Mᵀ X` and `out += α Mᵀ (S N)` (outputs holding zeros of both signs, factors of
-    /// both signs and zero), against every column visited; nor for a matrix with no nonzero.
-    #[test]
-    fn skipping_empty_columns_changes_no_bit() {
-        let (n, c) = (6, 9);
-        for (seed, occupied) in [(1, 2..5), (2, 0..0), (3, 0..9), (4, 8..9)] {
-            let mut m = pattern(n, c, seed);
-            for j in (0..c).filter(|j| !occupied.contains(j)) {
-                m.column_mut(j).fill(0.0);
-            }
-            let mut sp = SparseColumns::new(n, c);
-            sp.assign(&m);
-            let v: Vec<f64> = pattern(n, 1, seed + 10).iter().copied().collect();
-            let x = pattern(n, 3, seed + 20);
-            let s = {
-                let a = pattern(n, n, seed + 30);
-                &a + a.transpose()
-            };
-            let other = {
-                let mut o = SparseColumns::new(n, 2);
-                o.assign(&pattern(n, 2, seed + 40));
-                o
-            };
-            for alpha in [1.0, 0.5, 0.0, -0.0, -1.0] {
-                let start: Vec<f64> = (0..c).map(|j| [0.0, -0.0, 1.5][j % 3]).collect();
-                let (mut y, mut want) = (start.clone(), start.clone());
-                sp.tr_mul_vec_add(alpha, &v, &mut y);
-                for (j, w) in want.iter_mut().enumerate() {
-                    let (rows, vals) = sp.column(j);
-                    let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * v[i]).sum();
-                    *w += alpha * dot;
-                }
-                let bits = |y: &[f64]| y.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&y), bits(&want), "Mᵀ v, seed {seed}, α {alpha}");
-                let dirty = DMatrix::from_fn(c, 3, |i, j| [0.0, -0.0, 2.0][(i + j) % 3]);
-                let (mut out, mut want) = (dirty.clone(), dirty.clone());
-                sp.tr_mul_add(alpha, &x, &mut out);
-                for q in 0..3 {
-                    for j in 0..c {
-                        let (rows, vals) = sp.column(j);
-                        let dot: f64 = rows.iter().zip(vals).map(|(&i, &a)| a * x[(i, q)]).sum();
-                        want[(j, q)] += alpha * dot;
-                    }
-                }
-                assert_eq!(
-                    bits(out.as_slice()),
-                    bits(want.as_slice()),
-                    "Mᵀ X, α {alpha}"
-                );
-                let dirty = DMatrix::from_fn(c, 2, |i, j| [0.0, -0.0, 2.0][(i + j) % 3]);
-                let (mut out, mut want) = (dirty.clone(), dirty.clone());
-                let mut rows = Vec::new();
-                sp.tr_mul_product_add(alpha, &s, &other, &mut rows, &mut out);
-                let mut sn = DMatrix::zeros(n, 2);
-                other.right_mul(&s, &mut sn);
-                for q in 0..2 {
-                    for j in 0..c {
-                        let (idx, vals) = sp.column(j);
-                        let dot: f64 = idx.iter().zip(vals).map(|(&i, &a)| a * sn[(i, q)]).sum();
-                        want[(j, q)] += alpha * dot;
-                    }
-                }
-                assert_eq!(
-                    bits(out.as_slice()),
-                    bits(want.as_slice()),
-                    "Mᵀ S N, α {alpha}"
-                );
-            }
-        }
-    }
-}
+pub(crate) mod tests;

@@ -212,6 +212,7 @@ impl Trajectory {
         self.supported =
             problem.dynamics.state_support(&mut self.support) && self.support.fits(nx, nu);
         self.relinearizable = refillable && self.supported && self.support == self.last_support;
+        self.make_room(nx, nu);
         self.differentiated = false;
         self.hessian = match problem.cost.hessian_support() {
             Some(r) if r.start <= r.end && r.end <= nx => r,
@@ -339,8 +340,8 @@ impl Ilqg {
         Ilqg {
             options,
             on_iteration: None,
-            nominal: Trajectory::new(nx, nu, nw, h),
-            candidate: Trajectory::new(nx, nu, nw, h),
+            nominal: Trajectory::with_room(problem, h),
+            candidate: Trajectory::with_room(problem, h),
             ff: (0..h).map(|_| DVector::zeros(nu)).collect(),
             gains: (0..h).map(|_| DMatrix::zeros(nu, nx)).collect(),
             bw: Backward::new(nx, nu),

@@ -157,6 +157,31 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
     traj.differentiated = true;
 }
 
+impl Trajectory {
+    /// A trajectory for `problem`'s sizes with room for its plant's nonzeros
+    /// ([`Trajectory::make_room`]): its first solve allocates nothing more.
+    pub(super) fn with_room(problem: &Problem, horizon: usize) -> Self {
+        let d = problem.dynamics;
+        let (nx, nu) = (d.nx(), d.nu());
+        let mut traj = Trajectory::new(nx, nu, d.nw(), horizon);
+        traj.supported = d.state_support(&mut traj.support) && traj.support.fits(nx, nu);
+        traj.make_room(nx, nu);
+        traj
+    }
+
+    /// Room in `sparse` for every nonzero the plant's support allows (every entry when it
+    /// declares none), where the backward pass reads the patterns
+    /// ([`SparseLinearization::make_room`]).
+    pub(super) fn make_room(&mut self, nx: usize, nu: usize) {
+        if !reads_in_place(nx, nu) {
+            let support = self.supported.then_some(&self.support);
+            for sp in &mut self.sparse {
+                sp.make_room(support);
+            }
+        }
+    }
+}
+
 /// [`linearize`] unless a fused rollout already did.
 pub(super) fn ensure_linearized(problem: &Problem, traj: &mut Trajectory) {
     if !traj.linearized {
