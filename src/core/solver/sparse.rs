@@ -376,8 +376,9 @@ impl SparseLinearization {
     /// it has none: the refills then allocate nothing. Room once made is kept. The delayed
     /// plant's 46 nonzeros of `A` and 8 of each `Cx_i` take 1 KB a knot where room for every
     /// entry took 84 KB: the backward pass's few lines per knot lay scattered over 40 MB of
-    /// address space, and a plan spent about a tenth of its time on the page-table misses
-    /// (measured by backing the heap with huge pages: 0.88 of the time).
+    /// address space, and a noisy delayed plan waited on page-table misses (with the heap on
+    /// huge pages the process took 0.88 of its time; with the room fitted the plan takes
+    /// 0.87 of it, `docs/BENCHMARKS.md`).
     pub fn make_room(&mut self, support: Option<&StateSupport>) {
         let len = |c: &Column| match c {
             Column::Rows(r) => r.len(),
