@@ -292,10 +292,12 @@ fn plan_delayed(
         source,
     })?;
     let guess_time = guess_time.elapsed();
-    // The guess is the deterministic problem's optimum already (see `undelayed_guess`), the
-    // first phase of `solve_in_phases`: a deterministic solve from it stops at once, after a
-    // linearisation and a backward pass of the augmented plant (3.8 ms of a 47 ms plan of the
-    // single joint with 200 ms of delay), so the stochastic solve starts from it directly.
+    // Without noise the guess is the deterministic problem's optimum already (see
+    // `undelayed_guess`), the first phase of `solve_in_phases`: a deterministic solve from it
+    // stops at once, after a linearisation and a backward pass of the augmented plant (3.8 ms
+    // of a 47 ms plan of the single joint with 200 ms of delay). With noise it is the optimum
+    // of the tail with the stiffness held, which the stochastic solve re-plans under the
+    // noise: it starts from the guess directly either way.
     let stochastic = s.solver.options.stochastic && problem.dynamics.nw() > 0;
     let phase = if stochastic { "stochastic" } else { "ilqg" };
     let mut sol = solver_for(&problem, &s.solver.options, phase, progress)

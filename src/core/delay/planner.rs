@@ -33,7 +33,8 @@ use nalgebra::{DMatrix, DVector};
 use std::time::Instant;
 
 /// A first guess for the delayed problem from the undelayed plant, exact without noise (see the
-/// module's documentation). `plain` is the undelayed problem (plant, cost, start state, horizon,
+/// module's documentation); with noise (in `options` and the plant) the tail problem holds the
+/// impedance's stiffness at its lower limit (`tail_bounds`). `plain` is the undelayed problem (plant, cost, start state, horizon,
 /// limits), `pending` the command in flight in every slot, `u_init` a guess for the undelayed
 /// plant (its knots `d..N` are used). The last `d` commands minimise their control cost.
 pub fn undelayed_guess(
@@ -53,7 +54,9 @@ pub fn undelayed_guess(
     let in_flight = std::iter::repeat_n(pending, delay);
     let x_d = state_after(plain.dynamics, &plain.x0, in_flight);
     let (dynamics, cost) = tail_of(plain, delay);
-    let tail = tail_problem(&dynamics, &cost, x_d, steps - delay, &plain.bounds);
+    let hold = options.stochastic && plain.dynamics.nw() > 0;
+    let bounds = tail_bounds(&plain.bounds, options, hold);
+    let tail = tail_problem(&dynamics, &cost, x_d, steps - delay, bounds);
     let sol = plain_solver(&tail, options).try_solve(&tail, &u_init[delay..])?;
     let mut u = vec![DVector::zeros(plain.dynamics.nu()); steps];
     let mut d = CostDerivatives::new(plain.dynamics.nx(), plain.dynamics.nu());
@@ -115,7 +118,7 @@ impl DelayedPlanner {
             &cost,
             plain.x0.clone(),
             plain.horizon - delay,
-            &plain.bounds,
+            plain.bounds.clone(),
         );
         let (n, m, w) = (
             plain.dynamics.nx(),
@@ -192,13 +195,14 @@ impl DelayedPlanner {
         let in_flight = delayed.x0[n..].chunks_exact(m);
         let x_d = state_after(plain.dynamics, &delayed.x0[..n], in_flight);
         let (dynamics, cost) = tail_of(plain, d);
-        let tail = tail_problem(&dynamics, &cost, x_d, plain.horizon - d, &plain.bounds);
+        let deterministic = !self.options.stochastic || delayed.dynamics.nw() == 0;
+        let bounds = tail_bounds(&plain.bounds, &self.options, !deterministic);
+        let tail = tail_problem(&dynamics, &cost, x_d, plain.horizon - d, bounds);
         let sol = match start {
             Start::Cold(u) => self.tail.try_solve(&tail, u)?,
             Start::Shifted(s) => self.tail.resolve_shifted(&tail, s)?,
         };
         complete_guess(plain, &sol, &mut self.derivs, &mut self.guess);
-        let deterministic = !self.options.stochastic || delayed.dynamics.nw() == 0;
         let predicted = if deterministic {
             self.predicted_policy(plain, delayed, &tail, &sol)
         } else {
@@ -369,15 +373,39 @@ fn tail_problem<'a>(
     cost: &'a dyn Cost,
     x_d: Vec<f64>,
     horizon: usize,
-    bounds: &Bounds,
+    bounds: Bounds,
 ) -> Problem<'a> {
     Problem {
         dynamics,
         cost,
         x0: x_d,
         horizon,
-        bounds: bounds.clone(),
+        bounds,
     }
+}
+
+/// The limits the tail problem is solved with: the plan's, or for a plan with noise (`hold`)
+/// with the controls that act only through the deviation from the reference
+/// ([`IlqgOptions::held_first`]: an impedance's stiffness) held at their finite lower limits.
+/// With noise the tail's solution is only the augmented solve's first guess, and that solve
+/// re-plans the stiffness under the noise; without noise a stiffness buys almost nothing, and
+/// freeing it was 27 of the tail's 29 iterations (a Gauss–Newton crawl, see
+/// [`crate::core::solver::Ilqg::try_solve_held_first`]), where the torque-only problem takes
+/// 2. The single joint at 100–300 ms of delay: 1–2 tail iterations instead of 29–37, 13–29
+/// stochastic ones instead of 11–27, expected costs −0.7 % to +0.2 % (`docs/BENCHMARKS.md`,
+/// forty-second session). Without noise the tail's optimum is the plan: nothing is held.
+fn tail_bounds(bounds: &Bounds, options: &IlqgOptions, hold: bool) -> Bounds {
+    let mut held = bounds.clone();
+    if hold {
+        for &i in &options.held_first {
+            if let (Some(&lower), Some(upper)) = (held.lower.get(i), held.upper.get_mut(i))
+                && lower.is_finite()
+            {
+                *upper = lower;
+            }
+        }
+    }
+    held
 }
 
 /// Deterministic ILQG for the tail problem (the noise-free plan is the guess).

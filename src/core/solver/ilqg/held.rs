@@ -16,7 +16,10 @@
 //! Only for first guesses on the reference: the delayed plant's undelayed tail problem starts
 //! where the commands in flight left the joint, off the reference, where stiffness buys much
 //! (the held optimum costs 20 % more) and the free solve from it crawled again (2 + 19
-//! iterations against 29, and a stop 2e-6 above the free one's), so `core::delay` does not hold.
+//! iterations against 29, and a stop 2e-6 above the free one's), so `core::delay` does not hold
+//! first when the tail's optimum is the plan (without noise). With noise it holds the stiffness
+//! throughout the tail, whose solution is then only the augmented solve's first guess (the
+//! delay planner's `tail_bounds`).
 
 use super::{Ilqg, IlqgError, Solution};
 use crate::core::solver::Problem;
