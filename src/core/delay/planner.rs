@@ -395,17 +395,8 @@ fn tail_problem<'a>(
 /// stochastic ones instead of 11–27, expected costs −0.7 % to +0.2 % (`docs/BENCHMARKS.md`,
 /// forty-second session). Without noise the tail's optimum is the plan: nothing is held.
 fn tail_bounds(bounds: &Bounds, options: &IlqgOptions, hold: bool) -> Bounds {
-    let mut held = bounds.clone();
-    if hold {
-        for &i in &options.held_first {
-            if let (Some(&lower), Some(upper)) = (held.lower.get(i), held.upper.get_mut(i))
-                && lower.is_finite()
-            {
-                *upper = lower;
-            }
-        }
-    }
-    held
+    let held = hold.then(|| bounds.holding(&options.held_first)).flatten();
+    held.unwrap_or_else(|| bounds.clone())
 }
 
 /// Deterministic ILQG for the tail problem (the noise-free plan is the guess).

@@ -45,6 +45,26 @@ impl Bounds {
             *v = v.clamp(*lo, *hi);
         }
     }
+
+    /// These limits with the `controls` that have a finite lower limit held there (the upper
+    /// limit set to it); `None` when none has one (nothing to hold). For the controls that act
+    /// only through the deviation from the reference ([`IlqgOptions::held_first`]).
+    pub fn holding(&self, controls: &[usize]) -> Option<Bounds> {
+        let lower = |i: usize| self.lower.get(i).copied().filter(|l| l.is_finite());
+        if !controls
+            .iter()
+            .any(|&i| lower(i).is_some() && i < self.upper.len())
+        {
+            return None;
+        }
+        let mut held = self.clone();
+        for &i in controls {
+            if let (Some(l), Some(upper)) = (lower(i), held.upper.get_mut(i)) {
+                *upper = l;
+            }
+        }
+        Some(held)
+    }
 }
 
 /// A finite-horizon optimal control problem: dynamics, cost, initial state, horizon, limits.

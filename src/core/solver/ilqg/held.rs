@@ -55,36 +55,19 @@ impl Ilqg {
         out: &mut Solution,
     ) -> Result<(), IlqgError> {
         let deterministic = !self.options.stochastic || self.dims.2 == 0;
-        let lower_of = |i: usize| {
-            problem
-                .bounds
-                .lower
-                .get(i)
-                .copied()
-                .filter(|l| l.is_finite())
-        };
-        let holds = self
-            .options
-            .held_first
-            .iter()
-            .any(|&i| lower_of(i).is_some());
-        if !(deterministic && holds) {
+        let held_bounds = deterministic.then(|| problem.bounds.holding(&self.options.held_first));
+        let Some(bounds) = held_bounds.flatten() else {
             return self.try_solve_into(problem, u_init, out);
-        }
+        };
         let start = Instant::now();
-        let mut held = Problem {
+        // The solve clamps its start into the limits: the held controls start there.
+        let held = Problem {
             dynamics: problem.dynamics,
             cost: problem.cost,
             x0: problem.x0.clone(),
             horizon: problem.horizon,
-            bounds: problem.bounds.clone(),
+            bounds,
         };
-        for &i in &self.options.held_first {
-            if let Some(lower) = lower_of(i) {
-                // The solve clamps its start into the limits: the held controls start there.
-                held.bounds.upper[i] = lower;
-            }
-        }
         if self.try_solve_into(&held, u_init, out).is_err() {
             return self.try_solve_into(problem, u_init, out);
         }
