@@ -204,7 +204,11 @@ fn with_noise_a_warm_replan_starts_from_the_last_plan_shifted() {
     let warm = planner
         .resolve_shifted(&plain2, &augmented2, 2)
         .expect("replans");
-    let reference = alone.resolve_shifted(&augmented2, 2).expect("re-solves");
+    // The commands from knot N − d − 2 on start from the planner's new undelayed guess.
+    let tail = &planner.guess()[s.task.steps - d - 2..];
+    let reference = alone
+        .resolve_shifted_with_tail(&augmented2, 2, tail)
+        .expect("re-solves");
     assert_eq!(warm.solution.u, reference.u);
     assert_eq!(warm.solution.iterations, reference.iterations);
     let mut fresh = DelayedPlanner::new(&plain2, &augmented2, options).expect("sizes fit");
@@ -226,6 +230,37 @@ fn with_noise_a_warm_replan_starts_from_the_last_plan_shifted() {
     assert!(warm.solution.stop.converged());
     let gap = (warm.solution.expected_cost - recold.solution.expected_cost).abs();
     assert!(gap <= 0.01 * recold.solution.expected_cost, "{gap}");
+
+    // Where the replan starts (no iterations: the shifted plan rolled out from x2). The first
+    // plan left its last d commands at their control cost's minimum, since they act after its
+    // horizon; shifted, the first two act within this one, and started from them the plant
+    // ends off its target. From the undelayed guess it starts about where the first plan was.
+    let start_of = |tail: &[DVector<f64>]| {
+        let mut solver = Ilqg::new(&augmented, options.clone());
+        solver.try_solve(&augmented, &guess).expect("solves");
+        solver.options.max_iterations = 0;
+        let start = solver
+            .resolve_shifted_with_tail(&augmented2, 2, tail)
+            .expect("re-solves");
+        assert_eq!(start.iterations, 0);
+        start.cost
+    };
+    let (unplanned, from_guess) = (start_of(&[]), start_of(tail));
+    println!(
+        "the replan's start: cost {unplanned:.6e} from the shifted plan alone, {from_guess:.6e} \
+         with its last commands from the guess; the first plan {:.6e}",
+        first.cost
+    );
+    assert!(
+        from_guess <= 1.5 * first.cost,
+        "{from_guess} against {}",
+        first.cost
+    );
+    assert!(
+        unplanned > 100.0 * first.cost,
+        "{unplanned} against {}",
+        first.cost
+    );
 }
 
 #[test]

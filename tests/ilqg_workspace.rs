@@ -198,6 +198,29 @@ fn a_diverging_initial_guess_is_an_error() {
             .stop
             .converged()
     );
+    // A replacement tail longer than the horizon, or of the wrong size, is refused.
+    let steps = s.task.steps;
+    let long = vec![DVector::zeros(2); steps + 1];
+    assert_eq!(
+        solver
+            .resolve_shifted_with_tail(&problem, 1, &long)
+            .unwrap_err(),
+        IlqgError::InitialGuessLength {
+            got: steps + 1,
+            want: steps
+        }
+    );
+    let wrong = vec![DVector::zeros(3); 2];
+    assert_eq!(
+        solver
+            .resolve_shifted_with_tail(&problem, 1, &wrong)
+            .unwrap_err(),
+        IlqgError::ControlSize {
+            knot: steps - 2,
+            got: 3,
+            want: 2
+        }
+    );
 }
 
 /// A solve whose first backward pass never finds a positive definite `Q_uu` (control weights

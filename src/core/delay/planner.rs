@@ -141,6 +141,12 @@ impl DelayedPlanner {
         self.delay
     }
 
+    /// The last plan's guess for the augmented plant, from the undelayed tail problem: command
+    /// `k` is the tail's control at knot `k + d`, the last `d` minimise their control cost.
+    pub fn guess(&self) -> &[DVector<f64>] {
+        &self.guess
+    }
+
     /// Plans from `delayed.x0` (the plant's state and the commands in flight), the undelayed
     /// plant started from `u_init` (its knots `d..N`).
     pub fn solve(
@@ -162,7 +168,9 @@ impl DelayedPlanner {
     /// there (their reference read `shift` knots later, `delayed.x0` the state and the commands
     /// in flight now). The undelayed tail problem restarts from its previous solution shifted
     /// ([`Ilqg::resolve_shifted`]); with noise, so does ILQG on the augmented plant, from its
-    /// previous plan (the first plan on the augmented plant starts from the tail's solution).
+    /// previous plan (the first plan on the augmented plant starts from the tail's solution),
+    /// whose commands from knot `N − d − shift` on start from the new undelayed guess
+    /// ([`Ilqg::resolve_shifted_with_tail`]: the last plan left them unplanned).
     pub fn resolve_shifted(
         &mut self,
         plain: &Problem,
@@ -221,8 +229,14 @@ impl DelayedPlanner {
                     // guess, which knows nothing of the noise. The single joint's 64 replans of
                     // `examples/delay_replans` (delays 100-250 ms, shifts of 1-5 knots): 10.2
                     // stochastic iterations a replan against 17.0, 16.4 ms against 27.4.
+                    // The last plan's last `d` commands act after its horizon, so it left
+                    // them at their control cost's minimum; shifted by `s`, the first `s` of
+                    // them act within this one (on the single joint, 20 ms without torque
+                    // before the end: a terminal cost 7000 times the plan's). They, and the
+                    // knots after them, start from the undelayed guess instead.
                     Start::Shifted(s) if !deterministic && full.has_solution() => {
-                        full.resolve_shifted(delayed, s)?
+                        let from = self.guess.len().saturating_sub(d + s);
+                        full.resolve_shifted_with_tail(delayed, s, &self.guess[from..])?
                     }
                     _ => full.try_solve(delayed, &self.guess)?,
                 }

@@ -25,6 +25,7 @@ mod held;
 mod knot;
 mod options;
 mod policy;
+mod resolve;
 mod rollout;
 mod search;
 
@@ -237,6 +238,13 @@ pub enum IlqgError {
     /// The initial control sequence has the wrong length.
     #[error("the initial guess has {got} controls, the horizon needs {want}")]
     InitialGuessLength { got: usize, want: usize },
+    /// A given control has the wrong number of components.
+    #[error("control {knot} has {got} components, the plant takes {want}")]
+    ControlSize {
+        knot: usize,
+        got: usize,
+        want: usize,
+    },
     /// Rolling out the initial guess gave a non-finite state or cost: no nominal to linearise.
     #[error(
         "the initial control sequence makes the plant diverge (non-finite state at step {step} of {horizon}): start from a guess that keeps the plant finite"
@@ -418,50 +426,6 @@ impl Ilqg {
         })
     }
 
-    /// Whether the workspace holds a solution that [`Ilqg::resolve_shifted`] can shift.
-    pub fn has_solution(&self) -> bool {
-        self.solved
-    }
-
-    /// Re-solves after the plan has advanced `shift` knots (receding-horizon replanning): the
-    /// previous solution is shifted, its last knot repeated, and rolled out from the new
-    /// `problem.x0` under its own feedback gains, `u_k = ū_{k+s} + L_{k+s} (x_k − x̄_{k+s})`
-    /// (the closed-loop policy of Eq. 9 keeps an unstable plant near the old nominal where an
-    /// open-loop replay would drift). The workspace is reused; nothing is allocated but the
-    /// returned copy of the solution.
-    pub fn resolve_shifted(
-        &mut self,
-        problem: &Problem,
-        shift: usize,
-    ) -> Result<Solution, IlqgError> {
-        let start = Instant::now();
-        self.check_size(problem)?;
-        if !self.solved {
-            return Err(IlqgError::NoPreviousSolution);
-        }
-        let horizon = self.dims.3;
-        let s = shift.min(horizon);
-        shift_knots(&mut self.nominal.u, s);
-        shift_knots(&mut self.gains, s);
-        shift_knots(&mut self.nominal.x, s);
-        self.nominal.linearized = false;
-        self.nominal.start_solve(problem);
-        self.candidate.start_solve(problem);
-        for l in &mut self.ff {
-            zero(l);
-        }
-        self.solved = false;
-        if self.roll_candidate(problem, 0.0, f64::INFINITY, true) {
-            std::mem::swap(&mut self.nominal, &mut self.candidate);
-        } else {
-            // The old gains do not hold the plant from here: replay the shifted controls.
-            self.replay(problem)?;
-        }
-        let mut out = Solution::empty();
-        self.iterate(problem, start, &mut out);
-        Ok(out)
-    }
-
     fn check_size(&self, problem: &Problem) -> Result<(), IlqgError> {
         let got = (
             problem.dynamics.nx(),
@@ -628,20 +592,5 @@ where
         }
     } else {
         *dst = src.to_vec();
-    }
-}
-
-/// Moves every knot `s` places earlier and repeats the last knot into the `s` freed places
-/// (in place: no allocation).
-fn shift_knots<T: Clone>(knots: &mut [T], s: usize) {
-    let n = knots.len();
-    if s == 0 || n == 0 {
-        return;
-    }
-    let s = s.min(n - 1);
-    knots.rotate_left(s);
-    let (head, tail) = knots.split_at_mut(n - s);
-    for t in tail {
-        t.clone_from(&head[n - s - 1]);
     }
 }
