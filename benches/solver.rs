@@ -247,6 +247,25 @@ fn solvers(c: &mut Criterion) {
     group.bench_function("single_joint_delay_200ms_noise", |b| {
         b.iter(|| black_box(planner.solve(&plain, &problem, &setup.u_init)))
     });
+    // The central controller's load with noise (issue 12's "≤ 5 ms warm"): after the cold plan
+    // (not timed), 30 replans at 50 Hz (two knots apart), each from the augmented state the
+    // last plan's commands lead to; the time reported is a replan's, the sequence's mean.
+    let (iterations, ms) = receding(&mut planner, &plain, &problem, &setup, &delayed, &cost);
+    eprintln!(
+        "single_joint_delay_200ms_noise_receding: {} stochastic iterations over {RECEDING} replans, {:.3} ms a replan (single run)",
+        iterations,
+        ms / RECEDING as f64
+    );
+    group.bench_function("single_joint_delay_200ms_noise_receding", |b| {
+        b.iter_custom(|runs| {
+            let mut timed = std::time::Duration::ZERO;
+            for _ in 0..runs {
+                let (_, ms) = receding(&mut planner, &plain, &problem, &setup, &delayed, &cost);
+                timed += std::time::Duration::from_secs_f64(ms / 1e3 / RECEDING as f64);
+            }
+            timed
+        })
+    });
 
     // SOOC at full noise from the configured warm start, capped at a few iterations: the cost of
     // one iteration on the moment dynamics (z = (m, vech P): 14 dims for the type-2 arm, 44 for
@@ -440,6 +459,62 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
             black_box(replanner.replan_from(shift, &x2))
         })
     });
+}
+
+/// Replans in the receding sequence of `single_joint_delay_200ms_noise_receding`.
+const RECEDING: usize = 30;
+
+/// A cold plan, then [`RECEDING`] replans two knots apart, each from the augmented state the
+/// last plan's commands lead to: the stochastic iterations and milliseconds of the replans.
+fn receding(
+    planner: &mut DelayedPlanner,
+    plain: &Problem,
+    problem: &Problem,
+    setup: &Setup,
+    delayed: &Delayed<vic::core::dynamics::DiscreteDynamics>,
+    cost: &plan::DelayedCost,
+) -> (usize, f64) {
+    use vic::core::dynamics::Dynamics;
+    let shift = 2;
+    let cold = planner.solve(plain, problem, &setup.u_init).expect("plans");
+    let (mut u, mut z, mut at) = (cold.solution.u, problem.x0.clone(), 0);
+    let (mut iterations, mut ms) = (0, 0.0);
+    let nx = plain.x0.len();
+    for _ in 0..RECEDING {
+        for (k, uk) in u.iter().enumerate().take(shift) {
+            let mut next = vec![0.0; z.len()];
+            delayed.step(at + k, &z, uk.as_slice(), &mut next);
+            z = next;
+        }
+        at += shift;
+        let (dynamics, later_cost) = (Offset::new(delayed, at), Offset::new(cost, at));
+        let (plain_dynamics, plain_cost) = (
+            Offset::new(&setup.dynamics, at),
+            Offset::new(&setup.cost, at),
+        );
+        let shifted = Problem {
+            dynamics: &dynamics,
+            cost: &later_cost,
+            x0: z.clone(),
+            horizon: problem.horizon,
+            bounds: problem.bounds.clone(),
+        };
+        let shifted_plain = Problem {
+            dynamics: &plain_dynamics,
+            cost: &plain_cost,
+            x0: z[..nx].to_vec(),
+            horizon: problem.horizon,
+            bounds: problem.bounds.clone(),
+        };
+        let t = std::time::Instant::now();
+        let warm = planner
+            .resolve_shifted(&shifted_plain, &shifted, shift)
+            .expect("replans");
+        ms += t.elapsed().as_secs_f64() * 1e3;
+        iterations += warm.solution.iterations;
+        u = warm.solution.u;
+    }
+    (iterations, ms)
 }
 
 criterion_group!(benches, solvers);
