@@ -256,16 +256,25 @@ fn solvers(c: &mut Criterion) {
         iterations,
         ms / RECEDING as f64
     );
-    group.bench_function("single_joint_delay_200ms_noise_receding", |b| {
-        b.iter_custom(|runs| {
-            let mut timed = std::time::Duration::ZERO;
-            for _ in 0..runs {
-                let (_, ms) = receding(&mut planner, &plain, &problem, &setup, &delayed, &cost);
-                timed += std::time::Duration::from_secs_f64(ms / 1e3 / RECEDING as f64);
-            }
-            timed
-        })
-    });
+    for cap in [None, Some(2)] {
+        // Capped: a real-time iteration scheme (`DelayedPlanner::replan_iterations`).
+        planner.replan_iterations = cap;
+        let name = match cap {
+            None => "single_joint_delay_200ms_noise_receding".to_string(),
+            Some(c) => format!("single_joint_delay_200ms_noise_receding_capped{c}"),
+        };
+        group.bench_function(name, |b| {
+            b.iter_custom(|runs| {
+                let mut timed = std::time::Duration::ZERO;
+                for _ in 0..runs {
+                    let (_, ms) = receding(&mut planner, &plain, &problem, &setup, &delayed, &cost);
+                    timed += std::time::Duration::from_secs_f64(ms / 1e3 / RECEDING as f64);
+                }
+                timed
+            })
+        });
+    }
+    planner.replan_iterations = None;
 
     // SOOC at full noise from the configured warm start, capped at a few iterations: the cost of
     // one iteration on the moment dynamics (z = (m, vech P): 14 dims for the type-2 arm, 44 for

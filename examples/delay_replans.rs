@@ -3,8 +3,8 @@
 //! the last plan's commands lead to; prints the replans' iterations and time summed over the
 //! four, and the last one's expected cost (`docs/BENCHMARKS.md`, thirty-eighth session). Then
 //! the central controller's steady load: 30 replans two knots apart (50 Hz), each replan's
-//! iterations and the mean time of a replan, over all 30 and over the last 20
-//! (forty-third session):
+//! iterations and the mean time of a replan, over all 30 and over the last 20, converged and
+//! capped at 2 iterations (forty-third session):
 //! `cargo run --release --example delay_replans [config/single_joint_delay.toml]`.
 
 use std::path::Path;
@@ -29,7 +29,7 @@ fn main() {
     for delay in [100, 150, 200, 250] {
         let mut line = format!("delay {delay} ms:");
         for shift in [1, 2, 3, 5] {
-            let q = sequence(&file, delay, shift, 4);
+            let q = sequence(&file, delay, shift, 4, None);
             let (iterations, ms) = (q.iterations.iter().sum::<usize>(), q.ms.iter().sum::<f64>());
             line += &format!(
                 " shift {shift}: {iterations} it, {ms:.0} ms, E {:.3};",
@@ -38,11 +38,15 @@ fn main() {
         }
         println!("{line}");
     }
-    for delay in [100, 150, 200, 250] {
-        let q = sequence(&file, delay, 2, 30);
+    for (delay, cap) in [100, 150, 200, 250]
+        .into_iter()
+        .flat_map(|d| [(d, None), (d, Some(2))])
+    {
+        let q = sequence(&file, delay, 2, 30, cap);
         let mean = |ms: &[f64]| ms.iter().sum::<f64>() / ms.len() as f64;
         println!(
-            "delay {delay} ms, 30 replans 2 knots apart: iterations {:?}, {:.2} ms a replan ({:.2} over the last 20), E {:.3}",
+            "delay {delay} ms, 30 replans 2 knots apart{}: iterations {:?}, {:.2} ms a replan ({:.2} over the last 20), E {:.3}",
+            cap.map(|c| format!(", capped at {c}")).unwrap_or_default(),
             q.iterations,
             mean(&q.ms),
             mean(&q.ms[10..]),
@@ -51,8 +55,15 @@ fn main() {
     }
 }
 
-/// A cold plan at `delay` ms, then `replans` replans each `shift` knots later.
-fn sequence(file: &str, delay: usize, shift: usize, replans: usize) -> Sequence {
+/// A cold plan at `delay` ms, then `replans` replans each `shift` knots later, each of at most
+/// `cap` iterations if given (`DelayedPlanner::replan_iterations`).
+fn sequence(
+    file: &str,
+    delay: usize,
+    shift: usize,
+    replans: usize,
+    cap: Option<usize>,
+) -> Sequence {
     let set = [format!("task.delay_ms={delay}")];
     let s = Scenario::load(Path::new(file), &set).expect("scenario loads");
     let setup = plan::setup(&s).expect("scenario sets up");
@@ -69,6 +80,7 @@ fn sequence(file: &str, delay: usize, shift: usize, replans: usize) -> Sequence 
     };
     let plain = setup.problem(s.task.steps);
     let mut planner = DelayedPlanner::new(&plain, &problem, &s.solver.options).expect("sizes fit");
+    planner.replan_iterations = cap;
     let cold = planner
         .solve(&plain, &problem, &setup.u_init)
         .expect("plans");

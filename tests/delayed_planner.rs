@@ -9,7 +9,7 @@ use std::path::Path;
 use vic::core::cost::{Cost, CostDerivatives, TrackingCost};
 use vic::core::delay::{Delayed, DelayedPlanner, Offset};
 use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
-use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem};
+use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem, StopReason};
 use vic::planning::plan::{self, DelayedCost, Setup};
 use vic::planning::scenario::Scenario;
 
@@ -526,4 +526,60 @@ fn with_noise_the_guess_holds_the_stiffness_and_plans_as_well() {
         from_held.expected_cost,
         from_free.expected_cost
     );
+}
+
+/// A receding sequence with noise: a cold plan, then `replans` replans two knots apart, each
+/// from the augmented state the last plan's commands lead to; each replan's iterations, stop
+/// and expected cost.
+fn receding(cap: Option<usize>, replans: usize) -> Vec<(usize, StopReason, f64)> {
+    let (s, setup, delayed) = load(&[]);
+    let cost = DelayedCost::new(&setup.cost, setup.x0.len());
+    let start = at(&setup, &delayed, &cost, 0);
+    let x0 = delayed.initial_state(&setup.x0, setup.u_init[0].as_slice());
+    let (plain, augmented) = problems(&s, &setup, &start, &x0);
+    let mut planner =
+        DelayedPlanner::new(&plain, &augmented, &s.solver.options).expect("sizes fit");
+    planner.replan_iterations = cap;
+    let cold = planner
+        .solve(&plain, &augmented, &setup.u_init)
+        .expect("plans");
+    let (mut u, mut z) = (cold.solution.u, x0);
+    let mut out = Vec::new();
+    for r in 0..replans {
+        for (k, uk) in u.iter().enumerate().take(2) {
+            let mut next = vec![0.0; z.len()];
+            delayed.step(2 * r + k, &z, uk.as_slice(), &mut next);
+            z = next;
+        }
+        let later = at(&setup, &delayed, &cost, 2 * (r + 1));
+        let (plain, augmented) = problems(&s, &setup, &later, &z);
+        let warm = planner
+            .resolve_shifted(&plain, &augmented, 2)
+            .expect("replans");
+        let sol = warm.solution;
+        out.push((sol.iterations, sol.stop, sol.expected_cost));
+        u = sol.u;
+    }
+    out
+}
+
+/// Replans capped at two iterations (a real-time iteration scheme) never take more, stop
+/// unconverged where the converged sequence needed more (its first replan after the cold
+/// plan), and 30 replans (0.6 s at 50 Hz) later end where the converged replans end: the last
+/// expected cost within 0.5 % (0.04 % today).
+#[test]
+fn capped_replans_carry_their_iterations_forward() {
+    let (replans, cap) = (30, 2);
+    let free = receding(None, replans);
+    let capped = receding(Some(cap), replans);
+    println!("converged replans: {free:?}\ncapped at {cap}: {capped:?}");
+    assert!(
+        free[0].0 > cap,
+        "the first converged replan needs more than the cap"
+    );
+    assert!(free.iter().all(|r| r.1.converged()));
+    assert!(capped.iter().all(|r| r.0 <= cap));
+    assert_eq!(capped[0].1, StopReason::MaxIterations);
+    let (a, b) = (free[replans - 1].2, capped[replans - 1].2);
+    assert!((a - b).abs() <= 5e-3 * a, "{a} against {b}");
 }
