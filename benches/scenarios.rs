@@ -9,7 +9,8 @@
 //! summary's rollouts).
 //!
 //! Filter: `cargo bench --bench scenarios -- divergent` runs the cases whose name contains the
-//! word. The results also go to `$CARGO_TARGET_DIR/bench-scenarios.json`.
+//! word. The results also go to `$CARGO_TARGET_DIR/bench-scenarios.json`, with the machine
+//! they ran on.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -107,6 +108,9 @@ fn main() {
         "icub_elbow.toml",
     ];
     let mut cases = Vec::new();
+    // Absolute times are the host's: name it (a VM may move to another CPU between runs).
+    let machine = vic::tools::bench::Machine::detect();
+    println!("machine: {}", machine.line());
     println!("ILQG on every scenario (3 runs), SOOC on the targeted ones (1 run)");
     for f in &files {
         let stem = f.trim_end_matches(".toml");
@@ -212,7 +216,7 @@ fn main() {
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("target"));
     let out = target.join("bench-scenarios.json");
-    let doc = serde_json::json!({ "cases": cases, "targets": targets });
+    let doc = serde_json::json!({ "machine": machine, "cases": cases, "targets": targets });
     if std::fs::write(&out, doc.to_string()).is_ok() {
         println!("\nwritten {}", out.display());
     }

@@ -86,6 +86,8 @@ fn bench_plain(c: &mut Criterion, name: &str, file: &str, overrides: &[&str]) {
 }
 
 fn solvers(c: &mut Criterion) {
+    // Absolute times are the host's: name it (a VM may move to another CPU between runs).
+    eprintln!("machine: {}", vic::tools::bench::Machine::detect().line());
     bench_plain(c, "two_link_reach_ddp", "two_link_reach.toml", &[]);
     bench_plain(
         c,

@@ -164,6 +164,17 @@ def solve(problem, prob, box, runs):
     return solver, times
 
 
+def cpu_model():
+    """The CPU the times were taken on (absolute times are the host's)."""
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown"
+
+
 def main():
     prob = json.load(open(sys.argv[1]))
     model = sys.argv[2]
@@ -177,6 +188,7 @@ def main():
     vic = prob["vic"]
     print(json.dumps({
         "problem": prob["name"],
+        "cpu_model": cpu_model(),
         "crocoddyl_model": model,
         "crocoddyl_solver": "BoxDDP" if box else "DDP",
         "runs": runs,
