@@ -24,6 +24,13 @@ pub fn lock_memory() -> bool {
 /// Sleeps until the monotonic time `deadline_ns` (absolute, so no drift accumulates), then spins
 /// the last `spin_ns` if asked.
 pub fn sleep_until(deadline_ns: u64, spin_ns: u64) {
+    sleep_until_preparing(deadline_ns, spin_ns, || {});
+}
+
+/// [`sleep_until`], running `prepare` once at the start of the spin when there is one and the
+/// deadline has not passed: work that may be done before the deadline, done in time the thread
+/// would otherwise spend polling the clock. Without a spin `prepare` does not run.
+pub fn sleep_until_preparing(deadline_ns: u64, spin_ns: u64, prepare: impl FnOnce()) {
     let wake = deadline_ns.saturating_sub(spin_ns);
     let ts = libc::timespec {
         tv_sec: (wake / 1_000_000_000) as libc::time_t,
@@ -44,6 +51,9 @@ pub fn sleep_until(deadline_ns: u64, spin_ns: u64) {
         }
     }
     if spin_ns > 0 {
+        if monotonic_ns() < deadline_ns {
+            prepare();
+        }
         while monotonic_ns() < deadline_ns {
             std::hint::spin_loop();
         }
@@ -95,8 +105,15 @@ impl Periodic {
     /// Waits for the next deadline. A wake-up later than a whole period skips the missed
     /// deadlines: the next one is the first still in the future.
     pub fn wait(&mut self) -> Wake {
+        self.wait_preparing(|| {})
+    }
+
+    /// [`Periodic::wait`], running `prepare` in the spin before the deadline
+    /// ([`sleep_until_preparing`]). The wake-up is taken after it, so a `prepare` that ran past
+    /// the deadline shows as lateness.
+    pub fn wait_preparing(&mut self, prepare: impl FnOnce()) -> Wake {
         let deadline = self.next_ns;
-        sleep_until(deadline, self.spin_ns);
+        sleep_until_preparing(deadline, self.spin_ns, prepare);
         let woke = monotonic_ns();
         let lateness = woke.saturating_sub(deadline);
         let skipped = lateness / self.period_ns;
@@ -190,6 +207,42 @@ mod tests {
     }
 
     #[test]
+    fn the_spin_runs_its_preparation_once_before_the_deadline() {
+        set_timer_slack_1ns();
+        // With a spin: once, before the deadline, and the wake-up comes after both.
+        let mut p = Periodic::new(1_000_000, 200_000);
+        let mut checked = 0;
+        for _ in 0..20 {
+            let (deadline, mut ran) = (p.next_deadline(), Vec::new());
+            let w = p.wait_preparing(|| ran.push(monotonic_ns()));
+            if w.lateness_ns >= 200_000 {
+                continue; // woke after the window (a loaded machine): nothing to check
+            }
+            assert_eq!(ran.len(), 1);
+            assert!(ran[0] < deadline, "prepared at {} for {deadline}", ran[0]);
+            assert!(w.woke_ns >= deadline && w.woke_ns >= ran[0]);
+            checked += 1;
+        }
+        assert!(
+            checked > 0,
+            "every wake-up of 20 came after its spin window"
+        );
+        // Without a spin the preparation never runs: there is no time before the deadline.
+        let mut p = Periodic::new(1_000_000, 0);
+        let mut ran = 0;
+        for _ in 0..5 {
+            p.wait_preparing(|| ran += 1);
+        }
+        assert_eq!(ran, 0);
+        // A deadline already past: no time left, no preparation.
+        let mut ran = false;
+        sleep_until_preparing(monotonic_ns().saturating_sub(1_000_000), 100_000, || {
+            ran = true
+        });
+        assert!(!ran);
+    }
+
+    #[test]
     fn histogram_saturates_instead_of_growing() {
         let mut h = LatencyHistogram::new();
         h.record(u64::MAX);
@@ -267,9 +320,7 @@ pub fn board_tick(
     seq: u64,
     hist: &mut BoardHistograms,
 ) -> Outputs {
-    ep.drain_controls(|c| inputs.push_control(c));
-    ep.drain_disturbances(|d| inputs.push_disturbance(d));
-    ep.drain_commands(|c| inputs.push_command(c));
+    drain_inputs(ep, inputs);
     inputs.received_ns = monotonic_ns();
     let out = board.step(wake.deadline_ns, inputs);
     let mut s = out.state;
@@ -287,6 +338,22 @@ pub fn board_tick(
     hist.work
         .record(monotonic_ns().saturating_sub(wake.woke_ns));
     out
+}
+
+/// Takes every message waiting on the board's three subscriptions into `inputs`.
+fn drain_inputs(ep: &BoardPorts, inputs: &mut Inputs) {
+    ep.drain_controls(|c| inputs.push_control(c));
+    ep.drain_disturbances(|d| inputs.push_disturbance(d));
+    ep.drain_commands(|c| inputs.push_command(c));
+}
+
+/// The board's wait for its next tick: with a spin before the deadline, the messages that have
+/// arrived by then are taken in the spin ([`Periodic::wait_preparing`]), so that the tick, which
+/// takes the ones that arrive after them, starts from caches the subscriptions have just warmed
+/// instead of from cold shared memory. A message is applied at the same tick either way: both
+/// takes come before the step of this deadline.
+pub fn board_wait(periodic: &mut Periodic, ep: &BoardPorts, inputs: &mut Inputs) -> Wake {
+    periodic.wait_preparing(|| drain_inputs(ep, inputs))
 }
 
 /// The telemetry of the board after tick `tick` (its step gave `out`).
@@ -347,7 +414,7 @@ pub fn run_board(
     let mut telemetry_seq = 0u64;
     let mut last_telemetry = (monotonic_ns(), 0u64);
     while !stop.load(Ordering::Relaxed) {
-        let wake = periodic.wait();
+        let wake = board_wait(&mut periodic, ep, &mut inputs);
         seq += 1;
         let out = board_tick(ep, board, &mut inputs, &wake, seq, &mut hist);
         if let Some(r) = record.as_deref_mut() {

@@ -5,7 +5,7 @@ use super::{Options, PERIOD_NS, Variant, VariantResult, board_config};
 use crate::planning::scenario::Scenario;
 use crate::rt::board::{Board, Inputs};
 use crate::rt::realtime::{
-    BoardHistograms, Periodic, board_tick, lock_memory, set_timer_slack_1ns,
+    BoardHistograms, Periodic, board_tick, board_wait, lock_memory, set_timer_slack_1ns,
 };
 use crate::rt::sched::{self, SchedPolicy};
 use crate::rt::transport::{
@@ -227,7 +227,7 @@ fn measure_loop(
     let mut seq = 0u64;
     let warm_end = monotonic_ns() + 200_000_000;
     while monotonic_ns() < warm_end {
-        let w = periodic.wait();
+        let w = board_wait(&mut periodic, &ep, &mut inputs);
         seq += 1;
         board_tick(&ep, &mut board, &mut inputs, &w, seq, &mut hist);
     }
@@ -240,7 +240,7 @@ fn measure_loop(
     let cpu0 = sched::thread_cpu_ns();
     let end = t0 + seconds * 1_000_000_000;
     loop {
-        let w = periodic.wait();
+        let w = board_wait(&mut periodic, &ep, &mut inputs);
         if w.deadline_ns >= end {
             // A late wake that crossed the end skipped deadlines on both sides of it: only
             // those before the end belong to the window.
