@@ -209,24 +209,21 @@ mod tests {
     #[test]
     fn the_spin_runs_its_preparation_once_before_the_deadline() {
         set_timer_slack_1ns();
-        // With a spin: once, before the deadline, and the wake-up comes after both.
+        // With a spin: at most once, before the deadline, and the wake-up comes after both. A
+        // sleep that returned past the deadline (a loaded machine) leaves no time for it.
         let mut p = Periodic::new(1_000_000, 200_000);
-        let mut checked = 0;
+        let mut prepared = 0;
         for _ in 0..20 {
             let (deadline, mut ran) = (p.next_deadline(), Vec::new());
             let w = p.wait_preparing(|| ran.push(monotonic_ns()));
-            if w.lateness_ns >= 200_000 {
-                continue; // woke after the window (a loaded machine): nothing to check
+            assert!(ran.len() <= 1);
+            if let Some(&at) = ran.first() {
+                assert!(at < deadline, "prepared at {at} for {deadline}");
+                assert!(w.woke_ns >= deadline);
+                prepared += 1;
             }
-            assert_eq!(ran.len(), 1);
-            assert!(ran[0] < deadline, "prepared at {} for {deadline}", ran[0]);
-            assert!(w.woke_ns >= deadline && w.woke_ns >= ran[0]);
-            checked += 1;
         }
-        assert!(
-            checked > 0,
-            "every wake-up of 20 came after its spin window"
-        );
+        assert!(prepared > 0, "no wake-up of 20 came before its deadline");
         // Without a spin the preparation never runs: there is no time before the deadline.
         let mut p = Periodic::new(1_000_000, 0);
         let mut ran = 0;
