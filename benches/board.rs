@@ -5,7 +5,7 @@
 //! - `board_step_new_slice`: the same with a fresh 32-knot slice to validate and store every
 //!   tick (the planner sends one every 20 ticks; this is the worst tick).
 //! - `board_validate_full_slice`: [`Board::validate`] on a valid 32-knot slice.
-//! - `board_tick_transport`: [`vic::rt::realtime::board_tick`]: drain the three subscriptions,
+//! - `board_tick_transport`: [`vic_rt::realtime::board_tick`]: drain the three subscriptions,
 //!   step, publish the state over iceoryx2 to one subscriber (a namespace of its own).
 //!
 //! Target (issue 7): tick work p99 under 5 µs; `vic bench loop` measures its distribution live.
@@ -13,16 +13,16 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
-use vic::planning::scenario::Scenario;
-use vic::rt::board::{Board, Inputs};
-use vic::rt::realtime::{BoardHistograms, Wake, board_tick};
-use vic::rt::transport::{BoardPorts, CentralPorts, Control, ControlKind, Header};
-use vic::tools::bench::loop_bench::{PERIOD_NS, board_config, hold_slice};
+use vic::bench::loop_bench::{PERIOD_NS, board_config, hold_slice};
+use vic_plan::scenario::Scenario;
+use vic_rt::board::{Board, Inputs};
+use vic_rt::realtime::{BoardHistograms, Wake, board_tick};
+use vic_rt::transport::{BoardPorts, CentralPorts, Control, ControlKind, Header};
 
 fn running_board() -> (Board, Vec<f64>, usize) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/two_link_divergent.toml");
     let s = Scenario::load(&path, &[]).expect("scenario loads");
-    let setup = vic::planning::plan::setup(&s).expect("scenario sets up");
+    let setup = vic_plan::plan::setup(&s).expect("scenario sets up");
     let dof = s.model.dof();
     let q0 = setup.x0[..dof].to_vec();
     let mut b = Board::new(s.model.clone(), board_config(&s, PERIOD_NS), &q0).expect("a board");
@@ -88,7 +88,7 @@ fn board(c: &mut Criterion) {
         bench.iter(|| black_box(b.validate(black_box(&slice))))
     });
 
-    let ns = vic::tools::bench::unique_namespace("bc");
+    let ns = vic::bench::unique_namespace("bc");
     {
         let ep = BoardPorts::open(&ns).expect("board endpoint");
         let reader = CentralPorts::open(&ns).expect("planner endpoint");
@@ -101,7 +101,7 @@ fn board(c: &mut Criterion) {
                 tick += 1;
                 let wake = Wake {
                     deadline_ns: tick * PERIOD_NS,
-                    woke_ns: vic::rt::transport::monotonic_ns(),
+                    woke_ns: vic_rt::transport::monotonic_ns(),
                     ..Default::default()
                 };
                 let out = board_tick(&ep, &mut b, &mut inputs, &wake, tick, &mut hist);
@@ -112,7 +112,7 @@ fn board(c: &mut Criterion) {
             })
         });
     }
-    vic::rt::transport::remove_namespace(&ns);
+    vic_rt::transport::remove_namespace(&ns);
 }
 
 criterion_group!(benches, board);

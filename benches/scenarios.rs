@@ -14,8 +14,8 @@
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use vic::planning::plan::{Method, plan};
-use vic::planning::scenario::Scenario;
+use vic_plan::plan::{Method, plan};
+use vic_plan::scenario::Scenario;
 
 #[derive(serde::Serialize)]
 struct Case {
@@ -109,7 +109,7 @@ fn main() {
     ];
     let mut cases = Vec::new();
     // Absolute times are the host's: name it (a VM may move to another CPU between runs).
-    let machine = vic::tools::bench::Machine::detect();
+    let machine = vic::bench::Machine::detect();
     println!("machine: {}", machine.line());
     println!("ILQG on every scenario (3 runs), SOOC on the targeted ones (1 run)");
     for f in &files {

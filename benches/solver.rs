@@ -7,15 +7,15 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
-use vic::core::delay::{Delayed, DelayedPlanner, Offset};
-use vic::core::replan::{ReplanOptions, Replanner};
-use vic::core::solver::sooc::{MomentCost, MomentDynamics};
-use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
-use vic::core::solver::{Ilqg, IlqgOptions, Problem, Solution};
-use vic::planning::method::Method;
-use vic::planning::plan::{self, Setup};
-use vic::planning::receding::{TAIL_SHARE, TailFirst};
-use vic::planning::scenario::Scenario;
+use vic_core::delay::{Delayed, DelayedPlanner, Offset};
+use vic_core::replan::{ReplanOptions, Replanner};
+use vic_core::solver::sooc::{MomentCost, MomentDynamics};
+use vic_core::solver::sooc_newton::{SoocProblem, SoocSolver};
+use vic_core::solver::{Ilqg, IlqgOptions, Problem, Solution};
+use vic_plan::method::Method;
+use vic_plan::plan::{self, Setup};
+use vic_plan::receding::{TAIL_SHARE, TailFirst};
+use vic_plan::scenario::Scenario;
 
 fn load(file: &str, overrides: &[&str]) -> (Scenario, Setup) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -87,7 +87,7 @@ fn bench_plain(c: &mut Criterion, name: &str, file: &str, overrides: &[&str]) {
 
 fn solvers(c: &mut Criterion) {
     // Absolute times are the host's: name it (a VM may move to another CPU between runs).
-    eprintln!("machine: {}", vic::tools::bench::Machine::detect().line());
+    eprintln!("machine: {}", vic::bench::Machine::detect().line());
     bench_plain(c, "two_link_reach_ddp", "two_link_reach.toml", &[]);
     bench_plain(
         c,
@@ -127,7 +127,7 @@ fn solvers(c: &mut Criterion) {
         bounds: setup.bounds.clone(),
     };
     let plain = setup.problem(s.task.steps);
-    // The whole plan (vic::core::delay::DelayedPlanner): the undelayed plant's plan from the
+    // The whole plan (vic_core::delay::DelayedPlanner): the undelayed plant's plan from the
     // state the commands in flight lead to, then ILQG on the 42-dimensional delayed plant for
     // its gains.
     let mut planner = DelayedPlanner::new(&plain, &problem, &s.solver.options).expect("fits");
@@ -482,10 +482,10 @@ fn receding(
     plain: &Problem,
     problem: &Problem,
     setup: &Setup,
-    delayed: &Delayed<vic::core::dynamics::DiscreteDynamics>,
+    delayed: &Delayed<vic_core::dynamics::DiscreteDynamics>,
     cost: &plan::DelayedCost,
 ) -> (usize, f64) {
-    use vic::core::dynamics::Dynamics;
+    use vic_core::dynamics::Dynamics;
     let shift = 2;
     let cold = planner.solve(plain, problem, &setup.u_init).expect("plans");
     let (mut u, mut z, mut at) = (cold.solution.u, problem.x0.clone(), 0);

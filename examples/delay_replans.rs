@@ -8,11 +8,11 @@
 //! `cargo run --release --example delay_replans [config/single_joint_delay.toml]`.
 
 use std::path::Path;
-use vic::core::delay::{Delayed, DelayedPlanner, Offset};
-use vic::core::dynamics::Dynamics;
-use vic::core::solver::Problem;
-use vic::planning::plan;
-use vic::planning::scenario::Scenario;
+use vic_core::delay::{Delayed, DelayedPlanner, Offset};
+use vic_core::dynamics::Dynamics;
+use vic_core::solver::Problem;
+use vic_plan::plan;
+use vic_plan::scenario::Scenario;
 
 /// What a receding sequence took: each replan's iterations and milliseconds, and the last
 /// replan's expected cost.

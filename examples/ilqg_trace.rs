@@ -4,9 +4,9 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::core::solver::{Ilqg, Problem};
-use vic::planning::plan;
-use vic::planning::scenario::Scenario;
+use vic_core::solver::{Ilqg, Problem};
+use vic_plan::plan;
+use vic_plan::scenario::Scenario;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -22,7 +22,7 @@ fn main() {
     let plain = setup.problem(s.task.steps);
     let u_init: Vec<DVector<f64>> = if std::env::var("UNDELAYED").is_ok() {
         let t = std::time::Instant::now();
-        let u = vic::core::delay::undelayed_guess(
+        let u = vic_core::delay::undelayed_guess(
             &plain,
             setup.u_init[0].as_slice(),
             d,
@@ -53,8 +53,8 @@ fn main() {
     }
     .expect("solves");
     let (later_dynamics, later_cost) = (
-        vic::core::delay::Offset::new(&delayed.dynamics, 2),
-        vic::core::delay::Offset::new(&delayed.cost, 2),
+        vic_core::delay::Offset::new(&delayed.dynamics, 2),
+        vic_core::delay::Offset::new(&delayed.cost, 2),
     );
     if std::env::var("WARM").is_ok() {
         println!(

@@ -8,8 +8,8 @@
 //! cargo run --release --features zenoh --example link_junk -- LINK_NAME ENDPOINT [SECONDS] [EVERY_MS]
 
 use std::time::{Duration, Instant};
-use vic::rt::bridge::{key, wire};
-use vic::rt::transport::{CommandSlice, Header, PROTOCOL_VERSION, monotonic_ns};
+use vic_rt::bridge::{key, wire};
+use vic_rt::transport::{CommandSlice, Header, PROTOCOL_VERSION, monotonic_ns};
 use zenoh::Wait;
 
 /// Zenoh's errors as anyhow's (they are boxed without `Sized`, so `?` alone does not convert).

@@ -18,7 +18,7 @@
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
-use vic::rt::transport::{
+use vic_rt::transport::{
     CommandSlice, Disturbance, DisturbanceKind, Header, PROTOCOL_VERSION, RawPorts, ToolPorts,
     monotonic_ns,
 };
@@ -111,7 +111,7 @@ fn main() {
         let stop = stop.clone();
         let _ = ctrlc::set_handler(move || stop.store(true, std::sync::atomic::Ordering::Relaxed));
     }
-    let fail = |e: vic::rt::transport::TransportError| -> ! {
+    let fail = |e: vic_rt::transport::TransportError| -> ! {
         eprintln!("malformed: {e}");
         std::process::exit(1)
     };
@@ -123,7 +123,7 @@ fn main() {
     while Instant::now() < end && !stop.load(std::sync::atomic::Ordering::Relaxed) {
         n += 1;
         let d = Disturbance {
-            header: Header::new(vic::rt::transport::session_seq() + n, monotonic_ns()),
+            header: Header::new(vic_rt::transport::session_seq() + n, monotonic_ns()),
             kind: DisturbanceKind::Pulse as u32,
             torque: [0.2, -0.1],
             duration_ns: 10_000_000,

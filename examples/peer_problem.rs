@@ -8,10 +8,10 @@
 
 use std::path::Path;
 use std::time::Instant;
-use vic::core::model::Plant;
-use vic::core::solver::Ilqg;
-use vic::planning::plan;
-use vic::planning::scenario::Scenario;
+use vic_core::model::Plant;
+use vic_core::solver::Ilqg;
+use vic_plan::plan;
+use vic_plan::scenario::Scenario;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

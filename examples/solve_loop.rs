@@ -8,10 +8,10 @@
 //! same plans print the same.
 
 use std::path::Path;
-use vic::core::delay::DelayedPlanner;
-use vic::core::solver::{Ilqg, Solution};
-use vic::planning::plan;
-use vic::planning::scenario::Scenario;
+use vic_core::delay::DelayedPlanner;
+use vic_core::solver::{Ilqg, Solution};
+use vic_plan::plan;
+use vic_plan::scenario::Scenario;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

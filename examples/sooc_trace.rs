@@ -5,10 +5,10 @@
 
 use std::path::Path;
 use std::sync::Arc;
-use vic::core::solver::sooc::{MomentCost, MomentDynamics};
-use vic::core::solver::sooc_newton::{SoocProblem, SoocSolver};
-use vic::planning::plan;
-use vic::planning::scenario::Scenario;
+use vic_core::solver::sooc::{MomentCost, MomentDynamics};
+use vic_core::solver::sooc_newton::{SoocProblem, SoocSolver};
+use vic_plan::plan;
+use vic_plan::scenario::Scenario;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -31,7 +31,7 @@ fn main() {
     let plain = setup.problem(s.task.steps);
     // COLD=1: the cold plan's steps too (each phase: the deterministic warm start, then SOOC).
     let progress: Option<plan::ProgressFn> = std::env::var("COLD").ok().map(|_| {
-        Arc::new(|phase: &str, p: &vic::core::solver::ilqg::Progress| {
+        Arc::new(|phase: &str, p: &vic_core::solver::ilqg::Progress| {
             println!(
                 "  {phase} {:3}  J = {:.12e}  mu = {:.3e}  alpha = {:.4}",
                 p.iteration, p.merit, p.mu, p.alpha
@@ -71,7 +71,7 @@ fn main() {
         let mut z = sizing.initial_state(&setup.x0);
         let mut after = z.clone();
         for (k, u) in cold.u.iter().take(shift).enumerate() {
-            use vic::core::dynamics::Dynamics;
+            use vic_core::dynamics::Dynamics;
             sizing.step(k, &z, u.as_slice(), &mut after);
             std::mem::swap(&mut z, &mut after);
         }

@@ -4,9 +4,9 @@
 //! No timing thresholds: these machines are noisy.
 
 use std::process::Command;
-use vic::tools::bench::HistogramError;
-use vic::tools::bench::cyclictest::parse;
-use vic::tools::bench::{Dist, percentile_of_buckets, ratio};
+use vic::bench::HistogramError;
+use vic::bench::cyclictest::parse;
+use vic::bench::{Dist, percentile_of_buckets, ratio};
 
 /// A trimmed cyclictest 2.4 histogram (`-h 10 --histfile`): 20 samples in the buckets, one
 /// overflow at 3123 µs.

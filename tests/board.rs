@@ -2,9 +2,9 @@
 //! watchdog, safe hold, plant guard, disturbances.
 
 use std::path::Path;
-use vic::planning::scenario::Scenario;
-use vic::rt::board::*;
-use vic::rt::transport::*;
+use vic_plan::scenario::Scenario;
+use vic_rt::board::*;
+use vic_rt::transport::*;
 
 fn scenario() -> Scenario {
     Scenario::load(
@@ -19,11 +19,11 @@ fn scenario() -> Scenario {
 
 fn board() -> (Board, [f64; 2]) {
     let s = scenario();
-    let setup = vic::planning::plan::setup(&s).unwrap();
+    let setup = vic_plan::plan::setup(&s).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
     let b = Board::new(
         s.model.clone(),
-        vic::tools::launch::board_config(&s, 1_000_000),
+        vic::launch::board_config(&s, 1_000_000),
         &q0,
     )
     .unwrap();
@@ -153,11 +153,11 @@ fn the_hold_ramps_the_stiffness_over_the_configured_time() {
 #[test]
 fn the_plant_guard_latches_until_a_reset() {
     let s = scenario();
-    let setup = vic::planning::plan::setup(&s).unwrap();
+    let setup = vic_plan::plan::setup(&s).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
     let cfg = BoardConfig {
         velocity_max: 0.5,
-        ..vic::tools::launch::board_config(&s, 1_000_000)
+        ..vic::launch::board_config(&s, 1_000_000)
     };
     let mut b = Board::new(s.model.clone(), cfg, &q0).unwrap();
     let mut inp = Inputs::default();
@@ -296,13 +296,13 @@ fn rejects_invalid_commands() {
     // The iCub's affine damping law (K_D = 0.075 K_P − 0.0015) is unstable below
     // K_P = 0.02: such a stiffness is refused.
     let mut icub = b.model().clone();
-    icub.actuator = vic::core::model::Actuator::Impedance {
-        damping: vic::core::model::Damping::Affine {
+    icub.actuator = vic_core::model::Actuator::Impedance {
+        damping: vic_core::model::Damping::Affine {
             slope: 0.075,
             offset: -0.0015,
         },
     };
-    let cfg = vic::tools::launch::board_config(&scenario(), 1_000_000);
+    let cfg = vic::launch::board_config(&scenario(), 1_000_000);
     let mut c = Board::new(icub, cfg, &q0).unwrap();
     let mut ci = Inputs::default();
     ci.push_control(&reset(q0, 0));

@@ -1,20 +1,17 @@
 //! A board tick allocates nothing: a counting global allocator watches `Board::step`, and the
 //! I/O of the real-time loop (`rt::realtime`) around it, with a planner and a tool connected.
 
-mod common;
+use crate::common;
 
-use common::alloc::{Counting, allocations};
+use common::alloc::allocations;
 use common::daemons::unique_namespace;
 use std::path::Path;
-use vic::planning::scenario::Scenario;
-use vic::rt::board::{Board, Inputs};
-use vic::rt::transport::{
+use vic_plan::scenario::Scenario;
+use vic_rt::board::{Board, Inputs};
+use vic_rt::transport::{
     BoardEvent, BoardPorts, CentralPorts, CommandSlice, Control, ControlKind, Disturbance,
     DisturbanceKind, Header, StateMsg, Telemetry, ToolPorts,
 };
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
 
 #[test]
 fn a_board_step_does_not_allocate() {
@@ -23,11 +20,11 @@ fn a_board_step_does_not_allocate() {
         "/config/two_link_divergent.toml"
     ));
     let scenario = Scenario::load(path, &[]).unwrap();
-    let setup = vic::planning::plan::setup(&scenario).unwrap();
+    let setup = vic_plan::plan::setup(&scenario).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
     let mut board = Board::new(
         scenario.model.clone(),
-        vic::tools::launch::board_config(&scenario, 1_000_000),
+        vic::launch::board_config(&scenario, 1_000_000),
         &q0,
     )
     .unwrap();
@@ -193,5 +190,5 @@ fn the_board_ports_do_not_allocate_in_a_tick() {
         // The drains saw what was sent: the counted path is the one that carries messages.
         assert_eq!(received, [4, 4, 55], "controls, disturbances, commands");
     }
-    vic::rt::transport::remove_namespace(&ns);
+    vic_rt::transport::remove_namespace(&ns);
 }

@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vic::planning::scenario::{BOARD_RANGES, ConfigError, JOINT_LIMIT_RAD, Scenario};
+use vic_plan::scenario::{BOARD_RANGES, ConfigError, JOINT_LIMIT_RAD, Scenario};
 
 fn config(stem: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -2,7 +2,7 @@
 //! diverged"): the real `vic-board` is SIGKILLed mid-trial; `vic-planner` must stop with exit 1
 //! and "board lost" within a second, and still report the trials it finished before.
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, planner_command, sooc_plan, unique_namespace};
 use std::io::Read;
@@ -62,7 +62,7 @@ fn a_killed_board_stops_the_planner_with_board_lost_and_keeps_earlier_trials() {
         noticed < Duration::from_secs(1),
         "noticed after {noticed:?}"
     );
-    let result: vic::tools::report::StrategyResult =
+    let result: vic::report::StrategyResult =
         serde_json::from_str(stdout.trim()).expect("the finished trials as JSON");
     assert!(
         (1..5).contains(&result.trials),

@@ -4,7 +4,7 @@
 
 #![cfg(feature = "zenoh")]
 
-mod common;
+use crate::common;
 
 use common::bridge::{bridge, port, status, two_hosts, wait_for};
 use common::daemons::{Daemons, run_planner, sooc_plan, unique_namespace};
@@ -91,9 +91,9 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
 fn messages_cross_promptly_without_a_poll_and_stop_is_prompt() {
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
-    use vic::rt::bridge::{self, BridgeOptions, Link, Side};
-    use vic::rt::transport::{BoardPorts, CentralPorts, CommandSlice, Header, StateMsg};
-    use vic::rt::transport::{monotonic_ns, remove_namespace};
+    use vic_rt::bridge::{self, BridgeOptions, Link, Side};
+    use vic_rt::transport::{BoardPorts, CentralPorts, CommandSlice, Header, StateMsg};
+    use vic_rt::transport::{monotonic_ns, remove_namespace};
 
     let safety = Duration::from_secs(2);
     let (host_a, host_b) = (unique_namespace("bea"), unique_namespace("beb"));
@@ -107,7 +107,7 @@ fn messages_cross_promptly_without_a_poll_and_stop_is_prompt() {
             side,
             link,
             safety_interval: safety,
-            stamps: vic::rt::bridge::Stamps::Keep,
+            stamps: vic_rt::bridge::Stamps::Keep,
             clock_skew_ns: 0,
         };
         let stop = stop.clone();

@@ -6,7 +6,7 @@
 
 #![cfg(feature = "zenoh")]
 
-mod common;
+use crate::common;
 
 use common::bridge::{port, status, stop_bridge, two_hosts};
 use common::daemons::{Daemons, planner_command, run_planner, sooc_plan, unique_namespace};

@@ -4,16 +4,16 @@
 
 #![cfg(feature = "zenoh")]
 
-mod common;
+use crate::common;
 
 use common::bridge::port;
 use common::daemons::unique_namespace;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use vic::rt::bridge::wire::encode;
-use vic::rt::bridge::{self, BridgeOptions, BridgeStats, Link, Side, key};
-use vic::rt::transport::{
+use vic_rt::bridge::wire::encode;
+use vic_rt::bridge::{self, BridgeOptions, BridgeStats, Link, Side, key};
+use vic_rt::transport::{
     BoardPorts, CentralPorts, CommandSlice, Control, Header, PROTOCOL_VERSION, StateMsg, Telemetry,
     remove_namespace,
 };

@@ -5,12 +5,12 @@
 
 use std::cell::Cell;
 use std::path::Path;
-use vic::core::policy::Strategy;
-use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
-use vic::planning::scenario::Scenario;
-use vic::rt::board::Board;
-use vic::rt::central::{Central, Timing, Track, lockstep};
-use vic::rt::transport::CommandSlice;
+use vic_core::policy::Strategy;
+use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
+use vic_plan::scenario::Scenario;
+use vic_rt::board::Board;
+use vic_rt::central::{Central, Timing, Track, lockstep};
+use vic_rt::transport::CommandSlice;
 
 const PERIOD_NS: u64 = 20_000_000;
 const FAST_NS: u64 = 1_000_000;
@@ -135,7 +135,7 @@ fn overruns_leave_the_noiseless_trajectory_unchanged() {
             use_fake_clock(slow);
             c.set_clock(fake_clock);
         }
-        let cfg = vic::tools::launch::board_config(&s, 1_000_000);
+        let cfg = vic::launch::board_config(&s, 1_000_000);
         let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
         let recs = lockstep(&mut board, &mut c, 1_000_000, PERIOD_NS, 1, 3);
         (recs, c.compute_timing())
@@ -164,7 +164,7 @@ fn lockstep_on_the_real_clock_decides_no_overrun() {
     let run = |budget_ns: u64| {
         let mut c = central(&set, &p, 200.0, &x0);
         c.set_compute_budget_ns(budget_ns);
-        let cfg = vic::tools::launch::board_config(&s, 1_000_000);
+        let cfg = vic::launch::board_config(&s, 1_000_000);
         let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
         let recs = lockstep(&mut board, &mut c, 1_000_000, PERIOD_NS, 1, 3);
         (recs, c.compute_timing())

@@ -8,12 +8,12 @@
 //! and the trajectories must match; with noise the means must agree within their spread.
 
 use std::path::Path;
-use vic::core::policy::{Feedback, Strategy};
-use vic::planning::montecarlo::run_trials;
-use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
-use vic::planning::scenario::Scenario;
-use vic::rt::board::Board;
-use vic::rt::central::{Central, Timing, Track, TrialRecord, lockstep};
+use vic_core::policy::{Feedback, Strategy};
+use vic_plan::montecarlo::run_trials;
+use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
+use vic_plan::scenario::Scenario;
+use vic_rt::board::Board;
+use vic_rt::central::{Central, Timing, Track, TrialRecord, lockstep};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -55,7 +55,7 @@ fn run_lockstep(
     let steps = (latency_ms / (s.task.dt * 1000.0)).round() as usize;
     let timing = Timing::split(latency_ms, steps, PLANNER_PERIOD_NS);
     let mut central = Central::new(track, strategy, timing);
-    let cfg = vic::tools::launch::board_config(s, 1_000_000);
+    let cfg = vic::launch::board_config(s, 1_000_000);
     let mut board = Board::new(s.model.clone(), cfg, x0).expect("board");
     lockstep(
         &mut board,
@@ -205,13 +205,13 @@ fn lockstep_missing_a_tick(
     let period = 1_000_000;
     let mut board = Board::new(
         s.model.clone(),
-        vic::tools::launch::board_config(s, period),
+        vic::launch::board_config(s, period),
         set.x0.as_slice(),
     )
     .expect("board");
     let mut now: u64 = 1_000_000_000;
     let start = (now + central.lead_time_ns(PLANNER_PERIOD_NS)).div_ceil(period) * period;
-    let mut inputs = vic::rt::board::Inputs::default();
+    let mut inputs = vic_rt::board::Inputs::default();
     inputs.push_control(&central.begin_trial(0, 1, start, now));
     let mut out = Vec::new();
     while !central.trial_done() && now < start + 5_000_000_000 {

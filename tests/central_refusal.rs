@@ -2,12 +2,12 @@
 //! with exit 1, naming the namespace and the running one's pid, and the first one's trials carry
 //! on undisturbed. Real `vic-board` and two real `vic-planner`s.
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, planner_command, sooc_plan, unique_namespace};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
-use vic::tools::report::StrategyResult;
+use vic::report::StrategyResult;
 
 const TRIALS: usize = 3;
 

@@ -4,7 +4,7 @@
 //! a bare iceoryx2 error name. Real `vic-board`, real `vic monitor` / `status` / `inject`
 //! processes, a namespace of their own.
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, unique_namespace};
 use std::io::{BufRead, BufReader};
@@ -12,8 +12,8 @@ use std::process::{Command, Output, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
-use vic::rt::transport::limits::{MAX_PUBLISHERS, MAX_SUBSCRIBERS};
-use vic::rt::transport::{ObserverPorts, PortKind, ToolPorts, TransportError};
+use vic_rt::transport::limits::{MAX_PUBLISHERS, MAX_SUBSCRIBERS};
+use vic_rt::transport::{ObserverPorts, PortKind, ToolPorts, TransportError};
 
 const MONITORS: usize = 8;
 

@@ -5,10 +5,10 @@
 //! parallel); a further test fails when a file in `config/` has no test here.
 
 use std::path::{Path, PathBuf};
-use vic::planning::method::Method;
-use vic::planning::plan::plan;
-use vic::planning::plan_file::{PlanSummary, Stop};
-use vic::planning::scenario::Scenario;
+use vic_plan::method::Method;
+use vic_plan::plan::plan;
+use vic_plan::plan_file::{PlanSummary, Stop};
+use vic_plan::scenario::Scenario;
 
 /// The scenarios, as file stems of `config/*.toml`.
 const SCENARIOS: [&str; 10] = [

@@ -3,7 +3,7 @@
 //! inside the loops (a run three times as long logs the same lines). Real `vic-board` processes
 //! in a namespace of their own, each stopping by itself (`--duration-s`).
 
-mod common;
+use crate::common;
 
 use common::daemons::{CONFIG, unique_namespace};
 use std::process::{Command, Output};

@@ -1,4 +1,4 @@
-//! The delay wrapper `vic::core::delay::Delayed` (paper Eq. 11–13, 19).
+//! The delay wrapper `vic_core::delay::Delayed` (paper Eq. 11–13, 19).
 //!
 //! * With 0 steps it is the plain model: step, noise gain and linearisation identical.
 //! * With `d > 0` steps a rollout of the augmented model from `initial_state(x0, pending)` is a
@@ -6,15 +6,15 @@
 //!   (and `pending` for `k < d`), with and without noise.
 //! * Its linearisation agrees with central finite differences of its step and noise gain.
 
-mod common;
+use crate::common;
 
 use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
-use vic::core::delay::{Delayed, NoiseFree};
-use vic::core::dynamics::{Column, DiscreteDynamics, Dynamics, Linearization};
-use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
+use vic_core::delay::{Delayed, NoiseFree};
+use vic_core::dynamics::{Column, DiscreteDynamics, Dynamics, Linearization};
+use vic_core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
 
 const DT: f64 = 0.01;
 const HORIZON: usize = 15;
@@ -429,7 +429,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
         let base = discrete(&model, &mut rng);
         for d in [0, 1, 2, 5] {
             let delayed = Delayed::new(base.clone(), d);
-            let mut support = vic::core::dynamics::StateSupport::default();
+            let mut support = vic_core::dynamics::StateSupport::default();
             assert!(delayed.state_support(&mut support));
             let point = |rng: &mut StdRng| {
                 let mut x = random_state(&model, rng);
@@ -447,7 +447,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                 assert_eq!(bits(&lin), bits(&fresh), "{name}");
                 if delayed.nw() > 0 {
                     let mut lin = linearize(&delayed, k, &x1, &u1);
-                    lin.noise = vic::core::dynamics::NoiseKind::None;
+                    lin.noise = vic_core::dynamics::NoiseKind::None;
                     lin.c.fill(f64::NAN);
                     for m in lin.cx.iter_mut().chain(lin.cu.iter_mut()) {
                         m.fill(f64::NAN);
@@ -484,7 +484,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                 let plain =
                     |l: &Linearization| step_bits(&[l.a.as_slice(), l.b.as_slice()].concat());
                 assert_eq!(plain(&lin), plain(&fresh), "{name}: without the noise");
-                assert_eq!(lin.noise, vic::core::dynamics::NoiseKind::None, "{name}");
+                assert_eq!(lin.noise, vic_core::dynamics::NoiseKind::None, "{name}");
                 next.fill(f64::NAN);
                 quiet.step_relinearized(k, &x1, &u1, &mut next, &mut lin);
                 let other = linearize(&delayed, k, &x1, &u1);

@@ -6,12 +6,12 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::core::cost::{Cost, CostDerivatives, TrackingCost};
-use vic::core::delay::{Delayed, DelayedPlanner, Offset};
-use vic::core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
-use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem, StopReason};
-use vic::planning::plan::{self, DelayedCost, Setup};
-use vic::planning::scenario::Scenario;
+use vic_core::cost::{Cost, CostDerivatives, TrackingCost};
+use vic_core::delay::{Delayed, DelayedPlanner, Offset};
+use vic_core::dynamics::{DiscreteDynamics, Dynamics, Linearization};
+use vic_core::solver::{Ilqg, IlqgError, IlqgOptions, Problem, StopReason};
+use vic_plan::plan::{self, DelayedCost, Setup};
+use vic_plan::scenario::Scenario;
 
 /// The single joint with its 200 ms delay, its plan setup and its augmented plant.
 fn load(overrides: &[&str]) -> (Scenario, Setup, Delayed<DiscreteDynamics>) {
@@ -75,7 +75,7 @@ fn problems<'a>(
 /// The undelayed first guess for the augmented plant, the commands in flight the scenario's
 /// first.
 fn guess(setup: &Setup, plain: &Problem, d: usize, options: &IlqgOptions) -> Vec<DVector<f64>> {
-    vic::core::delay::undelayed_guess(plain, setup.u_init[0].as_slice(), d, options, &setup.u_init)
+    vic_core::delay::undelayed_guess(plain, setup.u_init[0].as_slice(), d, options, &setup.u_init)
         .expect("guess")
 }
 
@@ -426,7 +426,7 @@ fn a_workspace_refilled_across_solves_gives_the_fresh_plans() {
     let (here, there) = (problem((&delayed, &cost)), problem((&late.0, &late.1)));
     let hidden = (Hidden(&other, 1e-6), HiddenCost(&other_cost));
     let elsewhere = problem((&hidden.0, &hidden.1));
-    let bits = |sol: &vic::core::solver::Solution| {
+    let bits = |sol: &vic_core::solver::Solution| {
         let mut all: Vec<u64> = sol
             .u
             .iter()

@@ -2,7 +2,7 @@
 //! loopback give the trial the one-host demo gives (same plan, same seed), and report the
 //! link's round trip; without the `zenoh` feature the flag says how to build it (exit 2).
 
-mod common;
+use crate::common;
 
 use common::daemons::{CONFIG, SIGMA, ilqg_plan, sooc_plan};
 use std::path::Path;

@@ -8,16 +8,16 @@
 //! * [`DiscreteDynamics::linearize`] (`A = I + Δ f_x`, `B = Δ f_u`, `c = √Δ F`, `Cx`, `Cu`) against
 //!   central finite differences of [`DiscreteDynamics::step`] and [`DiscreteDynamics::noise_gain`].
 
-mod common;
+use crate::common;
 
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::core::dynamics::{DiscreteDynamics, Dynamics, Integrator, Linearization, NoiseKind};
-use vic::core::model::{
+use vic_core::dynamics::{DiscreteDynamics, Dynamics, Integrator, Linearization, NoiseKind};
+use vic_core::model::{
     Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
 };
-use vic::core::scalar::{MAX_NU, MAX_NW, MAX_NX};
+use vic_core::scalar::{MAX_NU, MAX_NW, MAX_NX};
 
 /// Random points per model.
 const POINTS: usize = 6;

@@ -2,11 +2,11 @@
 //! with some diverged trials equal those of the report of the other trials alone.
 
 use std::path::Path;
-use vic::core::policy::Feedback;
-use vic::planning::evaluation::summarize;
-use vic::planning::montecarlo::run_trials;
-use vic::planning::plan::{Method, plan, setup};
-use vic::planning::scenario::Scenario;
+use vic_core::policy::Feedback;
+use vic_plan::evaluation::summarize;
+use vic_plan::montecarlo::run_trials;
+use vic_plan::plan::{Method, plan, setup};
+use vic_plan::scenario::Scenario;
 
 #[test]
 fn diverged_trials_never_enter_the_means() {

@@ -3,12 +3,12 @@
 //! misses the safe-hold deadline, applies what it should refuse, or leaves a process or a
 //! shared-memory file behind.
 
-mod common;
+use crate::common;
 
 use common::daemons::{CONFIG, Daemons, planner_command, run_planner, sooc_plan, unique_namespace};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use vic::rt::transport::{BoardObserver, Mode, StateMsg, ToolPorts, namespace_files};
+use vic_rt::transport::{BoardObserver, Mode, StateMsg, ToolPorts, namespace_files};
 
 /// The tests run one at a time: each runs a 1 kHz board and a planner, and four pairs at once on
 /// a 2-core machine would test the machine, not the board.
@@ -160,7 +160,7 @@ fn a_killed_board_is_replaced_and_the_planner_reports_it_lost() {
     let replacement = d.board(&ns, &[]);
     wait_for(&ep, Duration::from_secs(10), |_| true);
     assert_eq!(
-        vic::rt::transport::dead_nodes(&ns),
+        vic_rt::transport::dead_nodes(&ns),
         0,
         "the killed board's resources are still there"
     );
@@ -247,14 +247,14 @@ fn injected_pulses_show_within_two_ticks_and_namespaces_do_not_cross() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no board in namespace"));
     assert!(t0.elapsed() < Duration::from_secs(5));
-    vic::rt::transport::remove_namespace("nobodyhere");
+    vic_rt::transport::remove_namespace("nobodyhere");
     // Bad input: exit 2 before anything starts.
     let out = vic(&["inject", "pulse", "--torque", "nan", "--namespace", &a]);
     assert_eq!(out.status.code(), Some(2));
 
     // No segment of the namespace is writable by other users: those in /dev/shm by their
     // mode, the rest by the private directory they are in.
-    let root = vic::rt::transport::root_dir();
+    let root = vic_rt::transport::root_dir();
     let root_mode = std::fs::metadata(&root).unwrap().permissions().mode();
     assert_eq!(root_mode & 0o077, 0, "{root:?} has mode {root_mode:o}");
     for f in namespace_files(&a) {
@@ -288,7 +288,7 @@ fn the_plant_guard_latches_a_fault_that_status_reports() {
         .output()
         .unwrap();
     assert!(out.status.success());
-    let r: vic::tools::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
+    let r: vic::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r.fault_trials, 1, "{r:?}");
     // Past the 100 ms ramp into the hold.
     std::thread::sleep(Duration::from_millis(300));

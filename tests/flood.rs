@@ -29,11 +29,11 @@
 //! unpaced flood. The floods of this file run one at a time, so that they do not measure each
 //! other.
 
-mod common;
+use crate::common;
 
 use common::trial::{LiveTrial, VALID_PERIOD, rejected_by_reason};
 use std::time::{Duration, Instant};
-use vic::rt::transport::{
+use vic_rt::transport::{
     CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Header, Mode,
     PROTOCOL_VERSION, Telemetry, ToolPorts, monotonic_ns,
 };

@@ -5,9 +5,9 @@
 use proptest::prelude::*;
 use proptest::test_runner::Config as ProptestConfig;
 use std::path::{Path, PathBuf};
-use vic::planning::scenario::Scenario;
-use vic::rt::board::{Board, BoardConfig, Inputs, Outputs};
-use vic::rt::transport::{
+use vic_plan::scenario::Scenario;
+use vic_rt::board::{Board, BoardConfig, Inputs, Outputs};
+use vic_rt::transport::{
     CommandSlice, Control, ControlKind, Disturbance, Header, Knot, MAX_JOINTS, MAX_KNOTS,
     PROTOCOL_VERSION,
 };
@@ -21,8 +21,8 @@ const MS: u64 = 1_000_000;
 /// The board as `vic-board` builds it from the scenario (stiffness and torque bounds included).
 fn board() -> (Board, [f64; 2], BoardConfig) {
     let scenario = Scenario::load(Path::new(CONFIG), &[]).unwrap();
-    let setup = vic::planning::plan::setup(&scenario).unwrap();
-    let cfg = vic::tools::launch::board_config(&scenario, MS);
+    let setup = vic_plan::plan::setup(&scenario).unwrap();
+    let cfg = vic::launch::board_config(&scenario, MS);
     let q0 = [setup.x0[0], setup.x0[1]];
     let b = Board::new(scenario.model.clone(), cfg.clone(), &q0).unwrap();
     (b, q0, cfg)

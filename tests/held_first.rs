@@ -5,14 +5,14 @@
 //! stochastic solves and actuators whose stiffness carries the torque are not held; a held start
 //! that cannot be rolled out falls back to the free solve.
 
-mod common;
+use crate::common;
 
 use common::scenario as load;
 
 use nalgebra::DMatrix;
 use std::sync::{Arc, Mutex};
-use vic::core::dynamics::{Dynamics, Linearization};
-use vic::core::solver::{Ilqg, StopReason};
+use vic_core::dynamics::{Dynamics, Linearization};
+use vic_core::solver::{Ilqg, StopReason};
 
 /// On the impedance scenarios the scenario's first guess (inverse-dynamics torques, the
 /// configured stiffness) solved deterministically: held first and free reach the same cost to

@@ -1,15 +1,15 @@
 //! ILQG on a linear plant with quadratic cost and additive noise is LQG (Todorov & Li 2005: the
 //! exactness check): its gains, nominal and predicted expected cost must equal those of a
 //! discrete-time Riccati recursion written independently here, and the moment propagation of
-//! `vic::core::solver::moments` must give the same expected cost.
+//! `vic_core::solver::moments` must give the same expected cost.
 
 use nalgebra::{DMatrix, DVector};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::core::cost::{Cost, CostDerivatives};
-use vic::core::dynamics::{Dynamics, Linearization, NoiseKind};
-use vic::core::solver::moments::{self, MomentWorkspace};
-use vic::core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
+use vic_core::cost::{Cost, CostDerivatives};
+use vic_core::dynamics::{Dynamics, Linearization, NoiseKind};
+use vic_core::solver::moments::{self, MomentWorkspace};
+use vic_core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
 
 const NX: usize = 3;
 const NU: usize = 2;

@@ -12,13 +12,13 @@
 //! the box QP was skipped for Newton steps inside the box). It therefore pins the arithmetic bit for
 //! bit, on this kind of machine (the libm's sin/cos variant included).
 
-mod common;
+use crate::common;
 
 use common::scenario as load;
 
 use nalgebra::DVector;
-use vic::core::cost::{Cost, CostDerivatives};
-use vic::core::solver::{Ilqg, Problem};
+use vic_core::cost::{Cost, CostDerivatives};
+use vic_core::solver::{Ilqg, Problem};
 
 /// (cost, expected cost, accepted iterations) of a solve.
 fn solve(file: &str, overrides: &[&str], delay: Option<usize>) -> (f64, f64, usize) {

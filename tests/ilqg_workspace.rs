@@ -2,19 +2,16 @@
 //! guess is an error and not a panic, and a warm start from the shifted converged plan
 //! re-converges to the cold start's cost in fewer iterations.
 
-mod common;
+use crate::common;
 
 use common::scenario as load;
 
-use common::alloc::{Counting, allocations};
+use common::alloc::allocations;
 use nalgebra::DVector;
-use vic::core::delay::{Delayed, Offset};
-use vic::core::solver::{Ilqg, IlqgError, IlqgOptions, Problem, StopReason};
-use vic::planning::plan::{DelayedCost, Setup};
-use vic::planning::scenario::Scenario;
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+use vic_core::delay::{Delayed, Offset};
+use vic_core::solver::{Ilqg, IlqgError, IlqgOptions, Problem, StopReason};
+use vic_plan::plan::{DelayedCost, Setup};
+use vic_plan::scenario::Scenario;
 
 fn problem<'a>(s: &Scenario, setup: &'a Setup) -> Problem<'a> {
     setup.problem(s.task.steps)
@@ -313,7 +310,7 @@ fn undelayed_guess_is_the_deterministic_delayed_optimum() {
     let delayed = setup.delayed(d);
     let problem = delayed.problem(steps);
     let plain = setup.problem(s.task.steps);
-    let guess = vic::core::delay::undelayed_guess(
+    let guess = vic_core::delay::undelayed_guess(
         &plain,
         setup.u_init[0].as_slice(),
         d,
@@ -341,9 +338,9 @@ fn undelayed_guess_is_the_deterministic_delayed_optimum() {
 
 /// The delayed plant with nonzeros where its Jacobians have zeros (and no support declared):
 /// another plant of the same size, whose linearisations fill the whole buffer.
-struct Filled<'a>(&'a Delayed<vic::core::dynamics::DiscreteDynamics>);
+struct Filled<'a>(&'a Delayed<vic_core::dynamics::DiscreteDynamics>);
 
-impl vic::core::dynamics::Dynamics for Filled<'_> {
+impl vic_core::dynamics::Dynamics for Filled<'_> {
     fn nx(&self) -> usize {
         self.0.nx()
     }
@@ -364,7 +361,7 @@ impl vic::core::dynamics::Dynamics for Filled<'_> {
         k: usize,
         x: &[f64],
         u: &[f64],
-        lin: &mut vic::core::dynamics::Linearization,
+        lin: &mut vic_core::dynamics::Linearization,
     ) {
         self.0.linearize(k, x, u, lin);
         for m in std::iter::once(&mut lin.a).chain(lin.cx.iter_mut()) {
@@ -382,7 +379,7 @@ impl vic::core::dynamics::Dynamics for Filled<'_> {
 /// support names) is set up anew by each solve.
 #[test]
 fn a_workspace_from_another_plant_solves_the_delayed_plant_as_a_fresh_one() {
-    use vic::core::dynamics::Dynamics;
+    use vic_core::dynamics::Dynamics;
     let (s, setup) = load("single_joint_delay.toml", &[]);
     let delayed = Delayed::new(setup.dynamics.clone(), s.task.delay_steps());
     let cost = DelayedCost::new(&setup.cost, setup.x0.len());
@@ -397,7 +394,7 @@ fn a_workspace_from_another_plant_solves_the_delayed_plant_as_a_fresh_one() {
             bounds: setup.bounds.clone(),
         })
         .into();
-    let bits = |sol: &vic::core::solver::Solution| -> Vec<u64> {
+    let bits = |sol: &vic_core::solver::Solution| -> Vec<u64> {
         let mut all = vec![sol.cost.to_bits(), sol.expected_cost.to_bits()];
         for v in sol
             .u

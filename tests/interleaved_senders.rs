@@ -10,11 +10,11 @@
 //! between. Checked against the board's own telemetry: every message sent is accepted (the valid
 //! ones: the trial keeps running on them), rejected by reason, or counted as dropped, exactly.
 
-mod common;
+use crate::common;
 
 use common::trial::{LiveTrial, rejected_by_reason};
 use std::time::{Duration, Instant};
-use vic::rt::transport::{CommandSlice, Header, Mode, RawPorts, monotonic_ns};
+use vic_rt::transport::{CommandSlice, Header, Mode, RawPorts, monotonic_ns};
 
 const JUNK_SESSION: u32 = 0xB0057;
 /// Junk slices per burst: more than the board's receive buffer, so most are overwritten.

@@ -6,9 +6,9 @@
 
 use nalgebra::DVector;
 use std::path::Path;
-use vic::core::solver::{Ilqg, Problem, Solution};
-use vic::planning::plan::{Setup, setup};
-use vic::planning::scenario::Scenario;
+use vic_core::solver::{Ilqg, Problem, Solution};
+use vic_plan::plan::{Setup, setup};
+use vic_plan::scenario::Scenario;
 
 const CONFIG: &str = "config/two_link_reach.toml";
 

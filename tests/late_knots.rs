@@ -3,11 +3,11 @@
 //! place (within the watchdog time, no safe hold). Even the open-loop plan then ends
 //! elsewhere, with every state on its knot: only `late_knots` says so.
 
-use vic::core::policy::Strategy;
-use vic::planning::plan::{Method, plan, setup};
-use vic::planning::scenario::Scenario;
-use vic::rt::board::Board;
-use vic::rt::central::{Central, Timing, Track, TrialRecord, lockstep_polled};
+use vic_core::policy::Strategy;
+use vic_plan::plan::{Method, plan, setup};
+use vic_plan::scenario::Scenario;
+use vic_rt::board::Board;
+use vic_rt::central::{Central, Timing, Track, TrialRecord, lockstep_polled};
 
 const PLANNER: u64 = 20_000_000;
 const BOARD: u64 = 1_000_000;
@@ -30,7 +30,7 @@ fn trial(polls: &dyn Fn(u64, u64) -> bool) -> TrialRecord {
     .expect("track");
     let timing = Timing::split(100.0, 10, PLANNER);
     let mut central = Central::new(track, Strategy::Stiffness, timing);
-    let cfg = vic::tools::launch::board_config(&s, BOARD);
+    let cfg = vic::launch::board_config(&s, BOARD);
     let mut board = Board::new(s.model.clone(), cfg, set.x0.as_slice()).expect("board");
     let mut records = lockstep_polled(&mut board, &mut central, (BOARD, PLANNER), 1, 1, polls);
     records.pop().expect("one trial")

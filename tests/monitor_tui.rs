@@ -4,7 +4,7 @@
 //! gives the terminal back (primary screen, canonical mode). Skipped, with the reason printed,
 //! where tmux is not installed.
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, unique_namespace};
 use std::process::{Command, Output};

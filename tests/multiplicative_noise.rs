@@ -11,9 +11,9 @@ use nalgebra::{DMatrix, DVector};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
-use vic::core::cost::{Cost, CostDerivatives};
-use vic::core::dynamics::{Dynamics, Linearization, NoiseKind};
-use vic::core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
+use vic_core::cost::{Cost, CostDerivatives};
+use vic_core::dynamics::{Dynamics, Linearization, NoiseKind};
+use vic_core::solver::{Bounds, Ilqg, IlqgOptions, Problem, Solution};
 
 const HORIZON: usize = 30;
 const TRIALS: usize = 50_000;

@@ -2,13 +2,13 @@
 //! stopped, the other untouched and answering; no file of a namespace that another user could
 //! write; a foreign or unsafe iceoryx2 directory refused.
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, unique_namespace};
 use std::collections::BTreeSet;
 use std::os::unix::fs::MetadataExt;
 use std::time::Duration;
-use vic::rt::transport::{ToolPorts, namespace_files, root_dir};
+use vic_rt::transport::{ToolPorts, namespace_files, root_dir};
 
 fn files(ns: &str) -> BTreeSet<String> {
     namespace_files(ns).into_iter().collect()
@@ -73,7 +73,7 @@ fn stopping_a_namespace_leaves_the_one_whose_name_it_prefixes_intact() {
 fn a_namespace_file_of_another_user_is_refused_with_a_message() {
     let ns = unique_namespace("nf");
     // A file in the namespace's name that belongs to someone else (uid 65534, "nobody").
-    let path = format!("/dev/shm/{}planted", vic::rt::transport::prefix(&ns));
+    let path = format!("/dev/shm/{}planted", vic_rt::transport::prefix(&ns));
     std::fs::write(&path, [0u8; 16]).unwrap();
     // SAFETY: chown(2) on a file this test created, with a valid NUL-terminated path.
     let c = std::ffi::CString::new(path.clone()).unwrap();
@@ -118,7 +118,7 @@ fn a_killed_boards_node_directory_goes_with_its_namespace() {
     // Killed: the board cannot remove its own node directory; removing the namespace (what
     // the last process of a namespace, the tests' guard and the soak script do) must.
     d.signal_and_wait(board, libc::SIGKILL);
-    vic::rt::transport::remove_namespace(&ns);
+    vic_rt::transport::remove_namespace(&ns);
     assert!(files(&ns).is_empty(), "{:?}", files(&ns));
     let left: Vec<_> = dirs.iter().filter(|d| d.exists()).collect();
     assert!(left.is_empty(), "node directories left: {left:?}");

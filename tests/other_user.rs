@@ -14,7 +14,7 @@
 //! their root directories are removed at the end (never the uid running the tests: other tests
 //! share it).
 
-mod common;
+use crate::common;
 
 use common::daemons::{CONFIG, Daemons, unique_namespace};
 use std::collections::{BTreeMap, BTreeSet};
@@ -26,7 +26,7 @@ use std::process::{Command, Output, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use vic::rt::transport::prefix;
+use vic_rt::transport::prefix;
 
 /// `nobody`: the other local user.
 const OTHER: u32 = 65534;

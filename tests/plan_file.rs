@@ -4,10 +4,10 @@
 
 use std::path::Path;
 use std::process::Command;
-use vic::planning::method::Method;
-use vic::planning::plan::plan;
-use vic::planning::plan_file::PlanFile;
-use vic::planning::scenario::Scenario;
+use vic_plan::method::Method;
+use vic_plan::plan::plan;
+use vic_plan::plan_file::PlanFile;
+use vic_plan::scenario::Scenario;
 
 fn config(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -3,11 +3,11 @@
 //! the solvers' own predictions where they exist and against the Monte Carlo where they do not.
 
 use std::path::Path;
-use vic::core::policy::Feedback;
-use vic::planning::montecarlo::run_trials;
-use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
-use vic::planning::prediction::predicted_cost;
-use vic::planning::scenario::Scenario;
+use vic_core::policy::Feedback;
+use vic_plan::montecarlo::run_trials;
+use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
+use vic_plan::prediction::predicted_cost;
+use vic_plan::scenario::Scenario;
 
 fn planned(config: &str, extra: &[&str], method: Method) -> (Setup, PlanFile) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -2,10 +2,10 @@
 //! checked against what it must equal and against the naive delayed feedback of Eq. 13.
 
 use std::path::Path;
-use vic::core::policy::Feedback;
-use vic::planning::montecarlo::{Trial, run_trials};
-use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
-use vic::planning::scenario::Scenario;
+use vic_core::policy::Feedback;
+use vic_plan::montecarlo::{Trial, run_trials};
+use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
+use vic_plan::scenario::Scenario;
 
 /// The single joint of Fig. 2 without stiffness (feedback is all it has), planned by ILQG for a
 /// controller without delay; `sigma` sets the noise.

@@ -4,9 +4,9 @@
 //! after the last fresh valid command whatever that command claimed to cover.
 
 use std::path::Path;
-use vic::planning::scenario::Scenario;
-use vic::rt::board::*;
-use vic::rt::transport::*;
+use vic_plan::scenario::Scenario;
+use vic_rt::board::*;
+use vic_rt::transport::*;
 
 const MS: u64 = 1_000_000;
 
@@ -19,9 +19,9 @@ fn board() -> (Board, [f64; 2]) {
         &[],
     )
     .unwrap();
-    let setup = vic::planning::plan::setup(&s).unwrap();
+    let setup = vic_plan::plan::setup(&s).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
-    let cfg = vic::tools::launch::board_config(&s, MS);
+    let cfg = vic::launch::board_config(&s, MS);
     assert_eq!(cfg.watchdog_ns, 50 * MS, "the scenario's watchdog changed");
     (Board::new(s.model.clone(), cfg, &q0).unwrap(), q0)
 }

@@ -5,9 +5,9 @@
 use iceoryx2::prelude::ZeroCopySend;
 use std::collections::BTreeMap;
 use std::mem::{offset_of, size_of, size_of_val};
-use vic::rt::board::{FaultReason, gaps};
-use vic::rt::transport::ports::{self, Topic};
-use vic::rt::transport::*;
+use vic_rt::board::{FaultReason, gaps};
+use vic_rt::transport::ports::{self, Topic};
+use vic_rt::transport::*;
 
 const DOC: &str = include_str!("../docs/PROTOCOL.md");
 
@@ -284,5 +284,5 @@ fn services_and_prefix_match_the_document() {
     assert_eq!(rows, rust);
     let example = property("Prefix", "Example");
     let (ns, prefix) = example.split_once(" → ").unwrap();
-    assert_eq!(vic::rt::transport::prefix(ns), prefix);
+    assert_eq!(vic_rt::transport::prefix(ns), prefix);
 }

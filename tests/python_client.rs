@@ -14,7 +14,7 @@
 //!
 //! Without `VIC_PYTHON` the test says why it skips (outside CI only).
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, sooc_plan, unique_namespace};
 use std::path::{Path, PathBuf};
@@ -109,9 +109,9 @@ fn the_python_client_follows_the_protocol_and_matches_the_boards_record() {
     );
     drop(d);
     assert!(
-        vic::rt::transport::namespace_files(&ns).is_empty(),
+        vic_rt::transport::namespace_files(&ns).is_empty(),
         "the namespace left files: {:?}",
-        vic::rt::transport::namespace_files(&ns)
+        vic_rt::transport::namespace_files(&ns)
     );
 
     let out = Command::new(env!("CARGO_BIN_EXE_vic"))

@@ -5,7 +5,7 @@
 //! `common::daemons::SIGMA` for why). The plans are fixtures in tests/data/realtime (made by
 //! `vic plan`); if they no longer parse they are re-made.
 
-mod common;
+use crate::common;
 
 use common::daemons::{
     Daemons, ilqg_plan, ilqg0_plan, planner_command_at, run_planner, sooc_plan, unique_namespace,
@@ -28,7 +28,7 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
         .output()
         .unwrap();
     assert!(out.status.success());
-    let fb0: vic::tools::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
+    let fb0: vic::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
 
     // SIGTERM: the board stops at the end of the tick, prints its statistics, exits 0.
     let out = d.signal_and_wait(board, libc::SIGTERM);
@@ -47,9 +47,9 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
         stats["rejected_by_reason"]
     );
     assert!(
-        vic::rt::transport::namespace_files(&ns).is_empty(),
+        vic_rt::transport::namespace_files(&ns).is_empty(),
         "shared memory left behind: {:?}",
-        vic::rt::transport::namespace_files(&ns)
+        vic_rt::transport::namespace_files(&ns)
     );
 
     eprintln!(

@@ -3,29 +3,26 @@
 //! `vic identify` reads it. And the loop's side of a recording (building the sample, pushing it,
 //! dropping it when the queue is full) allocates nothing.
 
-mod common;
+use crate::common;
 
-use common::alloc::{Counting, allocations};
+use common::alloc::allocations;
 use common::daemons::{CONFIG, Daemons, SIGMA, sooc_plan};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use vic::planning::scenario::Scenario;
-use vic::rt::board::{Board, Inputs};
-use vic::rt::record::{RecordOptions, Recorder, Sample};
-use vic::rt::transport::{
+use vic_plan::scenario::Scenario;
+use vic_rt::board::{Board, Inputs};
+use vic_rt::record::{RecordOptions, Recorder, Sample};
+use vic_rt::transport::{
     CommandSlice, Control, ControlKind, Disturbance, DisturbanceKind, Header, ToolPorts,
 };
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
 
 #[test]
 fn building_and_pushing_a_sample_does_not_allocate_even_when_the_queue_is_full() {
     let scenario = Scenario::load(Path::new(CONFIG), &[]).unwrap();
-    let setup = vic::planning::plan::setup(&scenario).unwrap();
+    let setup = vic_plan::plan::setup(&scenario).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
-    let cfg = vic::tools::launch::board_config(&scenario, 1_000_000);
+    let cfg = vic::launch::board_config(&scenario, 1_000_000);
     let mut board = Board::new(scenario.model.clone(), cfg, &q0).unwrap();
     let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("record_alloc.csv");
     let mut rec = Recorder::start(
@@ -167,7 +164,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     loop {
         let running = tool
             .latest_state()
-            .is_some_and(|s| s.mode == vic::rt::transport::Mode::Running as u32);
+            .is_some_and(|s| s.mode == vic_rt::transport::Mode::Running as u32);
         if running {
             break;
         }
@@ -176,7 +173,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     }
     std::thread::sleep(Duration::from_millis(100));
     tool.publish_disturbance(&Disturbance {
-        header: Header::new(77, vic::rt::transport::monotonic_ns()),
+        header: Header::new(77, vic_rt::transport::monotonic_ns()),
         kind: DisturbanceKind::Pulse as u32,
         torque: [0.25, -0.125],
         duration_ns: 20_000_000,
@@ -227,7 +224,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     // Both trials ran with the plan's stiffness and the law's damping (K_D = 0.1 K_P).
     let running: Vec<&Vec<String>> = rows
         .iter()
-        .filter(|r| num(r, "x_mode") == vic::rt::transport::Mode::Running as u32 as f64)
+        .filter(|r| num(r, "x_mode") == vic_rt::transport::Mode::Running as u32 as f64)
         .collect();
     assert!(running.len() > 1000, "{} running ticks", running.len());
     assert!(running.iter().any(|r| num(r, "x_trial") == 1.0));
@@ -281,12 +278,12 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     }
 
     // The log reader of `vic identify` reads the whole recording.
-    let log = vic::tools::identify::read_log_file(&file).unwrap();
+    let log = vic::identify::read_log_file(&file).unwrap();
     assert_eq!(log.len() as u64, ticks);
     assert_eq!(log[5].q, num(&rows[5], "q"));
     std::fs::remove_file(&file).unwrap();
     assert!(
-        vic::rt::transport::namespace_files(&ns).is_empty(),
+        vic_rt::transport::namespace_files(&ns).is_empty(),
         "shared memory left behind"
     );
 }

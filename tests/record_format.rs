@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 use std::time::Duration;
-use vic::rt::record::*;
-use vic::tools::identify::read_log;
+use vic::identify::read_log;
+use vic_rt::record::*;
 
 fn sample(tick: u64) -> Sample {
     Sample {

@@ -8,7 +8,7 @@
 //! `mcap` Python package (python/tools/check_recording.py, run by the interpreter named in
 //! `VIC_PYTHON`, which `.ci/run` sets to a venv) reads both files with the same counts.
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, sooc_plan, unique_namespace};
 use serde_json::Value;
@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use vic::rt::transport::{Disturbance, DisturbanceKind, Header, Mode, ToolPorts, monotonic_ns};
+use vic_rt::transport::{Disturbance, DisturbanceKind, Header, Mode, ToolPorts, monotonic_ns};
 
 /// Checks `v` against the subset of JSON Schema our schemas use: types, properties, required
 /// keys, array items, additionalProperties.
@@ -265,7 +265,7 @@ fn a_live_run_recorded_by_the_board_and_by_vic_record_reads_back_whole() {
     assert!(compared > 1000, "{compared} states in both files");
     assert_eq!(
         ext_meta["vic"]["plan_fnv1a64"],
-        vic::tools::record_command::fnv1a64(&std::fs::read(&plan).unwrap())
+        vic::record_command::fnv1a64(&std::fs::read(&plan).unwrap())
     );
     assert_eq!(ext_meta["vic.summary"]["states_lost"], lost.to_string());
 
@@ -291,8 +291,8 @@ fn a_live_run_recorded_by_the_board_and_by_vic_record_reads_back_whole() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let from_csv = vic::tools::identify::read_log_file(&csv_file).unwrap();
-    let from_mcap = vic::tools::identify::read_log_file(&board_file).unwrap();
+    let from_csv = vic::identify::read_log_file(&csv_file).unwrap();
+    let from_mcap = vic::identify::read_log_file(&board_file).unwrap();
     assert_eq!(from_csv.len() as u64, ticks);
     assert_eq!(from_csv, from_mcap);
     assert_eq!(
@@ -302,7 +302,7 @@ fn a_live_run_recorded_by_the_board_and_by_vic_record_reads_back_whole() {
     for f in [&board_file, &ext_file, &csv_file] {
         std::fs::remove_file(f).unwrap();
     }
-    assert!(vic::rt::transport::namespace_files(&ns).is_empty());
+    assert!(vic_rt::transport::namespace_files(&ns).is_empty());
 }
 
 /// The Python `mcap` package reads both files: the same messages per topic as the Rust reader,

@@ -6,15 +6,12 @@
 //! iceoryx2 0.10 allocates the shared state of every loaned sample, which vic's service recycles,
 //! `rt::transport::recycled`).
 
-mod common;
+use crate::common;
 
-use common::alloc::{Counting, allocations};
+use common::alloc::allocations;
 use common::daemons::unique_namespace;
-use vic::rt::transport::relay::{Relay, RelayListener};
-use vic::rt::transport::{BoardEvent, BoardPorts, CentralPorts, Header, StateMsg, Telemetry};
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+use vic_rt::transport::relay::{Relay, RelayListener};
+use vic_rt::transport::{BoardEvent, BoardPorts, CentralPorts, Header, StateMsg, Telemetry};
 
 #[test]
 fn board_notifications_do_not_allocate_with_or_without_a_relay_listener() {
@@ -68,5 +65,5 @@ fn board_notifications_do_not_allocate_with_or_without_a_relay_listener() {
             "the listener was woken {woken} times in 999 ticks"
         );
     }
-    vic::rt::transport::remove_namespace(&ns);
+    vic_rt::transport::remove_namespace(&ns);
 }

@@ -7,16 +7,16 @@
 //! swing the joint; started with the covariance of the latency's unseen noise they do not.
 
 use std::path::Path;
-use vic::core::policy::{Feedback, Policy, Strategy};
-use vic::core::replan::{Executor, ReplanOptions, ReplanOutcome, Replanner};
-use vic::planning::evaluation::summarize;
-use vic::planning::montecarlo::{
+use vic_core::policy::{Feedback, Policy, Strategy};
+use vic_core::replan::{Executor, ReplanOptions, ReplanOutcome, Replanner};
+use vic_plan::evaluation::summarize;
+use vic_plan::montecarlo::{
     Pulse, Trial, position, run_trial_on, run_trials, run_trials_disturbed,
 };
-use vic::planning::plan::{Method, PlanFile, Setup, plan, setup};
-use vic::planning::scenario::Scenario;
-use vic::rt::board::Board;
-use vic::rt::central::{Central, ReplanTiming, Timing, Track, TrialRecord, lockstep};
+use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
+use vic_plan::scenario::Scenario;
+use vic_rt::board::Board;
+use vic_rt::central::{Central, ReplanTiming, Timing, Track, TrialRecord, lockstep};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -67,7 +67,7 @@ fn replan_in_lockstep(
     if background {
         central.replan_in_background(true);
     }
-    let cfg = vic::tools::launch::board_config(s, 1_000_000);
+    let cfg = vic::launch::board_config(s, 1_000_000);
     let mut board = Board::new(s.model.clone(), cfg, &set.x0).expect("board");
     let rec = lockstep(&mut board, &mut central, 1_000_000, PLANNER_PERIOD_NS, 1, 5).remove(0);
     assert!(!rec.safe_hold && !rec.fault && rec.missing_states == 0);

@@ -12,7 +12,7 @@
 //!   stiffness against the field, and executed open loop it spreads far less than a torque-only
 //!   plan.
 
-mod common;
+use crate::common;
 
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 use rand::rngs::StdRng;
@@ -20,19 +20,19 @@ use rand::{RngExt, SeedableRng};
 use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
-use vic::core::cost::{Cost, CostDerivatives, TrackingCost};
-use vic::core::dynamics::{DiscreteDynamics, Dynamics, Integrator, Linearization};
-use vic::core::model::{
+use vic_core::cost::{Cost, CostDerivatives, TrackingCost};
+use vic_core::dynamics::{DiscreteDynamics, Dynamics, Integrator, Linearization};
+use vic_core::model::{
     Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant, SingleJoint, TwoLink,
 };
-use vic::core::policy::{Feedback, Policy};
-use vic::core::solver::sooc::{MomentCost, MomentDynamics, pack, unpack, vech_len, vech_pairs};
-use vic::core::solver::{Bounds, Problem};
-use vic::planning::montecarlo::{final_state_statistics, position, run_trials};
-use vic::planning::plan::{
+use vic_core::policy::{Feedback, Policy};
+use vic_core::solver::sooc::{MomentCost, MomentDynamics, pack, unpack, vech_len, vech_pairs};
+use vic_core::solver::{Bounds, Problem};
+use vic_plan::montecarlo::{final_state_statistics, position, run_trials};
+use vic_plan::plan::{
     Method, PlanFile, Setup, final_position_covariance, plan, predict_open_loop, setup,
 };
-use vic::planning::scenario::Scenario;
+use vic_plan::scenario::Scenario;
 
 // ---------------------------------------------------------------------------------------------
 // Helpers
@@ -97,7 +97,7 @@ fn largest_std(c: &DMatrix<f64>) -> f64 {
 /// Sample covariance of the final position (hand [m] or joint angle [rad]) over trials.
 fn final_position_sample_covariance(
     model: &ArmModel,
-    trials: &[vic::planning::montecarlo::Trial],
+    trials: &[vic_plan::montecarlo::Trial],
 ) -> DMatrix<f64> {
     let points: Vec<Vec<f64>> = trials
         .iter()
@@ -820,7 +820,7 @@ fn check_covariance(what: &str, setup: &Setup, acting: &[DVector<f64>], seed: u6
     // Monte Carlo side maps every trial through the nonlinear kinematics.
     let (end_pred, std_pred) = final_position_covariance(model, &pred.mean[steps], predicted);
     let end_mc = final_position_sample_covariance(model, &trials);
-    let unit = vic::planning::unit::Unit::for_model(model);
+    let unit = vic_plan::unit::Unit::for_model(model);
     let scale = unit.scale();
     eprintln!(
         "{what}: {COVARIANCE_TRIALS} trials in {:.2} s; final end-point sd {std_pred:.4} {unit} \

@@ -2,14 +2,14 @@
 //! its optimum (KKT conditions by finite differences, agreement from several starts, Monte Carlo)
 //! and its receding-horizon warm start.
 
-mod common;
+use crate::common;
 
 use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use vic::core::dynamics::{DiscreteDynamics, Integrator};
-use vic::core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
-use vic::core::solver::sooc::{MomentDynamics, MomentExpansion, pack, vech_len};
+use vic_core::dynamics::{DiscreteDynamics, Integrator};
+use vic_core::model::{Actuator, ArmModel, Damping, Exogenous, Field, Noise, Plant};
+use vic_core::solver::sooc::{MomentDynamics, MomentExpansion, pack, vech_len};
 
 struct Case {
     name: &'static str,
@@ -227,16 +227,16 @@ fn moment_curvature_matches_finite_differences() {
 use nalgebra::DVector;
 use std::path::Path;
 use std::sync::OnceLock;
-use vic::core::dynamics::Dynamics;
-use vic::core::policy::{Feedback, Policy};
-use vic::core::solver::sooc::MomentCost;
-use vic::core::solver::sooc_newton::{
+use vic_core::dynamics::Dynamics;
+use vic_core::policy::{Feedback, Policy};
+use vic_core::solver::sooc::MomentCost;
+use vic_core::solver::sooc_newton::{
     Indefinite, SoocOptions, SoocProblem, SoocSolution, SoocSolver, SoocStop,
 };
-use vic::planning::montecarlo::run_trials;
-use vic::planning::plan::{self, Setup, predict_open_loop, setup};
-use vic::planning::receding::{TAIL_SHARE, TailFirst};
-use vic::planning::scenario::Scenario;
+use vic_plan::montecarlo::run_trials;
+use vic_plan::plan::{self, Setup, predict_open_loop, setup};
+use vic_plan::receding::{TAIL_SHARE, TailFirst};
+use vic_plan::scenario::Scenario;
 
 fn scenario(stem: &str) -> (Scenario, Setup) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -800,7 +800,7 @@ fn a_few_steps_without_the_flows_third_derivatives_decrease_the_cost_as_exact_on
     // The moment state of a start known exactly: the mean, a zero covariance.
     let mut z0 = next.x0.clone();
     z0.resize(moments.nx(), 0.0);
-    let start = vic::core::solver::Problem {
+    let start = vic_core::solver::Problem {
         dynamics: &moments,
         cost: &cost,
         x0: z0,

@@ -1,19 +1,16 @@
 //! The SOOC workspace: its iterations allocate nothing (a counting allocator), so a re-solve
 //! in the central controller's period costs arithmetic only.
 
-mod common;
+use crate::common;
 
-use common::alloc::{Counting, allocations};
+use common::alloc::allocations;
 use nalgebra::DVector;
 use std::path::Path;
-use vic::core::solver::Solution;
-use vic::core::solver::sooc::{MomentCost, MomentDynamics};
-use vic::core::solver::sooc_newton::{SoocProblem, SoocSolution, SoocSolver};
-use vic::planning::plan::{self, Setup};
-use vic::planning::scenario::Scenario;
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+use vic_core::solver::Solution;
+use vic_core::solver::sooc::{MomentCost, MomentDynamics};
+use vic_core::solver::sooc_newton::{SoocProblem, SoocSolution, SoocSolver};
+use vic_plan::plan::{self, Setup};
+use vic_plan::scenario::Scenario;
 
 fn load(file: &str) -> (Scenario, Setup) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -3,7 +3,7 @@
 //! lists each with its pid and role, a SIGKILLed monitor as dead, and when the board is gone the
 //! error still lists who is left.
 
-mod common;
+use crate::common;
 
 use common::daemons::{Daemons, unique_namespace};
 use std::process::{Command, Output, Stdio};

@@ -1,4 +1,4 @@
-//! The solvers' kernels compiled for AVX2 (chosen at run time, `vic::core::wide`) compute the
+//! The solvers' kernels compiled for AVX2 (chosen at run time, `vic_core::wide`) compute the
 //! portable kernels' numbers to the bit: on every scenario of `config/`, the ILQG plan (and with a
 //! feedback delay the delayed planner's) is solved with the wide kernels forbidden and then
 //! allowed, and every state, control, gain, cost and the iteration count must agree bit for bit;
@@ -11,11 +11,11 @@
 //! so on stderr. The CI machines have AVX2.
 
 use std::path::Path;
-use vic::core::delay::DelayedPlanner;
-use vic::core::solver::{Ilqg, Solution};
-use vic::core::wide;
-use vic::planning::plan;
-use vic::planning::scenario::Scenario;
+use vic_core::delay::DelayedPlanner;
+use vic_core::solver::{Ilqg, Solution};
+use vic_core::wide;
+use vic_plan::plan;
+use vic_plan::scenario::Scenario;
 
 /// Every number of a solution, as bits.
 fn bits(s: &Solution) -> Vec<u64> {

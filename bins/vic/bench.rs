@@ -1,10 +1,10 @@
-//! `vic bench loop` and `vic bench ipc`: flags, then [`vic::tools::bench_command`].
+//! `vic bench loop` and `vic bench ipc`: flags, then [`vic::bench_command`].
 
 use clap::Subcommand;
 use std::path::PathBuf;
-use vic::tools::bench::loop_bench;
-use vic::tools::bench_command::{PairRequest, run_ipc, run_loop};
-use vic::tools::cli::{DefaultScenarioArgs, JsonArg};
+use vic::bench::loop_bench;
+use vic::bench_command::{PairRequest, run_ipc, run_loop};
+use vic::cli::{DefaultScenarioArgs, JsonArg};
 
 #[derive(clap::Args)]
 pub struct BenchArgs {
@@ -150,8 +150,8 @@ impl BenchArgs {
                 run_ipc(a.iterations, pair, a.json.json)
             }
             #[cfg(feature = "zenoh")]
-            BenchCommand::Bridge(a) => vic::tools::bench_command::run_bridge(
-                &vic::tools::bench::bridge::Options {
+            BenchCommand::Bridge(a) => vic::bench_command::run_bridge(
+                &vic::bench::bridge::Options {
                     iterations: a.iterations,
                     port: a.port,
                     spin: a.spin,

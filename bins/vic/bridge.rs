@@ -1,8 +1,8 @@
-//! `vic bridge`: flags, then [`vic::tools::bridge_command::run`].
+//! `vic bridge`: flags, then [`vic::bridge_command::run`].
 
 use std::time::Duration;
-use vic::rt::bridge::{BridgeOptions, Link, Side, Stamps};
-use vic::tools::cli::{JsonArg, NamespaceArgs, input_error, non_negative_seconds};
+use vic::cli::{JsonArg, NamespaceArgs, input_error, non_negative_seconds};
+use vic_rt::bridge::{BridgeOptions, Link, Side, Stamps};
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum SideArg {
@@ -93,6 +93,6 @@ impl BridgeArgs {
             },
             clock_skew_ns,
         };
-        vic::tools::bridge_command::run(&options, duration, self.json.json)
+        vic::bridge_command::run(&options, duration, self.json.json)
     }
 }

@@ -1,7 +1,7 @@
-//! `vic convert`: flags, then [`vic::tools::record_command::run_convert`].
+//! `vic convert`: flags, then [`vic::record_command::run_convert`].
 
 use std::path::PathBuf;
-use vic::tools::cli::JsonArg;
+use vic::cli::JsonArg;
 
 #[derive(clap::Args)]
 #[command(mut_arg("json", |a| a.help("Print the summary as one JSON object")))]
@@ -18,6 +18,6 @@ pub struct ConvertArgs {
 
 impl ConvertArgs {
     pub fn run(self) -> anyhow::Result<()> {
-        vic::tools::record_command::run_convert(&self.input, &self.csv, self.json.json)
+        vic::record_command::run_convert(&self.input, &self.csv, self.json.json)
     }
 }

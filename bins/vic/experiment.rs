@@ -1,10 +1,10 @@
-//! `vic experiment`: flags, then [`vic::tools::reproduce::experiment`].
+//! `vic experiment`: flags, then [`vic::reproduce::experiment`].
 
 use clap::ValueEnum;
 use std::path::PathBuf;
-use vic::tools::cli::{JsonArg, SeedArgs};
-use vic::tools::experiment::Figure;
-use vic::tools::reproduce::{FigureRunOptions, experiment};
+use vic::cli::{JsonArg, SeedArgs};
+use vic::experiment::Figure;
+use vic::reproduce::{FigureRunOptions, experiment};
 
 #[derive(Clone, Copy, ValueEnum)]
 enum FigureArg {

@@ -1,8 +1,8 @@
-//! `vic identify`: flags, then [`vic::tools::identify_command::run`].
+//! `vic identify`: flags, then [`vic::identify_command::run`].
 
 use std::path::PathBuf;
-use vic::tools::cli::JsonArg;
-use vic::tools::identify::IdentifyOptions;
+use vic::cli::JsonArg;
+use vic::identify::IdentifyOptions;
 
 #[derive(clap::Args)]
 pub struct IdentifyArgs {
@@ -40,6 +40,6 @@ impl IdentifyArgs {
             std_degree: self.std_degree,
             subtract_mean: self.subtract_mean,
         };
-        vic::tools::identify_command::run(&self.log, self.config.as_ref(), &options, self.json.json)
+        vic::identify_command::run(&self.log, self.config.as_ref(), &options, self.json.json)
     }
 }

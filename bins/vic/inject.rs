@@ -1,8 +1,8 @@
-//! `vic inject`: flags, then [`vic::tools::operator_command::run_inject`].
+//! `vic inject`: flags, then [`vic::operator_command::run_inject`].
 
 use clap::Subcommand;
-use vic::tools::cli::{JsonArg, NamespaceArgs, positive_seconds};
-use vic::tools::operator_command::{field, load, noise, pulse, run_inject};
+use vic::cli::{JsonArg, NamespaceArgs, positive_seconds};
+use vic::operator_command::{field, load, noise, pulse, run_inject};
 
 #[derive(clap::Args)]
 #[command(

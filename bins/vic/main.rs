@@ -1,5 +1,5 @@
 //! `vic`: the command-line front end. Each subcommand's file parses its flags and makes one call
-//! into `vic::tools` (where the flags are a `vic::tools` type, that type is the subcommand);
+//! into the `vic` library (where the flags are a library type, that type is the subcommand);
 //! errors end the process with exit code 2 (bad input) or 1 (a failure).
 
 mod bench;
@@ -42,7 +42,7 @@ enum Command {
     /// divergence and the expected cost, next to the plan's prediction.
     ///
     /// Example: vic simulate --config config/two_link_divergent.toml --plan plan.json --policy open-loop
-    Simulate(vic::tools::simulate::SimulateOptions),
+    Simulate(vic::simulate::SimulateOptions),
     /// Reproduce a figure of the paper: plan and simulate every column, write the plots (PNG and
     /// SVG) and a JSON of the numbers into --out-dir, print a table.
     ///
@@ -68,7 +68,7 @@ enum Command {
     /// down.
     ///
     /// Example: vic demo --latency-ms 200 --trials 3
-    Demo(vic::tools::demo::DemoOptions),
+    Demo(vic::demo::DemoOptions),
     /// Send a disturbance to a running board and report the tick that applied it (read from its
     /// state stream), or fail (exit 1) when no board answers or it rejects the disturbance.
     ///
@@ -131,10 +131,10 @@ impl Command {
     fn run(self) -> anyhow::Result<()> {
         match self {
             Command::Plan(a) => a.run(),
-            Command::Simulate(o) => vic::tools::simulate::run(&o),
+            Command::Simulate(o) => vic::simulate::run(&o),
             Command::Experiment(a) => a.run(),
             Command::Results(a) => a.run(),
-            Command::Demo(o) => vic::tools::demo::run(&o),
+            Command::Demo(o) => vic::demo::run(&o),
             Command::Inject(a) => a.run(),
             Command::Status(a) => a.run(),
             Command::Monitor(a) => a.run(),
@@ -150,7 +150,7 @@ impl Command {
 }
 
 fn main() -> ExitCode {
-    vic::tools::cli::finish("vic", Cli::parse().command.run())
+    vic::cli::finish("vic", Cli::parse().command.run())
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
-//! `vic monitor`: flags, then [`vic::tools::operator_command::run_monitor`].
+//! `vic monitor`: flags, then [`vic::operator_command::run_monitor`].
 
-use vic::tools::cli::NamespaceArgs;
-use vic::tools::operator_command::MonitorOptions;
+use vic::cli::NamespaceArgs;
+use vic::operator_command::MonitorOptions;
 
 #[derive(clap::Args)]
 pub struct MonitorArgs {
@@ -33,7 +33,7 @@ pub struct MonitorArgs {
 impl MonitorArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let namespace = self.namespace.validated()?;
-        vic::tools::operator_command::run_monitor(
+        vic::operator_command::run_monitor(
             namespace,
             MonitorOptions {
                 interval_s: self.interval_s,

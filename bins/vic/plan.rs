@@ -1,9 +1,9 @@
-//! `vic plan`: flags, then [`vic::tools::plan_command::run`].
+//! `vic plan`: flags, then [`vic::plan_command::run`].
 
 use clap::ValueEnum;
 use std::path::PathBuf;
-use vic::tools::cli::{JsonArg, ScenarioArgs};
-use vic::tools::plan_command::{PlanOptions, run};
+use vic::cli::{JsonArg, ScenarioArgs};
+use vic::plan_command::{PlanOptions, run};
 
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
@@ -35,7 +35,7 @@ pub struct PlanArgs {
 
 impl PlanArgs {
     pub fn run(self) -> anyhow::Result<()> {
-        use vic::planning::plan::Method;
+        use vic_plan::plan::Method;
         run(&PlanOptions {
             config: self.scenario.config,
             overrides: self.scenario.set.overrides,

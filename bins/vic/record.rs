@@ -1,8 +1,8 @@
-//! `vic record`: flags, then [`vic::tools::record_command::run_record`].
+//! `vic record`: flags, then [`vic::record_command::run_record`].
 
 use std::path::PathBuf;
-use vic::tools::cli::{JsonArg, NamespaceArgs, non_negative_seconds, positive_seconds};
-use vic::tools::record_command::{RecordArgs as Run, run_record};
+use vic::cli::{JsonArg, NamespaceArgs, non_negative_seconds, positive_seconds};
+use vic::record_command::{RecordArgs as Run, run_record};
 
 #[derive(clap::Args)]
 #[command(mut_arg("json", |a| a.help("Print the summary as one JSON object")))]

@@ -1,4 +1,4 @@
-//! `vic results`: flags, then [`vic::tools::reproduce::results`].
+//! `vic results`: flags, then [`vic::reproduce::results`].
 
 use crate::experiment::FigureRunArgs;
 use std::path::PathBuf;
@@ -14,6 +14,6 @@ pub struct ResultsArgs {
 
 impl ResultsArgs {
     pub fn run(self) -> anyhow::Result<()> {
-        vic::tools::reproduce::results(&self.run.options(), &self.out_dir)
+        vic::reproduce::results(&self.run.options(), &self.out_dir)
     }
 }

@@ -1,6 +1,6 @@
-//! `vic status`: flags, then [`vic::tools::operator_command::run_status`].
+//! `vic status`: flags, then [`vic::operator_command::run_status`].
 
-use vic::tools::cli::{JsonArg, NamespaceArgs, positive_seconds};
+use vic::cli::{JsonArg, NamespaceArgs, positive_seconds};
 
 #[derive(clap::Args)]
 #[command(mut_arg("json", |a| a.help("Print one JSON object")))]
@@ -18,6 +18,6 @@ impl StatusArgs {
     pub fn run(self) -> anyhow::Result<()> {
         let namespace = self.namespace.validated()?;
         let timeout = positive_seconds("--timeout-s", self.timeout_s)?;
-        vic::tools::operator_command::run_status(namespace, timeout, self.json.json)
+        vic::operator_command::run_status(namespace, timeout, self.json.json)
     }
 }

@@ -1,9 +1,9 @@
-//! `vic sweep latency`: flags, then [`vic::tools::sweep`].
+//! `vic sweep latency`: flags, then [`vic::sweep`].
 
 use std::path::PathBuf;
-use vic::tools::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
-use vic::tools::progress::Progress;
-use vic::tools::sweep::{
+use vic::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
+use vic::progress::Progress;
+use vic::sweep::{
     Execution, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs,
 };
 
@@ -99,7 +99,7 @@ impl SweepArgs {
             done.set(done.get() + 1);
         })
         .map_err(|e| match e.is_input() {
-            true => vic::tools::cli::input_error(e),
+            true => vic::cli::input_error(e),
             false => anyhow::Error::new(e),
         })?;
         drop(progress);

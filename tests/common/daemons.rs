@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use vic::tools::report::StrategyResult;
+use vic::report::StrategyResult;
 
 pub const CONFIG: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
@@ -21,7 +21,7 @@ pub fn plan_or_fixture(fixture: &str, method: &str, extra: &[&str]) -> PathBuf {
         .join(fixture);
     let loads = std::fs::read_to_string(&path)
         .ok()
-        .and_then(|t| serde_json::from_str::<vic::planning::plan::PlanFile>(&t).ok())
+        .and_then(|t| serde_json::from_str::<vic_plan::plan::PlanFile>(&t).ok())
         .is_some();
     if loads {
         return path;
@@ -70,7 +70,7 @@ pub fn unique_namespace(tag: &str) -> String {
     format!(
         "{tag}{}x{}",
         std::process::id(),
-        vic::rt::transport::monotonic_ns() % 1_000_000
+        vic_rt::transport::monotonic_ns() % 1_000_000
     )
 }
 
@@ -144,7 +144,7 @@ impl Drop for Daemons {
             let _ = c.wait();
         }
         for ns in &self.namespaces {
-            vic::rt::transport::remove_namespace(ns);
+            vic_rt::transport::remove_namespace(ns);
         }
     }
 }

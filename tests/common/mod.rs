@@ -8,9 +8,9 @@ pub mod daemons;
 pub mod trial;
 
 use std::path::Path;
-use vic::core::model::{Plant, SingleJoint, TwoLink};
-use vic::planning::plan::{self, Setup};
-use vic::planning::scenario::Scenario;
+use vic_core::model::{Plant, SingleJoint, TwoLink};
+use vic_plan::plan::{self, Setup};
+use vic_plan::scenario::Scenario;
 
 /// A scenario of `config/` with `--set` overrides (`section.key=value`), and its plan setup.
 pub fn scenario(file: &str, overrides: &[&str]) -> (Scenario, Setup) {

@@ -3,12 +3,12 @@
 
 use super::daemons::{CONFIG, Daemons, unique_namespace};
 use std::time::{Duration, Instant};
-use vic::planning::plan::setup;
-use vic::planning::scenario::Scenario;
-use vic::rt::transport::{
+use vic::bench::loop_bench::hold_slice;
+use vic_plan::plan::setup;
+use vic_plan::scenario::Scenario;
+use vic_rt::transport::{
     CentralPorts, CommandSlice, Control, ControlKind, Header, Rejection, Telemetry, monotonic_ns,
 };
-use vic::tools::bench::loop_bench::hold_slice;
 
 /// The valid sender's session.
 pub const VALID_SESSION: u32 = 0x5AFE;

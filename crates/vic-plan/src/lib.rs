@@ -1,0 +1,20 @@
+//! From a scenario file to a plan and its offline evaluation: [`scenario`] (the TOML files,
+//! validated), [`reference`] (the desired movement), [`setup`] (the Eq. 10 model, the Eq. 14 cost
+//! and the warm start), [`plan`] (solving with a [`method`]), [`plan_file`] (what `vic plan`
+//! writes and the other commands read), [`montecarlo`] (seeded trials on the stochastic plant) and
+//! [`evaluation`] (statistics in the [`unit`] a reader expects).
+
+// Index loops read like the equations they implement; iterator chains over several arrays do not.
+#![allow(clippy::needless_range_loop)]
+
+pub mod evaluation;
+pub mod method;
+pub mod montecarlo;
+pub mod plan;
+pub mod plan_file;
+pub mod prediction;
+pub mod receding;
+pub mod reference;
+pub mod scenario;
+pub mod setup;
+pub mod unit;

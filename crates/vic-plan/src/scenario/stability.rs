@@ -1,0 +1,140 @@
+//! Numerical stability of the plant integration: a scenario whose sub-step is too long for its
+//! stiffest impedance is refused before any plan is made on it.
+
+use super::error::{ConfigError, FileCheck};
+use super::{Task, TaskPath};
+use vic_core::model::{Actuator, ArmModel};
+use vic_core::solver::Bounds;
+
+/// Refuses integration sub-steps too long for the stiffest configured impedance: explicit and
+/// semi-implicit Euler both diverge once `h · K_D / I > 2` (a damping rate) or `h · ω > 2` (a VSA
+/// spring). A plan made on a numerically unstable plant says nothing about the robot.
+pub(super) fn check_substep(
+    model: &ArmModel,
+    task: &Task,
+    bounds: &Bounds,
+    check: &FileCheck,
+) -> Result<(), ConfigError> {
+    let dof = model.dof();
+    let Some(off) = model.actuator.stiffness_offset(dof) else {
+        return Ok(());
+    };
+    let k_max = bounds.upper[off..off + dof]
+        .iter()
+        .copied()
+        .fold(0.0, f64::max);
+    if !k_max.is_finite() {
+        return Ok(());
+    }
+    let inertia = smallest_inertia(model, task);
+    let rate = match &model.actuator {
+        Actuator::Impedance { damping } => damping.gain(k_max) / inertia,
+        Actuator::Vsa { motor_inertia } => {
+            let b = motor_inertia.iter().copied().fold(f64::INFINITY, f64::min);
+            (k_max / inertia.min(b)).sqrt()
+        }
+        Actuator::Torque => return Ok(()),
+    };
+    let h = task.dt / task.substeps as f64;
+    if h * rate >= 2.0 {
+        let needed = (task.dt * rate / 2.0).floor() as usize + 1;
+        return Err(check.invalid(
+            "task",
+            "substeps",
+            format!(
+                "{} sub-step(s) of {:.2} ms are numerically unstable at stiffness_max = {k_max} N m/rad \
+                 (rate {rate:.0}/s needs h < {:.2} ms): use substeps ≥ {needed} or a lower stiffness_max",
+                task.substeps,
+                h * 1000.0,
+                2000.0 / rate
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The smallest effective inertia over the postures of the task (elbow angles between start and
+/// target, with a margin): the smallest eigenvalue of M(q).
+fn smallest_inertia(model: &ArmModel, task: &Task) -> f64 {
+    let dof = model.dof();
+    let elbow = |path: &TaskPath| -> (f64, f64) {
+        let ends = match path {
+            TaskPath::Joint { start, target } => [
+                start.get(1).copied().unwrap_or(0.0),
+                target.get(1).copied().unwrap_or(0.0),
+            ],
+            TaskPath::Hand { start, target } => {
+                [*start, *target].map(|p| model.plant.inverse_kinematics(p).map_or(0.0, |q| q[1]))
+            }
+        };
+        (ends[0].min(ends[1]) - 0.3, ends[0].max(ends[1]) + 0.3)
+    };
+    let (lo, hi) = elbow(&task.path);
+    (0..=36)
+        .map(|i| {
+            let q = [0.0, lo + (hi - lo) * i as f64 / 36.0];
+            let m = model.plant.mass_matrix(&q);
+            if dof == 1 {
+                m[0][0]
+            } else {
+                let (tr, det) = (m[0][0] + m[1][1], m[0][0] * m[1][1] - m[0][1] * m[1][0]);
+                0.5 * (tr - (tr * tr - 4.0 * det).max(0.0).sqrt())
+            }
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The board's tick at its default rate (1 kHz) [s]: it integrates in sub-steps no longer than
+/// this nor than the scenario's own sub-step.
+pub const BOARD_TICK_S: f64 = 1e-3;
+
+/// Refuses a safe-hold stiffness the board cannot hold stably: the impedance law's damping
+/// `K_D = gain(k)` (Eq. 4) must not be negative (it would pump energy in), and the board's
+/// semi-implicit Euler step `h = min(dt / substeps, 1 ms)` must satisfy both `h · K_D / I < 2`
+/// and `h · sqrt(k / I) < 2` at the smallest inertia of the task's postures (a VSA: the spring
+/// against the lighter of link and motor).
+pub(super) fn check_hold_stiffness(
+    model: &ArmModel,
+    task: &Task,
+    hold_stiffness: f64,
+    check: &FileCheck,
+) -> Result<(), ConfigError> {
+    let k = hold_stiffness;
+    let inertia = smallest_inertia(model, task);
+    let rate = match &model.actuator {
+        Actuator::Impedance { damping } => {
+            let d = damping.gain(k);
+            if d < 0.0 {
+                return Err(check.invalid(
+                    "board",
+                    "hold_stiffness",
+                    format!(
+                        "{k} N m/rad gives a negative damping {d} N m s/rad under the actuator's \
+                         damping law: the hold would pump energy into the arm; raise it"
+                    ),
+                ));
+            }
+            (d / inertia).max((k / inertia).sqrt())
+        }
+        Actuator::Vsa { motor_inertia } => {
+            let b = motor_inertia.iter().copied().fold(f64::INFINITY, f64::min);
+            (k / inertia.min(b)).sqrt()
+        }
+        // The board runs the impedance law only; it refuses other actuators itself.
+        Actuator::Torque => return Ok(()),
+    };
+    let h = (task.dt / task.substeps as f64).min(BOARD_TICK_S);
+    if h * rate >= 2.0 {
+        return Err(check.invalid(
+            "board",
+            "hold_stiffness",
+            format!(
+                "{k} N m/rad is numerically unstable on the board's {:.2} ms step (rate {rate:.0}/s \
+                 at the smallest inertia {inertia:.4} kg m² needs h < {:.2} ms): lower it",
+                h * 1000.0,
+                2000.0 / rate
+            ),
+        ));
+    }
+    Ok(())
+}

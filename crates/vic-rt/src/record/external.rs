@@ -1,0 +1,228 @@
+//! Recording a namespace from outside the board (`vic record`): a separate process subscribes
+//! to every service (states at 1 kHz, command slices, control requests, disturbances,
+//! telemetry) and writes each message to an MCAP file as it arrives. It publishes nothing, so
+//! the board does not know it is there; its subscriber buffers (128 messages per service) give
+//! it 128 ms to come back to each queue, and the states it missed anyway are counted from the
+//! board's sequence numbers and marked on the `/gap` channel.
+
+use super::error::RecordError;
+use super::mcap_file::McapOut;
+use super::schema::{self, ChannelSpec, gap_json};
+use crate::transport::RecorderPorts;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// What `vic record` was asked for.
+#[derive(Debug, Clone)]
+pub struct ExternalOptions {
+    /// Stop this long after the first state [ns] (0: when `stop` is set).
+    pub duration_ns: u64,
+    /// How long to wait for the board's first state before giving up [ms].
+    pub wait_for_board_ms: u64,
+    /// Key-value pairs of the file's metadata record (command line, plan hash, …).
+    pub metadata: BTreeMap<String, String>,
+}
+
+/// Messages written on one channel.
+#[derive(Debug, Clone, Serialize, PartialEq, Eq)]
+pub struct TopicCount {
+    pub topic: String,
+    pub messages: u64,
+}
+
+/// What an external recording wrote and what it missed.
+#[derive(Debug, Clone, Serialize)]
+pub struct ExternalSummary {
+    pub path: PathBuf,
+    pub namespace: String,
+    /// States written.
+    pub states: u64,
+    /// States the board published that the recorder missed (sequence numbers skipped).
+    pub states_lost: u64,
+    /// Gaps marked on `/gap`.
+    pub gaps: u64,
+    /// First and last board tick written.
+    pub first_tick: u64,
+    pub last_tick: u64,
+    /// Messages per channel.
+    pub topics: Vec<TopicCount>,
+    /// Seconds from the first state to the end.
+    pub seconds: f64,
+}
+
+struct Channels {
+    ids: [u16; 6],
+    counts: [u64; 6],
+}
+
+const SPECS: [&ChannelSpec; 6] = [
+    &schema::STATE,
+    &schema::COMMAND,
+    &schema::CONTROL,
+    &schema::DISTURBANCE,
+    &schema::TELEMETRY,
+    &schema::GAP,
+];
+const STATE: usize = 0;
+const COMMAND: usize = 1;
+const CONTROL: usize = 2;
+const DISTURBANCE: usize = 3;
+const TELEMETRY: usize = 4;
+const GAP: usize = 5;
+
+/// Loss accounting of the state stream.
+#[derive(Default)]
+struct StateTrack {
+    last_seq: u64,
+    first_tick: u64,
+    last_tick: u64,
+    lost: u64,
+    gaps: u64,
+}
+
+/// Records namespace `ns` into the MCAP file `path` until `stop` is set or the duration ends.
+pub fn record_namespace(
+    ns: &str,
+    path: &Path,
+    opts: &ExternalOptions,
+    stop: &AtomicBool,
+) -> Result<ExternalSummary, RecordError> {
+    let ports = RecorderPorts::open(ns)?;
+    let file = std::fs::File::create(path).map_err(|e| RecordError::io(path, e))?;
+    let mcap_err = |e| RecordError::mcap(path, e);
+    let mut metadata = opts.metadata.clone();
+    metadata.insert("vic_version".into(), env!("CARGO_PKG_VERSION").into());
+    metadata.insert("namespace".into(), ns.into());
+    metadata.insert("clock".into(), "CLOCK_MONOTONIC".into());
+    metadata.insert("recorder".into(), "vic record".into());
+    let mut out = McapOut::start(file, &metadata).map_err(mcap_err)?;
+    let mut ch = Channels {
+        ids: [0; 6],
+        counts: [0; 6],
+    };
+    for (id, spec) in ch.ids.iter_mut().zip(SPECS) {
+        *id = out.channel(spec).map_err(mcap_err)?;
+    }
+    let started = Instant::now();
+    let mut first_state: Option<Instant> = None;
+    let mut track = StateTrack::default();
+    loop {
+        let stopping = stop.load(Ordering::Relaxed)
+            || first_state.is_some_and(|t| {
+                opts.duration_ns > 0 && t.elapsed() >= Duration::from_nanos(opts.duration_ns)
+            });
+        drain_once(&ports, &mut out, &mut ch, &mut track).map_err(mcap_err)?;
+        if first_state.is_none() && ch.counts[STATE] > 0 {
+            first_state = Some(Instant::now());
+        }
+        if stopping {
+            break;
+        }
+        if first_state.is_none()
+            && started.elapsed() >= Duration::from_millis(opts.wait_for_board_ms)
+        {
+            drop(out);
+            let _ = std::fs::remove_file(path);
+            return Err(RecordError::NoBoard {
+                namespace: ns.into(),
+                waited_ms: opts.wait_for_board_ms,
+            });
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let summary = ExternalSummary {
+        path: path.to_path_buf(),
+        namespace: ns.into(),
+        states: ch.counts[STATE],
+        states_lost: track.lost,
+        gaps: track.gaps,
+        first_tick: track.first_tick,
+        last_tick: track.last_tick,
+        topics: SPECS
+            .iter()
+            .zip(ch.counts)
+            .map(|(s, n)| TopicCount {
+                topic: s.topic.into(),
+                messages: n,
+            })
+            .collect(),
+        seconds: first_state.map_or(0.0, |t| t.elapsed().as_secs_f64()),
+    };
+    let mut m = BTreeMap::new();
+    for t in &summary.topics {
+        m.insert(
+            format!("messages{}", t.topic.replace('/', "_")),
+            t.messages.to_string(),
+        );
+    }
+    m.insert("states_lost".into(), track.lost.to_string());
+    m.insert("gaps".into(), track.gaps.to_string());
+    out.metadata("vic.summary", m).map_err(mcap_err)?;
+    out.finish().map_err(mcap_err)?;
+    Ok(summary)
+}
+
+/// Writes everything waiting on every service.
+fn drain_once(
+    ports: &RecorderPorts,
+    out: &mut McapOut,
+    ch: &mut Channels,
+    track: &mut StateTrack,
+) -> mcap::McapResult<()> {
+    let mut result = Ok(());
+    let mut put =
+        |out: &mut McapOut, ch: &mut Channels, k: usize, t: u64, v: &serde_json::Value| {
+            if result.is_ok() {
+                result = out.write(ch.ids[k], t, t, v);
+                ch.counts[k] += 1;
+            }
+        };
+    ports.drain_states(|s| {
+        let t = s.header.time_ns;
+        // A board numbers its states 1, 2, …; a jump is states this recorder missed. A restart
+        // of the board (numbers going back) starts a new count.
+        if track.last_seq > 0 && s.header.seq > track.last_seq + 1 {
+            let missing = s.header.seq - track.last_seq - 1;
+            track.lost += missing;
+            track.gaps += 1;
+            let first = s.tick.saturating_sub(missing);
+            put(
+                out,
+                ch,
+                GAP,
+                t,
+                &gap_json(first, missing, "recorder missed states"),
+            );
+        }
+        if ch.counts[STATE] == 0 {
+            track.first_tick = s.tick;
+        }
+        track.last_seq = s.header.seq;
+        track.last_tick = s.tick;
+        put(out, ch, STATE, t, &schema::state_json(s));
+    });
+    ports.drain_commands(|c| put(out, ch, COMMAND, c.header.time_ns, &schema::command_json(c)));
+    ports.drain_controls(|c| put(out, ch, CONTROL, c.header.time_ns, &schema::control_json(c)));
+    ports.drain_disturbances(|d| {
+        put(
+            out,
+            ch,
+            DISTURBANCE,
+            d.header.time_ns,
+            &schema::disturbance_json(d),
+        )
+    });
+    ports.drain_telemetry(|t| {
+        put(
+            out,
+            ch,
+            TELEMETRY,
+            t.header.time_ns,
+            &schema::telemetry_json(t),
+        )
+    });
+    result
+}

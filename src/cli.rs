@@ -1,0 +1,264 @@
+//! What the three binaries (`vic`, `vic-board`, `vic-planner`) share: one error convention and the
+//! argument groups that every one of them takes.
+//!
+//! Errors: the command-line front ends return `anyhow::Result`; an error the user can fix (a file
+//! that cannot be read, a configuration key with a bad value, a flag out of range) is tagged with
+//! [`InputError`] (by [`Classify::input`] or [`input_error`]) and ends the process with exit code 2,
+//! anything else (a board that does not answer, a write that fails) with 1. [`finish`] prints the
+//! message as `PROGRAM: error: MESSAGE` and returns the exit code.
+
+use anyhow::anyhow;
+use std::fmt::Display;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use vic_rt::transport::DEFAULT_NAMESPACE;
+
+/// Marks an error as the user's: a file, a key or a flag that is wrong. Its message says which and
+/// why; [`exit_code`] turns it into exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct InputError(#[from] anyhow::Error);
+
+/// An [`InputError`] with this message.
+pub fn input_error(message: impl Display) -> anyhow::Error {
+    InputError(anyhow!("{message}")).into()
+}
+
+/// Classifies the error of a `Result` whose error only needs to be shown: the user's
+/// ([`Classify::input`], exit 2) or the run's ([`Classify::runtime`], exit 1).
+pub trait Classify<T> {
+    /// The error is the user's input (exit 2).
+    fn input(self) -> anyhow::Result<T>;
+    /// The error is a failure of the run (exit 1).
+    fn runtime(self) -> anyhow::Result<T>;
+}
+
+impl<T, E: Display> Classify<T> for Result<T, E> {
+    fn input(self) -> anyhow::Result<T> {
+        self.map_err(input_error)
+    }
+    fn runtime(self) -> anyhow::Result<T> {
+        self.map_err(|e| anyhow!("{e}"))
+    }
+}
+
+/// 2 when the error (or anything it wraps) is an [`InputError`], else 1.
+pub fn exit_code(error: &anyhow::Error) -> u8 {
+    if error.chain().any(|e| e.is::<InputError>()) {
+        2
+    } else {
+        1
+    }
+}
+
+/// The error's message and the messages of its causes, joined by ": ", each cause left out when
+/// the text before already ends with it (errors that print their source themselves).
+pub fn message(error: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in error.chain() {
+        let part = cause.to_string();
+        if text.is_empty() {
+            text = part;
+        } else if !text.ends_with(&part) {
+            text.push_str(": ");
+            text.push_str(&part);
+        }
+    }
+    text
+}
+
+/// Ends a binary: exit 0 on success, else `PROGRAM: error: MESSAGE` on stderr and exit 2 (the
+/// user's input) or 1 (a failure).
+pub fn finish(program: &str, result: anyhow::Result<()>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{program}: error: {}", message(&e));
+            ExitCode::from(exit_code(&e))
+        }
+    }
+}
+
+/// `--namespace`: which board the command talks to.
+#[derive(Debug, Clone, clap::Args)]
+pub struct NamespaceArgs {
+    /// Namespace of the services (instances in different namespaces never see each other).
+    #[arg(long, default_value = DEFAULT_NAMESPACE)]
+    pub namespace: String,
+}
+
+impl NamespaceArgs {
+    /// The namespace, checked (it names files in /dev/shm).
+    pub fn validated(&self) -> anyhow::Result<&str> {
+        vic_rt::transport::validate_namespace(&self.namespace).input()?;
+        Ok(&self.namespace)
+    }
+}
+
+/// `--set SECTION.KEY=VALUE`, repeatable: overrides of the scenario's keys.
+#[derive(Debug, Clone, clap::Args)]
+pub struct OverrideArgs {
+    /// Override a configuration key (repeatable): --set noise.sigma=0.02
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+/// `--config FILE` (required) and its `--set` overrides.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ScenarioArgs {
+    /// Scenario file (TOML).
+    #[arg(long, short, value_name = "FILE")]
+    pub config: PathBuf,
+    #[command(flatten)]
+    pub set: OverrideArgs,
+}
+
+/// The scenario every real-time command runs when none is given.
+pub const DEFAULT_SCENARIO: &str = "config/two_link_divergent.toml";
+
+/// `--config FILE` (default: the two-link arm in the divergent field) and its `--set` overrides.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DefaultScenarioArgs {
+    /// Scenario file (TOML).
+    #[arg(long, short, value_name = "FILE", default_value = DEFAULT_SCENARIO)]
+    pub config: PathBuf,
+    #[command(flatten)]
+    pub set: OverrideArgs,
+}
+
+/// `--seed`: the seed of the noise.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct SeedArgs {
+    /// Seed of the noise (each trial derives its own stream from it).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// `--json`: print one JSON object instead of the readable report.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct JsonArg {
+    /// Print one JSON object instead of the readable report.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Prints `value` as one line of JSON on stdout.
+pub fn print_json(value: &impl serde::Serialize) -> anyhow::Result<()> {
+    println!("{}", serde_json::to_string(value)?);
+    Ok(())
+}
+
+/// A command's result: one line of JSON with `--json`, else the readable report `table` prints.
+pub fn print_report<T: serde::Serialize>(
+    value: &T,
+    json: bool,
+    table: impl FnOnce(&T),
+) -> anyhow::Result<()> {
+    if json {
+        print_json(value)
+    } else {
+        table(value);
+        Ok(())
+    }
+}
+
+/// A whole number of time steps of `dt_ms` in `ms`, else an input error naming `flag`.
+pub fn whole_steps(flag: &str, ms: f64, dt_ms: f64) -> anyhow::Result<usize> {
+    let steps = ms / dt_ms;
+    if !(steps >= 0.0 && (steps - steps.round()).abs() < 1e-6) {
+        return Err(input_error(format!(
+            "{flag} {ms}: not a whole number of {dt_ms} ms plan steps"
+        )));
+    }
+    Ok(steps.round() as usize)
+}
+
+/// A positive, finite number of seconds given with `flag`.
+pub fn positive_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::Duration> {
+    if !(seconds.is_finite() && seconds > 0.0) {
+        return Err(input_error(format!(
+            "{flag} {seconds}: must be a positive number of seconds"
+        )));
+    }
+    Ok(std::time::Duration::from_secs_f64(seconds))
+}
+
+/// A finite number of seconds ≥ 0 given with `flag`.
+pub fn non_negative_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::Duration> {
+    if !(seconds.is_finite() && seconds >= 0.0) {
+        return Err(input_error(format!(
+            "{flag} {seconds}: must be a number of seconds ≥ 0"
+        )));
+    }
+    Ok(std::time::Duration::from_secs_f64(seconds))
+}
+
+/// The distance beyond which a trial counts as diverged: the user's, else the default of the
+/// model's unit (10° for a single joint, 50 mm for the arm).
+pub fn divergence_or_default(chosen: Option<f64>, model: &vic_core::model::ArmModel) -> f64 {
+    chosen.unwrap_or_else(|| vic_plan::unit::Unit::for_model(model).default_divergence())
+}
+
+/// A stop flag set by SIGINT or SIGTERM.
+pub fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .map_err(|e| anyhow!("cannot install the signal handler: {e}"))?;
+    Ok(stop)
+}
+
+/// The binary `name` next to the running one (the demo and the benchmarks start the board and the
+/// planner as separate processes).
+pub fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let path = exe.with_file_name(name);
+    if path.is_file() {
+        Ok(path)
+    } else {
+        Err(anyhow!(
+            "{} not found next to {} (build it with cargo build --bins)",
+            name,
+            exe.display()
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn input_errors_exit_2_even_with_context() {
+        let e = input_error("--rate-hz 0: use 1 to 10000");
+        assert_eq!(exit_code(&e), 2);
+        let e = e.context("starting the board");
+        assert_eq!(exit_code(&e), 2);
+        assert_eq!(exit_code(&anyhow!("no board")), 1);
+        let r: Result<(), &str> = Err("bad key");
+        assert_eq!(exit_code(&r.input().unwrap_err()), 2);
+        assert_eq!(exit_code(&r.runtime().unwrap_err()), 1);
+    }
+
+    #[test]
+    fn message_does_not_repeat_a_cause_already_printed() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("a.toml: cannot read: {source}")]
+        struct Io {
+            source: std::io::Error,
+        }
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "not found");
+        let e: anyhow::Error = InputError(Io { source: io }.into()).into();
+        assert_eq!(message(&e), "a.toml: cannot read: not found");
+        assert_eq!(message(&anyhow!("inner").context("outer")), "outer: inner");
+    }
+
+    #[test]
+    fn whole_steps_rejects_fractions_and_negatives() {
+        assert_eq!(whole_steps("--latency-ms", 200.0, 10.0).unwrap(), 20);
+        assert!(whole_steps("--latency-ms", 205.0, 10.0).is_err());
+        assert!(whole_steps("--latency-ms", -10.0, 10.0).is_err());
+        assert!(whole_steps("--latency-ms", f64::NAN, 10.0).is_err());
+    }
+}

@@ -1,0 +1,136 @@
+//! `vic plan`: solve a scenario's stochastic optimal control problem (ILQG for the scenario's
+//! feedback delay, or SOOC for open-loop execution), write the plan file and report its summary.
+
+use crate::cli::{Classify, print_json};
+use crate::progress::Progress;
+use std::path::PathBuf;
+use vic_plan::plan::{Method, PlanFile, plan};
+use vic_plan::plan_file::PlanSummary;
+use vic_plan::scenario::Scenario;
+
+/// What `vic plan` was asked for.
+#[derive(Debug, Clone)]
+pub struct PlanOptions {
+    pub config: PathBuf,
+    pub overrides: Vec<String>,
+    /// The planning method (default: the scenario's `[solver] method`).
+    pub method: Option<Method>,
+    /// The central feedback delay [ms], overriding `task.delay_ms`.
+    pub delay_ms: Option<f64>,
+    /// Where to write the plan file.
+    pub out: Option<PathBuf>,
+    pub json: bool,
+}
+
+/// Plans the scenario, writes the plan file if asked and prints the summary (JSON or text).
+pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
+    let mut overrides = o.overrides.clone();
+    if let Some(d) = o.delay_ms {
+        overrides.push(format!("task.delay_ms={d}"));
+    }
+    let scenario = Scenario::load(&o.config, &overrides).input()?;
+    let method = o.method.unwrap_or(scenario.solver.method);
+    let progress = Progress::spinner();
+    let plan = plan(&scenario, method, progress.solver_callback())
+        .map_err(|e| format!("{}: {e}", o.config.display()))
+        .input()?;
+    drop(progress);
+    if let Some(out) = &o.out {
+        write_plan(&plan, out)?;
+    }
+    if o.json {
+        print_json(&plan.summary)
+    } else {
+        print_summary(&plan, o.out.as_ref());
+        Ok(())
+    }
+}
+
+/// Writes `plan` as JSON to `path`.
+pub fn write_plan(plan: &PlanFile, path: &std::path::Path) -> anyhow::Result<()> {
+    let text = serde_json::to_string(plan)?;
+    std::fs::write(path, text)
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        .runtime()
+}
+
+/// Reads a plan file written by `vic plan --out`; an unreadable or malformed file is the user's.
+pub fn read_plan(path: &std::path::Path) -> anyhow::Result<PlanFile> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read: {e}", path.display()))
+        .input()?;
+    serde_json::from_str(&text)
+        .map_err(|e| format!("{}: not a plan file: {e}", path.display()))
+        .input()
+}
+
+/// The convergence criterion's values against their tolerances (SOOC's optimality, or ILQG's
+/// stop tests), for the readable summary.
+fn criterion_line(s: &PlanSummary) -> Option<String> {
+    if let Some(o) = &s.optimality {
+        return Some(format!(
+            "projected gradient {:.1e} (tolerance {:.0e}), predicted decrease {:.1e} ({:.0e})",
+            o.projected_gradient, o.gradient_tolerance, o.predicted_decrease, o.decrease_tolerance
+        ));
+    }
+    let c = s.convergence.as_ref()?;
+    let mut line = format!(
+        "feedforward step {:.1e} (tolerance {:.0e})",
+        c.feedforward_step, c.gradient_tolerance
+    );
+    if let Some(i) = c.improvement {
+        let how = match c.step_length {
+            Some(a) => format!("of a step of {a}"),
+            None => "predicted".to_string(),
+        };
+        line += &format!(
+            "; improvement {i:.1e} {how} (tolerance {:.0e}) at μ {:.1e} (trusted ≤ {:.1e})",
+            c.tolerance, c.mu, c.trusted_mu
+        );
+    }
+    Some(line)
+}
+
+fn print_summary(p: &PlanFile, out: Option<&PathBuf>) {
+    let s = &p.summary;
+    println!("plan       {} ({})", p.scenario, s.method);
+    println!(
+        "solver     {} after {} iterations in {:.1} ms ({})",
+        if s.converged {
+            "converged"
+        } else {
+            "did NOT converge"
+        },
+        s.iterations,
+        s.solve_ms,
+        s.stop
+    );
+    if let Some(line) = criterion_line(s) {
+        println!("criterion  {line}");
+    }
+    println!(
+        "cost       {:.6e} nominal, {:.6e} expected (predicted)",
+        s.cost, s.expected_cost
+    );
+    if let Some(n) = s.clamped_feedback_knots.filter(|&n| n > 0) {
+        println!(
+            "warning    at {n} of {} knots the feedback's predicted spread in a control passes \
+             its bound: the plant clamps it, and the expected cost above is that of a linear law \
+             it does not execute (measure it with vic simulate --policy feedback); stiffness is \
+             better planned open loop (--method sooc)",
+            p.u.len()
+        );
+    }
+    println!(
+        "stiffness  max {:.2} N m/rad, mean {:.2} N m/rad",
+        s.max_stiffness, s.mean_stiffness
+    );
+    println!("delay      {} steps ({:.0} ms)", s.delay_steps, s.delay_ms);
+    println!(
+        "accuracy   final nominal error {:.3} {}",
+        s.final_error, s.final_error_unit
+    );
+    if let Some(out) = out {
+        println!("written    {}", out.display());
+    }
+}
