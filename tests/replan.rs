@@ -1,4 +1,4 @@
-//! The `replan` strategy (receding-horizon stiffness planning, `core::replan`): the central
+//! The `replan` strategy (receding-horizon stiffness planning, `vic_core::replan`): the central
 //! controller in lockstep executes exactly what the Monte Carlo executes, and at 200 ms of latency
 //! in the divergent field it ends no farther from the target than the `stiffness` playback after
 //! a torque pulse it could not know of, and closer than the best delayed feedback (`predictor`).

@@ -705,7 +705,7 @@ fn warm_start_from_a_shifted_plan_reaches_the_cold_start_cost() {
     );
 }
 
-/// Tail first (`planning::receding`): the plan shifted by 2 knots, its last 30 % re-solved alone
+/// Tail first (`vic_plan::receding`): the plan shifted by 2 knots, its last 30 % re-solved alone
 /// from the moment state the shifted plan reaches there, then the whole horizon. The tail only
 /// chooses the start, so the result must be a converged solve of the whole problem, at the
 /// plain warm start's optimum (to 1e-9 of `J`: the landscape has other optima within 1e-4),
