@@ -6,7 +6,7 @@
 //! pass: the real part, and with it every sine, cosine and reciprocal of the model, is computed
 //! once instead of once per direction, and the lanes are plain arrays the compiler vectorises.
 //! The SOOC model recovers second and third partial derivatives from such directions
-//! (`crate::solver::sooc`).
+//! (the `solver::sooc` module).
 
 use crate::scalar::Scalar;
 use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};

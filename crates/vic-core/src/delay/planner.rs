@@ -421,8 +421,8 @@ fn tail_problem<'a>(
 /// re-plans the stiffness under the noise; without noise a stiffness buys almost nothing, and
 /// freeing it is most of a free tail solve's iterations (a Gauss–Newton crawl, see
 /// [`crate::solver::Ilqg::try_solve_held_first`]), where the torque-only problem takes one or
-/// two, for a stochastic solve and an expected cost about the same. Without noise the tail's
-/// optimum is the plan: nothing is held.
+/// two; the stochastic solve from the held guess takes about as many iterations and ends at
+/// about the same expected cost. Without noise the tail's optimum is the plan: nothing is held.
 fn tail_bounds(bounds: &Bounds, options: &IlqgOptions, hold: bool) -> Bounds {
     let held = hold.then(|| bounds.holding(&options.held_first)).flatten();
     held.unwrap_or_else(|| bounds.clone())

@@ -17,7 +17,7 @@
 //! Only for first guesses on the reference: the delayed plant's undelayed tail problem starts
 //! where the commands in flight left the joint, off the reference, where stiffness buys much
 //! (the held optimum costs markedly more) and the free solve from it crawls again (no fewer
-//! iterations than a free solve, and a slightly higher stop), so `crate::delay` does not hold
+//! iterations than a free solve, and a slightly higher stop), so the `delay` module does not hold
 //! first when the tail's optimum is the plan (without noise). With noise it holds the stiffness
 //! throughout the tail, whose solution is then only the augmented solve's first guess (the
 //! delay planner's `tail_bounds`).
