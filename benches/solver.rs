@@ -371,7 +371,7 @@ fn sooc_targets(group: &mut criterion::BenchmarkGroup<criterion::measurement::Wa
     });
 
     // The same re-solve with the last 30 % of the horizon solved alone first
-    // (`planning::receding`), on workspaces kept between samples.
+    // (`vic_plan::receding`), on workspaces kept between samples.
     let mut tail_first = TailFirst::new(&next, horizon, TAIL_SHARE, s.solver.sooc_options());
     let r = tail_first.resolve(&next, warm).expect("re-solves");
     eprintln!(

@@ -1,10 +1,10 @@
 //! The delayed planner's warm replans with the scenario's noise, as a receding horizon: for
 //! each delay, a cold plan, then four replans each `shift` knots later from the augmented state
 //! the last plan's commands lead to; prints the replans' iterations and time summed over the
-//! four, and the last one's expected cost (`docs/BENCHMARKS.md`, thirty-eighth session). Then
-//! the central controller's steady load: 30 replans two knots apart (50 Hz), each replan's
-//! iterations and the mean time of a replan, over all 30 and over the last 20, converged and
-//! capped at 2 iterations (forty-third session):
+//! four, and the last one's expected cost. Then the central controller's steady load: 30
+//! replans two knots apart (50 Hz), each replan's iterations and the mean time of a replan,
+//! over all 30 and over the last 20, converged and capped at 2 iterations (the criterion cases
+//! `…_noise_receding` and `…_receding_capped2` time the same in `docs/BENCHMARKS.md`, "Solver"):
 //! `cargo run --release --example delay_replans [config/single_joint_delay.toml]`.
 
 use std::path::Path;

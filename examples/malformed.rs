@@ -1,6 +1,6 @@
 //! A hidden helper for `scripts/soak.sh`: every `--every-ms` it publishes into a namespace one
 //! disturbance (a small pulse, as a tool would) and one hostile message, cycling through the
-//! attacks of issue 14 and the malformed slices from before:
+//! attacks of issue 14 and malformed slices:
 //! a slice with `knot_dt_ns` = 1e15 (shape), a slice with `seq` = u64::MAX (wrong trial: it
 //! must block nothing), a stale disturbance (1 s old), a wrong protocol version, a burst of
 //! `BURST` junk slices at once (rejected, or dropped by iceoryx2 and counted from the sequence

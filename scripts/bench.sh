@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs every benchmark of docs/BENCHMARKS.md and keeps the outputs in bench-results/ (or $1):
+# Runs the board-loop, transport and cargo benchmarks of docs/BENCHMARKS.md (each of its other
+# sections names its own command) and keeps the outputs in bench-results/ (or $1):
 #   vic bench loop  (board loop variants + cyclictest, 30 s each)
 #   vic bench ipc   (transport vs bare iceoryx2, then the running pair)
 #   cargo bench     (solver, scenarios, board)

@@ -77,8 +77,8 @@ pub struct RtArgs {
     /// Pin the loop to this CPU (default: the last CPU, where there are several).
     #[arg(long, value_name = "N")]
     pub cpu: Option<usize>,
-    /// The old behaviour: the normal scheduler, no pinning, no spin (memory locking is still
-    /// tried).
+    /// No real-time requests: the normal scheduler, no pinning, no spin (memory locking is
+    /// still tried).
     #[arg(long)]
     pub no_rt: bool,
 }

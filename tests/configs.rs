@@ -165,10 +165,10 @@ fn two_link_torque_divergent() {
     check("two_link_torque_divergent");
 }
 
-/// SOOC (`--method sooc`) converges on the scenarios where it once stopped at its iteration
-/// limit and that are cheap enough to plan in every test run: the deterministic plant (the
-/// criterion's curvature cap; no stiffness start without noise) and the torque actuator (the
-/// configured room). The VSA scenarios take 1–2 minutes each: see docs/BENCHMARKS.md.
+/// SOOC (`--method sooc`) converges on the scenarios that are cheap enough to plan in every test
+/// run: the deterministic plant (the criterion's curvature cap; no stiffness start without
+/// noise) and the torque actuator (the configured room). The VSA scenarios take minutes each
+/// (docs/BENCHMARKS.md, "Every scenario").
 #[test]
 fn sooc_converges_without_noise_and_without_stiffness() {
     for stem in ["two_link_deterministic", "two_link_torque_divergent"] {

@@ -167,7 +167,7 @@ fn cold_and_warm_plans_reach_the_augmented_plants_optimum() {
 /// plant alone does from the same plan (which the planner's first plan is, from the undelayed
 /// guess), and not what a start from the new undelayed guess gives. Its expected cost is that
 /// of a cold plan from the same state to within 1 % (the stochastic stops on this plant are
-/// many nearly equal ones, see the thirty-sixth session of `docs/BENCHMARKS.md`).
+/// many nearly equal ones).
 #[test]
 fn with_noise_a_warm_replan_starts_from_the_last_plan_shifted() {
     let (s, setup, delayed) = load(&[]);
@@ -471,7 +471,7 @@ fn a_workspace_refilled_across_solves_gives_the_fresh_plans() {
 /// knot (the augmented solve re-plans it under the noise; see `delay::planner`'s
 /// `tail_bounds`), where the free tail's optimum buys some; and the plan from the held guess is
 /// as good as the plan from the free one: its expected cost within the stochastic stops' band
-/// (1 %, see the thirty-sixth session of `docs/BENCHMARKS.md`) of it or below. Without noise
+/// (1 %) of it or below. Without noise
 /// nothing is held (`cold_and_warm_plans_reach_the_augmented_plants_optimum`: the plan is the
 /// free tail's optimum).
 #[test]
@@ -566,7 +566,7 @@ fn receding(cap: Option<usize>, replans: usize) -> Vec<(usize, StopReason, f64)>
 /// Replans capped at two iterations (a real-time iteration scheme) never take more, stop
 /// unconverged where the converged sequence needed more (its first replan after the cold
 /// plan), and 30 replans (0.6 s at 50 Hz) later end where the converged replans end: the last
-/// expected cost within 0.5 % (0.04 % today).
+/// expected cost within 0.5 %.
 #[test]
 fn capped_replans_carry_their_iterations_forward() {
     let (replans, cap) = (30, 2);

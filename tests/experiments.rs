@@ -37,7 +37,7 @@ fn assert_claims(run: &ExperimentRun) {
 fn check_figure(figure: Figure) {
     let first = run(figure, &config_dir(), 20, 1, None, |_, _, _| {}).expect("experiment runs");
     // Every column's plan met its solver's convergence criterion (the issue: `converged: true`
-    // on every scenario; the light VSA's did not before the thirty-ninth session).
+    // on every scenario, the light VSA arm's included).
     for c in &first.columns {
         assert!(
             c.plan_converged,

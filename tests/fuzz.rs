@@ -296,9 +296,9 @@ proptest! {
         run_messages(messages)?;
     }
 
-    /// The same with huge finite values everywhere: before the board bounded disturbances,
-    /// reset states and equilibria, a pulse of 1.8e308 N m or a command whose q_d is 1e300 rad
-    /// was accepted and the state became infinite.
+    /// The same with huge finite values everywhere: a pulse of 1.8e308 N m or a command whose
+    /// q_d is 1e300 rad would make the state infinite unless the board bounds disturbances,
+    /// reset states and equilibria.
     #[test]
     fn arbitrary_huge_messages_never_reach_the_plant_out_of_bounds(
         messages in prop::collection::vec((message(true), 1..4u64, 1..4u64), 1..8)

@@ -1,16 +1,15 @@
-//! The solver split into phases (backward pass, line search, regularisation, convergence test)
-//! computes what the single-function solver computed before the split: on reference problems the
-//! final cost, the predicted expected cost and the iteration count match numbers recorded from the
-//! solver before the split (commit 5fdd56a), to 1e-12 relative where the arithmetic did not change.
-//! The two single-joint cases were recorded again when the drift's Jacobian was written out rather
-//! than taken from dual numbers (a change of rounding in every linearisation, on purpose); the
-//! two-link reaches kept their numbers through it.
+//! The solver in phases (backward pass, line search, regularisation, convergence test) computes
+//! what a single-function solver computes: on reference problems the final cost, the predicted
+//! expected cost and the iteration count match pinned numbers (first recorded from the
+//! single-function solver, commit 5fdd56a) to 1e-12 relative. The single-joint cases' numbers
+//! carry the rounding of the written-out drift Jacobian (`vic_core::model::jacobian`, not dual
+//! numbers); the two-link reaches' are the same either way.
 //!
 //! The deterministic cases are well conditioned: a change of rounding moves them by far less than
 //! the tolerance. The stochastic single joint is not: its optimum is flat in the stiffness, and
-//! one different rounding per knot moves its converged expected cost by about 3 % (measured when
-//! the box QP was skipped for Newton steps inside the box). It therefore pins the arithmetic bit for
-//! bit, on this kind of machine (the libm's sin/cos variant included).
+//! one different rounding per knot moves its converged expected cost by percents (skipping the
+//! box QP for Newton steps inside the box does, see `vic_core::solver::ilqg::policy`). It therefore
+//! pins the arithmetic bit for bit, on this kind of machine (the libm's sin/cos variant included).
 
 use crate::common;
 

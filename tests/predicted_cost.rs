@@ -1,4 +1,4 @@
-//! The predicted expected cost of the executed policy (`planning::prediction::predicted_cost`:
+//! The predicted expected cost of the executed policy (`vic_plan::prediction::predicted_cost`:
 //! closed-loop covariance propagation of the plant augmented with the prediction error) against
 //! the solvers' own predictions where they exist and against the Monte Carlo where they do not.
 

@@ -1,10 +1,10 @@
 //! The relay notification the board's ports add to every publish and event (the bridge's wake-up,
-//! `rt::transport::relay`) allocates nothing: with no bridge listening, and with one that has
+//! `vic_rt::transport::relay`) allocates nothing: with no bridge listening, and with one that has
 //! connected (the first notification after a listener joins connects to it, once). Measured on
 //! `BoardPorts::notify`, which is the board's event notification plus the relay's, beside a
 //! listener of the board's events (the publishes themselves are counted in tests/board_alloc.rs:
 //! iceoryx2 0.10 allocates the shared state of every loaned sample, which vic's service recycles,
-//! `rt::transport::recycled`).
+//! `vic_rt::transport::recycled`).
 
 use crate::common;
 

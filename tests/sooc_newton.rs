@@ -421,7 +421,7 @@ fn hessian_diagonal_matches_second_differences() {
 
 /// Three different starts from the inverse-dynamics guess (the configured 30 N m/rad; 20 N m/rad;
 /// 40 N m/rad with the torques 5 % off) reach the same expected cost within 0.1 %. (Starts far
-/// away, 5 or 100 N m/rad, converge to other local optima 2–3 % worse: the landscape has several.)
+/// away, 5 or 100 N m/rad, converge to other, worse local optima: the landscape has several.)
 #[test]
 fn sooc_optimum_does_not_depend_on_the_start() {
     let (s, setup, sol) = divergent();
@@ -455,8 +455,8 @@ fn sooc_optimum_does_not_depend_on_the_start() {
 /// of the regularised optimum's cost, as from three starts in
 /// `sooc_optimum_does_not_depend_on_the_start`. (Not the same optimum to the last digits: this
 /// landscape has several within 1e-4 of each other, and which one a path reaches moves with the
-/// rounding of the derivatives; measured, both alternative paths below have ended on the
-/// regularised path's optimum to 1e-12, and on another 1.4e-4 lower.)
+/// rounding of the derivatives: each alternative path below may end on the regularised path's
+/// optimum or on a neighbouring one.)
 fn assert_an_optimum_as_good(what: &str, setup: &Setup, alt: &SoocSolution, reg: &SoocSolution) {
     assert_eq!(
         alt.stop,
@@ -705,7 +705,7 @@ fn warm_start_from_a_shifted_plan_reaches_the_cold_start_cost() {
     );
 }
 
-/// Tail first (`planning::receding`): the plan shifted by 2 knots, its last 30 % re-solved alone
+/// Tail first (`vic_plan::receding`): the plan shifted by 2 knots, its last 30 % re-solved alone
 /// from the moment state the shifted plan reaches there, then the whole horizon. The tail only
 /// chooses the start, so the result must be a converged solve of the whole problem, at the
 /// plain warm start's optimum (to 1e-9 of `J`: the landscape has other optima within 1e-4),

@@ -106,7 +106,7 @@ fn assert_iterations_do_not_allocate(file: &str, caps: (usize, usize)) {
 }
 
 /// The single joint, the impedance arm and the VSA arm (products larger than 5×5 by
-/// `core::dense::multiply`: nalgebra's matrixmultiply allocated its packing buffers per call).
+/// `vic_core::dense::multiply`: nalgebra's matrixmultiply allocates its packing buffers per call).
 #[test]
 fn iterations_do_not_allocate() {
     assert_iterations_do_not_allocate("icub_elbow.toml", (2, 8));

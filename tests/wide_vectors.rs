@@ -3,7 +3,7 @@
 //! feedback delay the delayed planner's) is solved with the wide kernels forbidden and then
 //! allowed, and every state, control, gain, cost and the iteration count must agree bit for bit;
 //! so must the SOOC plans (whose Taylor-polynomial flows the AVX2 step carries) of the iCub elbow
-//! and the arm in the divergent field (the VSA arms' take half a minute).
+//! and the arm in the divergent field (the VSA arms' take too long for every test run).
 //! A rounding that differed in one knot would show: the stochastic plans' optima are flat, and a
 //! changed rounding moves their costs in the third digit (see `tests/ilqg_phases.rs`).
 //!

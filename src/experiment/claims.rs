@@ -193,8 +193,8 @@ pub(super) fn notes(figure: Figure) -> &'static str {
              light motors with torques of several kN m that change sign from knot to knot: nothing in \
              Eq. 14 or the paper bounds the motor torque (w_to = 1e-2). With that plan the dashed \
              ellipse's claim is not reproduced: B/10 misses the target about as often as B (with \
-             20 trials either comes out ahead) and spreads less (docs/BENCHMARKS.md, \"The light VSA converged\": 200 trials for each \
-             of three seeds). The paper's order came out here only from the unconverged B/10 plan \
+             20 trials either comes out ahead) and spreads less (200 trials for each of three seeds, `vic \
+             experiment fig1 --trials 200 --seed S`). The paper's order came out here only from the unconverged B/10 plan \
              a noise continuation stopped at, at twice the converged expected cost; with the motor \
              torque limited to 300 N m (B's plan uses 293) it comes back, on a B/10 plan that does \
              not converge in 8000 steps. The claim is still checked and reported; the tests do \

@@ -1,8 +1,8 @@
 //! Whole-matrix operations on contiguous storage as plain slice operations.
 //!
 //! nalgebra's `fill` and `copy_from` go element by element through a strided iterator, which
-//! does not vectorise: in profiles of the 42-state delayed problem, clearing the cost's and the
-//! linearisation's matrices at every knot took a fifth of an ILQG iteration. On owned
+//! does not vectorise, and the 42-state delayed problem clears the cost's and the
+//! linearisation's matrices at every knot, a large part of an ILQG iteration. On owned
 //! (contiguous) storage the same operations are one `memset` or `memcpy`, with the same result.
 
 use nalgebra::{DMatrix, Dim, IsContiguous, Matrix, RawStorage, RawStorageMut};
@@ -42,7 +42,7 @@ where
     let (sd, dd) = (src.as_slice(), dst.as_mut_slice());
     // Four columns of `src` at a time, each row of them one contiguous run of `dst`'s column:
     // four sequential reads and one short write per row instead of a scattered store per
-    // entry (the delayed plant's 42×42 transposes were a tenth of its backward pass).
+    // entry (the delayed plant's 42×42 transposes are a large part of its backward pass).
     let mut j = 0;
     while j + 4 <= c {
         let col = |t: usize| &sd[(j + t) * r..(j + t + 1) * r];
@@ -116,15 +116,15 @@ pub fn symmetrize(m: &mut DMatrix<f64>) {
 const LANES: usize = 4;
 
 /// `c = aᵀ b` or `c += aᵀ b` for dynamically sized matrices, with the bits of nalgebra's
-/// `c.gemm_tr(1.0, a, b, β)` (β = 0 or 1), faster.
+/// `c.gemm_tr(1.0, a, b, β)` (β = 0 or 1), computed faster.
 ///
 /// Why: nalgebra computes each entry as a dot product of two columns on its own (eight partial
-/// sums over blocks of eight rows, then the rest), one call per entry; for the SOOC backward
-/// pass's `Aᵀ (V A)` on the VSA arm's 44 moment states that was 13 % of a plan. Here
-/// [`LANES`] entries of a row of `c` are computed side by side, each with exactly nalgebra's
-/// partial sums in nalgebra's order (the lanes are independent entries, not parts of one sum),
-/// so the compiler vectorises across entries and no rounding changes. `b` is read from a copy
-/// in blocks of [`LANES`] columns kept in the workspace (no allocation once sized).
+/// sums over blocks of eight rows, then the rest), one call per entry, and the SOOC backward
+/// pass forms `Aᵀ (V A)` on the VSA arm's 44 moment states at every knot, a large part of a
+/// plan. Here [`LANES`] entries of a row of `c` are computed side by side, each with exactly
+/// nalgebra's partial sums in nalgebra's order (the lanes are independent entries, not parts of
+/// one sum), so the compiler vectorises across entries and no rounding changes. `b` is read from
+/// a copy in blocks of [`LANES`] columns kept in the workspace (no allocation once sized).
 #[derive(Debug, Clone, Default)]
 pub struct TransposedProduct {
     /// `b` in blocks of [`LANES`] columns, each block row by row:
@@ -242,10 +242,10 @@ const SMALL_DIM: usize = 5;
 /// `c = a b` (`accumulate` false) or `c += a b` (true), without allocating.
 ///
 /// Why: nalgebra hands a product larger than 5×5 in every dimension to matrixmultiply, which
-/// allocates its packing buffers at every call; in the SOOC iteration that was an allocation per
-/// knot and backward pass on the impedance arm (`V A`) and about sixty per knot on the VSA arm
-/// (its moment step's 8×8 products). Here each entry is matrixmultiply's own sum on CPUs with
-/// FMA (the kernel it picks there): the products added one after another by fused
+/// allocates its packing buffers at every call; in the SOOC iteration that would be an
+/// allocation per knot and backward pass on the impedance arm (`V A`) and dozens per knot on the
+/// VSA arm (its moment step's 8×8 products). Here each entry is matrixmultiply's own sum on CPUs
+/// with FMA (the kernel it picks there): the products added one after another by fused
 /// multiply-adds from +0 in the order of `k`, then, to accumulate, one addition to `c`. So the
 /// plans keep their bits where matrixmultiply ran its FMA kernel; where it ran its plain AVX
 /// kernel (no FMA) this kernel is not used: without AVX2 and FMA (or with the wide kernels
@@ -273,7 +273,7 @@ pub fn multiply(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, accumu
         return;
     }
     // Without FMA (or with the wide kernels forbidden) matrixmultiply's own kernels are faster
-    // than a `mul_add` call per term, and round as they always did.
+    // than a `mul_add` call per term, and round as nalgebra's product does.
     c.gemm(1.0, a, b, if accumulate { 1.0 } else { 0.0 });
 }
 

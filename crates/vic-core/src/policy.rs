@@ -29,7 +29,7 @@ pub enum Feedback {
     /// `D`. Execute an undelayed plan with it.
     #[serde(rename = "predictor")]
     Predicted { latency_steps: usize },
-    /// Receding-horizon stiffness planning (the replanner of `core::replan`): every central
+    /// Receding-horizon stiffness planning (the replanner of the `replan` module): every central
     /// period the controller predicts the present from the state seen `D` steps late and
     /// re-solves the open-loop plan of torque and stiffness from it. The law lives in the
     /// replanner (it changes the plan); a [`Policy`] alone plays its plan open loop under it.

@@ -16,16 +16,15 @@
 //! starts with the covariance that `D` (plus the lead) steps of noise add to a state known
 //! exactly, propagated by the moment dynamics (Eq. 11) along the plan's commands from `x̂_k` (the
 //! exact prediction error runs along the commands applied since the seen state: the same number
-//! of steps of the same noise from the same neighbourhood). Not the old plan's open-loop
+//! of steps of the same noise from the same neighbourhood). Not the previous plan's open-loop
 //! covariance at knot `k`: that describes a controller that never measured anything since the
-//! start. Measured (`tests/replan.rs`), neither start is right everywhere: on the single joint at
-//! 200 ms with a 5 N m pulse, re-solves believing the present exact buy too little stiffness and
-//! correct by torque alone, 200 ms late, and the joint swings by ~12° RMS where the stiffness plan
-//! stays within ~5°; with the covariance start it swings ~3.5°. On the arm in the divergent field
-//! at 200 ms with a 10 N m pulse (20 trials, seed 1) the covariance start ends more than twice as
-//! far off as the stiffness plan (13.4 vs 5.9 mm, RMS 42 vs 35 mm) while the exact start ends
-//! nearer (5.1 mm, RMS 23 mm); without the pulse the two starts end alike (3.6 and 3.2 mm). The
-//! default stays the exact start, which every result in the documents uses.
+//! start. Neither start is right everywhere (`tests/replan.rs` runs the pulses and prints the
+//! figures): on the single joint at 200 ms after a pulse, re-solves believing the present exact
+//! buy too little stiffness and correct by torque alone, 200 ms late, so the joint swings far
+//! more than under the stiffness plan, and the covariance start does not; on the arm in the
+//! divergent field after a pulse the covariance start ends farther off than the stiffness plan
+//! while the exact start ends nearer, and without a pulse the two starts end alike. The default
+//! stays the exact start, which every result in the documents uses.
 //!
 //! Acceptance: converged or not, the new commands replace the old ones only when they are finite
 //! and their open-loop expected cost from `x̂_k` is not worse than the old plan's remaining
@@ -42,13 +41,12 @@ use crate::solver::sooc_newton::{SoocOptions, SoocProblem, SoocSolver, SoocStop}
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
-/// Newton iterations per re-solve. One stagewise Newton step without the third derivatives costs
-/// about 7 ms on the arm over the whole movement (less as the horizon shrinks; the solver bench's
-/// `two_link_divergent_replan_knot2`: 20–25 ms for three on a shared 2-core host, about the 20 ms
-/// central period, which is why the live controller re-solves in the background with a lead;
-/// `docs/BENCHMARKS.md`); from a warm start the
-/// first steps take most of the decrease, and three keep a Monte Carlo of the arm to seconds per
-/// point.
+/// Newton iterations per re-solve. On the arm three stagewise Newton steps without the third
+/// derivatives take a large part of the 20 ms central period (fewer knots as the horizon
+/// shrinks, so less), which is why the live controller re-solves in the background with a lead
+/// (the solver bench's `slow/two_link_divergent_replan_knot2`: `docs/BENCHMARKS.md`, "Solver
+/// targets" and "Live replanner"). From a warm start the first steps take most of the decrease,
+/// and three keep a Monte Carlo of the arm affordable.
 pub const REPLAN_MAX_ITERATIONS: usize = 3;
 
 /// The central period of the paper's iCub layer [s] (50 Hz).
@@ -76,14 +74,11 @@ pub struct ReplanOptions {
     /// Whether each re-solve's Newton model includes the flow's third derivatives (the exact
     /// Hessian; [`SoocOptions::flow_third_derivatives`]). Off by default: with at most
     /// [`REPLAN_MAX_ITERATIONS`] warm-started steps a re-solve never reaches the tolerances that
-    /// need the exact model, and the third derivatives are about two thirds of each step (~80 %
-    /// when this was measured). Measured on the
-    /// divergent arm at 200 ms (4 trials, seed 1): 13.8 s of CPU with them, 2.8 s without, final
-    /// error 0.99 and 0.88 mm, Monte Carlo cost 1222 and 1211. Measured again once a start
-    /// near the optimum took the exact model at once: from the plan's own mean one exact step
-    /// converges in the time of three Gauss–Newton steps, but a re-solve starts from a measured
-    /// state, and from states off the plan the three exact steps took about twice as long and
-    /// ended no lower except after a large deviation (`docs/BENCHMARKS.md`).
+    /// need the exact model, and the third derivatives are most of each step's cost. From the
+    /// plan's own mean one exact step converges in the time of three Gauss–Newton steps, but a
+    /// re-solve starts from a measured state, and from states off the plan the exact steps cost
+    /// more and end no lower except after a large deviation (`docs/BENCHMARKS.md`, "Approaches
+    /// that did not pay").
     #[serde(default)]
     pub flow_third_derivatives: bool,
 }

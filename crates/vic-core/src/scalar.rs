@@ -3,10 +3,10 @@
 //! Every model equation is written once, generic over [`Scalar`], and evaluated with `f64` for
 //! simulation, with [`num_dual::Dual64`] for exact first derivatives, with nested dual numbers
 //! for exact second derivatives one pair at a time, and with the Taylor polynomials of
-//! `core::taylor` for second and third derivatives along many directions at once (forward-mode
+//! the `taylor` module for second and third derivatives along many directions at once (forward-mode
 //! automatic differentiation). One derivative is written by hand, the drift's first
 //! (`ArmModel::f_jacobian` of the model module, for ILQG's linearisations, where the dual
-//! numbers cost a quarter of a solve); the tests check it against the dual numbers on every model,
+//! numbers cost much of a solve); the tests check it against the dual numbers on every model,
 //! so it cannot drift from the equation it differentiates.
 //!
 //! The trait asks only for what the models use: field arithmetic, arithmetic with `f64`

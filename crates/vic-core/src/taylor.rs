@@ -6,7 +6,7 @@
 //! pass: the real part, and with it every sine, cosine and reciprocal of the model, is computed
 //! once instead of once per direction, and the lanes are plain arrays the compiler vectorises.
 //! The SOOC model recovers second and third partial derivatives from such directions
-//! (`core::solver::sooc`).
+//! (the `solver::sooc` module).
 
 use crate::scalar::Scalar;
 use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -228,12 +228,12 @@ impl<const K: usize, const ORDER: usize> Scalar for Taylor<K, ORDER> {
 /// The SOOC model takes a knot's flow along its directions in several passes (15 third-order
 /// flows of eight lanes per knot on the two-link arm), and every pass computes the same real
 /// part bit for bit: the same angles at every sub-step, hence the same `sin_cos` calls. libm's
-/// `sincos` (which also saves and restores the rounding mode at each call) was 7 % of a SOOC
-/// plan, almost all of it recomputing what the first pass already had. A small direct-mapped
-/// table keyed by the angle's bits returns the same two numbers `f64::sin_cos` would (it is
-/// what computed them), so the derivatives are unchanged to the bit; a collision only costs
-/// the call it would have cost anyway. Per thread, so no lock and no sharing between rayon's
-/// workers.
+/// `sincos` (which also saves and restores the rounding mode at each call) is a noticeable share
+/// of a SOOC plan, almost all of it recomputing what the first pass already had. A small
+/// direct-mapped table keyed by the angle's bits returns the same two numbers `f64::sin_cos`
+/// would (it is what computed them), so the derivatives are unchanged to the bit; a collision
+/// only costs the call it would have cost anyway. Per thread, so no lock and no sharing between
+/// rayon's workers.
 mod memo {
     use std::cell::RefCell;
 

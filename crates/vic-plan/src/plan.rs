@@ -241,8 +241,9 @@ pub fn plan_sooc(
     // variance. Start the stiffness from the configured initial value instead. Without noise
     // the deterministic optimum *is* the open-loop problem's (the covariance stays 0), and
     // stiffness there would only move the mean through its damping: start from it as it is
-    // (measured on two_link_deterministic: from 30 N m/rad, 220 iterations crawl to J = 0.353;
-    // from the deterministic optimum one Newton step confirms J = 0.265).
+    // (on two_link_deterministic, from the configured stiffness the solve crawls for hundreds
+    // of iterations to a higher cost; from the deterministic optimum one Newton step confirms
+    // it).
     let mut warm = first.u.clone();
     if let Some(off) = s.model.actuator.stiffness_offset(s.model.dof())
         && s.initial_stiffness > 0.0
@@ -294,8 +295,8 @@ fn plan_delayed(
     let guess_time = guess_time.elapsed();
     // Without noise the guess is the deterministic problem's optimum already (see
     // `undelayed_guess`), the first phase of `solve_in_phases`: a deterministic solve from it
-    // stops at once, after a linearisation and a backward pass of the augmented plant (3.8 ms
-    // of a 47 ms plan of the single joint with 200 ms of delay). With noise it is the optimum
+    // stops at once, after a linearisation and a backward pass of the augmented plant (a small
+    // part of a plan of the single joint with 200 ms of delay). With noise it is the optimum
     // of the tail with the stiffness held, which the stochastic solve re-plans under the
     // noise: it starts from the guess directly either way.
     let stochastic = s.solver.options.stochastic && problem.dynamics.nw() > 0;

@@ -7,9 +7,9 @@
 //! knots, and a Newton solve over the whole horizon spends most of its steps moving them, each
 //! step an expansion of every knot. Solving the last knots alone first, from the moment state
 //! (mean and covariance) the shifted plan reaches where they start, moves them at a fraction of
-//! the cost per step; the whole horizon then converges from there in a few steps. Measured on
-//! the type-2 arm in the divergent field (N = 100, shifted by 2 knots): 15 steps over the last
-//! 30 knots and 4 over the whole, against 18 over the whole (see `docs/BENCHMARKS.md`).
+//! the cost per step; the whole horizon then converges from there in a few steps
+//! (`docs/BENCHMARKS.md`, "Criterion cases", times both re-solves on the type-2 arm in the
+//! divergent field: `slow/two_link_divergent_sooc_warm_shift2` and `…_tail_first`).
 
 use crate::setup::Setup;
 use nalgebra::DVector;
@@ -20,8 +20,8 @@ use vic_core::solver::sooc_newton::{
     SoocError, SoocOptions, SoocProblem, SoocSolution, SoocSolver,
 };
 
-/// The share of the horizon solved alone first (30 of 100 knots measured best against 20 and
-/// 40 on the divergent arm).
+/// The share of the horizon solved alone first (chosen on the divergent arm against 20 % and
+/// 40 %).
 pub const TAIL_SHARE: f64 = 0.3;
 
 /// A tail-first re-solve: the whole horizon's solution (its `solve_time` and `iterations` its

@@ -90,7 +90,7 @@ impl Setup {
     }
 
     /// The rest of the movement from knot `k0` on (`k0` knots fewer), from `x0`: what the
-    /// central controller's replanner re-solves (`core::replan`), with the warm start's tail.
+    /// central controller's replanner re-solves (`vic_core::replan`), with the warm start's tail.
     pub fn remaining(&self, k0: usize, x0: &[f64]) -> Setup {
         let mut rest = self.clone();
         let keep_last = |len: usize| k0.min(len.saturating_sub(1));

@@ -151,9 +151,9 @@ pub struct RtRequest {
 /// Priority asked for by default: cyclictest's customary `-p80`, the figure the loop is compared
 /// with (above the kernel's threaded interrupt handlers, at 50).
 pub const DEFAULT_FIFO_PRIORITY: i32 = 80;
-/// Spin before each deadline by default [µs]: what brings the wake-up p99 under cyclictest's on
-/// these machines (docs/BENCHMARKS.md), 10 % of one CPU at 1 kHz, far below the real-time
-/// throttling budget (95 %), so it can never trip it.
+/// Spin before each deadline by default [µs]: with `SCHED_FIFO` what brings the wake-up p99
+/// under cyclictest's on these machines (docs/BENCHMARKS.md, "Wake-up jitter"), 10 % of one CPU
+/// at 1 kHz, far below the real-time throttling budget (95 %), so it can never trip it.
 pub const DEFAULT_SPIN_US: u64 = 100;
 
 impl RtRequest {

@@ -185,8 +185,8 @@ impl<D: Dynamics> Delayed<D> {
     /// commands in flight below. With `clear` every entry is written; without, `lin` holds this
     /// model's linearisation from an earlier call ([`Dynamics::relinearize`]), whose entries
     /// outside the plant's blocks are the zeros and ones a clearing call wrote, so only the
-    /// blocks are written (clearing 42² entries of `A` and of each noise Jacobian at every knot cost
-    /// about a tenth of a stochastic solve of the delayed single joint). The noise Jacobians are
+    /// blocks are written (clearing 42² entries of `A` and of each noise Jacobian at every knot is
+    /// a sizeable part of a stochastic solve of the delayed single joint). The noise Jacobians are
     /// cleared when the noise kind changed: a noise-free call leaves them as they were. With
     /// `next` the step is taken on the way ([`Dynamics::step_linearized`]): the plant's step
     /// comes from its own fused call, bit for bit its [`Dynamics::step`].
@@ -220,8 +220,8 @@ impl<D: Dynamics> Delayed<D> {
         }
         if clear && self.steps > 0 {
             // The shift register's ones (its unit columns in `state_support`), written once:
-            // a relinearisation finds them in place, and touching them again was a cache line
-            // per column of a 42×42 `A` at every knot.
+            // a relinearisation finds them in place, and touching them again would cost a cache
+            // line per column of a 42×42 `A` at every knot.
             zero(&mut lin.a);
             zero(&mut lin.b);
             for i in 0..total - n - m {

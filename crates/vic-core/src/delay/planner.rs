@@ -84,10 +84,11 @@ pub struct DelayedPlanner {
     /// At most this many ILQG iterations in a replan with noise (`None`, the default: the
     /// options' `max_iterations`, a converged replan). A real-time iteration scheme for the
     /// central controller (Diehl, Bock & Schlöder 2005): the first replans after a cold plan
-    /// move it for 4–27 iterations before a sequence settles at 1–2 a replan, and a cap
+    /// move it for many iterations before a sequence settles at one or two a replan, and a cap
     /// spreads that over the next periods. On the single joint, 30 replans at 50 Hz capped at
-    /// 2 end within 0.07 % of the converged sequence's expected cost (`docs/BENCHMARKS.md`,
-    /// forty-third session); a capped replan reports `MaxIterations`, not converged.
+    /// 2 end next to the converged sequence's expected cost (`tests/delayed_planner.rs`;
+    /// `docs/BENCHMARKS.md`, "Why targets are missed"); a capped replan reports
+    /// `MaxIterations`, not converged.
     pub replan_iterations: Option<usize>,
 }
 
@@ -235,16 +236,15 @@ impl DelayedPlanner {
                 match start {
                     // With noise, the augmented plan of the last solve shifted (its gains hold
                     // the plant near it from the new state) starts closer than the undelayed
-                    // guess, which knows nothing of the noise. The single joint's 64 replans of
-                    // `examples/delay_replans` (delays 100-250 ms, shifts of 1-5 knots): 10.2
-                    // stochastic iterations a replan against 17.0, 16.4 ms against 27.4.
+                    // guess, which knows nothing of the noise: fewer stochastic iterations and
+                    // less time a replan (`examples/delay_replans` compares the two starts).
                     // The last plan's last `d` commands act after its horizon, so it left
                     // them at their control cost's minimum; shifted by `s`, the first `s` of
                     // them act within this one (on the single joint at 200 ms, 20 ms without
-                    // torque before the end: a terminal cost of 7.7e5 where the plan expects
-                    // 115). They, and the knots after them, start from the undelayed guess
-                    // instead: 436 iterations over those 64 replans instead of 640, and 30
-                    // replans at 50 Hz settle at 1-2 iterations each instead of 3-17.
+                    // torque before the end: a terminal cost orders of magnitude above the
+                    // plan's expected one). They, and the knots after them, start from the
+                    // undelayed guess instead: fewer iterations a replan, and replans at 50 Hz
+                    // settle at one or two iterations each.
                     Start::Shifted(s) if !deterministic && full.has_solution() => {
                         let from = self.guess.len().saturating_sub(d + s);
                         let cap = self.replan_iterations.unwrap_or(options.max_iterations);
@@ -419,11 +419,10 @@ fn tail_problem<'a>(
 /// ([`IlqgOptions::held_first`]: an impedance's stiffness) held at their finite lower limits.
 /// With noise the tail's solution is only the augmented solve's first guess, and that solve
 /// re-plans the stiffness under the noise; without noise a stiffness buys almost nothing, and
-/// freeing it was 27 of the tail's 29 iterations (a Gauss–Newton crawl, see
-/// [`crate::solver::Ilqg::try_solve_held_first`]), where the torque-only problem takes
-/// 2. The single joint at 100–300 ms of delay: 1–2 tail iterations instead of 29–37, 13–29
-/// stochastic ones instead of 11–27, expected costs −0.7 % to +0.2 % (`docs/BENCHMARKS.md`,
-/// forty-second session). Without noise the tail's optimum is the plan: nothing is held.
+/// freeing it is most of a free tail solve's iterations (a Gauss–Newton crawl, see
+/// [`crate::solver::Ilqg::try_solve_held_first`]), where the torque-only problem takes one or
+/// two; the stochastic solve from the held guess takes about as many iterations and ends at
+/// about the same expected cost. Without noise the tail's optimum is the plan: nothing is held.
 fn tail_bounds(bounds: &Bounds, options: &IlqgOptions, hold: bool) -> Bounds {
     let held = hold.then(|| bounds.holding(&options.held_first)).flatten();
     held.unwrap_or_else(|| bounds.clone())

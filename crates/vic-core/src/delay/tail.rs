@@ -99,8 +99,8 @@ impl<T: Cost + ?Sized> Cost for Offset<'_, T> {
 
 /// A model without its noise: the deterministic problem of the same plant (`nw() = 0`), whose
 /// solves neither read nor compute the noise's linearisation. The undelayed first guess of the
-/// delayed planner is such a solve; computing the noise Jacobians it never read was a tenth of
-/// its time.
+/// delayed planner is such a solve; computing the noise Jacobians it never reads would be a
+/// sizeable share of its time.
 pub struct NoiseFree<D>(pub D);
 
 impl<D: Dynamics> Dynamics for NoiseFree<D> {

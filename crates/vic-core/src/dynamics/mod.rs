@@ -61,8 +61,8 @@ pub enum Column {
     /// In these rows only: the entries outside are exactly zero.
     Rows(Range<usize>),
     /// Exactly `1` in this row and zero elsewhere, always: a shift register's column, whose
-    /// entry a reader need not look up (on the delayed plant that lookup was one cache line of a
-    /// 42×42 Jacobian per column, a tenth of a stochastic plan).
+    /// entry a reader need not look up (on the delayed plant that lookup would cost a cache line
+    /// of a 42×42 Jacobian per column).
     Unit(usize),
 }
 

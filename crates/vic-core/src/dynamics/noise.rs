@@ -15,9 +15,9 @@ impl DiscreteDynamics {
             return;
         }
         // Scratch sized for the plant: `noise_jacobian` writes every entry read back, so the
-        // buffers only need to be large enough, and clearing the largest plant's (6.5 kB) at
-        // every knot of every linearisation was a twentieth of a stochastic plan of the
-        // delayed single joint (whose plant needs 20 entries).
+        // buffers only need to be large enough; clearing the largest plant's (6.5 kB) at
+        // every knot of every linearisation would cost the delayed single joint (whose plant
+        // needs 20 entries) a pass over memory it never reads.
         let fits = |g: usize, dx: usize, du: usize| {
             nx * nw <= g && nx * nx * nw <= dx && nu * nx * nw <= du
         };

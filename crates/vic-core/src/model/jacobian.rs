@@ -5,8 +5,8 @@
 //! [`ArmModel::f`]. This one is the exception because ILQG linearises every knot of every
 //! iteration, and there a vector dual number pays for all `n + m` directions in every operation
 //! of `f`, most of them structurally zero (the accelerations depend on `q2`, `q'`, the spring and
-//! the controls, and the mass matrix only on `q2`): on the two-link reach it was a quarter of a
-//! solve. Written out, the Jacobian reuses the angles and the mass matrix of the evaluation of `f`
+//! the controls, and the mass matrix only on `q2`), a large part of a solve of the two-link
+//! reach. Written out, the Jacobian reuses the angles and the mass matrix of the evaluation of `f`
 //! it comes with and touches only the entries that can be non-zero. `tests/derivatives.rs`
 //! checks it against the dual numbers and against finite differences on every model, so it
 //! cannot drift from the equation it differentiates.

@@ -152,10 +152,9 @@ impl ArmModel {
     ///
     /// Inlined into its callers, with the plant's pieces it calls (marked so as well): the step
     /// (`DiscreteDynamics::flow`) is compiled twice, portably and for
-    /// AVX2, and left to itself the compiler kept these as calls to their portable copies, which
-    /// pass SOOC's Taylor polynomials through memory (measured: the arm's SOOC plan 0.54 of the
-    /// time with them inlined into the AVX2 step, against 0.75 when the whole program is built
-    /// for AVX2).
+    /// AVX2, and left to itself the compiler keeps these as calls to their portable copies, which
+    /// pass SOOC's Taylor polynomials through memory; inlined into the AVX2 step they stay in
+    /// registers (faster than building the whole program for AVX2).
     #[inline(always)]
     pub fn f<S: Scalar>(&self, x: &[S], u: &[S], ex: &Exogenous, xdot: &mut [S]) {
         self.drift(x, u, ex, xdot);

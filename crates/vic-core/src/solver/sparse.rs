@@ -24,8 +24,8 @@ pub struct SparseColumns {
     /// The nonzeros' rows and values, column after column. Room is reserved ahead (for every
     /// entry, or for what a model's support allows: [`SparseLinearization::make_room`]) but
     /// only the nonzeros are ever written: the 42-state delayed plant stores 46 of 1764 entries of
-    /// `A` per knot, and a workspace that touched all of them spent a fifth of a stochastic plan
-    /// faulting in and clearing memory it never read.
+    /// `A` per knot, and a workspace that touched all of them would spend a large part of a
+    /// stochastic plan faulting in and clearing memory it never read.
     row: Vec<usize>,
     val: Vec<f64>,
     /// The columns from the first to the last that holds a nonzero (empty when none does). The
@@ -338,7 +338,7 @@ impl ColumnProducts for SparseColumns {
 /// `Σ_i m_i x_i` over the nonzero `m_i`, in order (the sum [`SparseColumns`] forms). A zero
 /// `m_i` adds −0 instead of being filtered out: `s + (−0) = s` exactly for every `s` (±0, ±∞
 /// and NaN included), so the sum is the filtered one to the bit, without a branch per entry
-/// (the filter cost the two-link reach 15 % of a solve).
+/// (a filtering branch is a sizeable part of a solve of the two-link reach).
 #[inline(always)]
 pub(crate) fn nonzero_dot<const R: usize>(m: &[f64; R], x: &[f64]) -> f64 {
     m.iter()
@@ -375,10 +375,9 @@ impl SparseLinearization {
     /// Room for every nonzero a model with this `support` can have, or for every entry when
     /// it has none: the refills then allocate nothing. Room once made is kept. The delayed
     /// plant's 46 nonzeros of `A` and 8 of each `Cx_i` take 1 KB a knot where room for every
-    /// entry took 84 KB: the backward pass's few lines per knot lay scattered over 40 MB of
-    /// address space, and a noisy delayed plan waited on page-table misses (with the heap on
-    /// huge pages the process took 0.88 of its time; with the room fitted the plan takes
-    /// 0.87 of it, `docs/BENCHMARKS.md`).
+    /// entry would take 84 KB: the backward pass's few lines per knot would lie scattered over
+    /// tens of MB of address space, and a noisy delayed plan would wait on page-table misses
+    /// (fitting the room gains what putting the heap on huge pages gains).
     pub fn make_room(&mut self, support: Option<&StateSupport>) {
         let len = |c: &Column| match c {
             Column::Rows(r) => r.len(),

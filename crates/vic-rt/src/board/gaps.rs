@@ -107,8 +107,9 @@ mod tests {
             (1, 10),
         ]);
         assert_eq!(got, 8);
-        // The single tracker this replaces saw a new session at every switch: it counted none of
-        // these losses. One switch in the middle of a session's gap still counts the gap.
+        // A single tracker for the last session would see a new session at every switch and
+        // count none of these losses. One switch in the middle of a session's gap still counts
+        // the gap.
         assert_eq!(count(&[(1, 1), (2, 7), (2, 8), (1, 5)]), 3);
     }
 

@@ -1,6 +1,7 @@
 //! The `replan` strategy's re-solves on a worker thread, so that a re-solve longer than the
-//! central period never holds the slices back (live on the arm one takes 20–550 ms against a
-//! 20 ms period; inline, every such period overran and resent the previous slice).
+//! central period never holds the slices back (live on the arm one can take many 20 ms periods,
+//! docs/BENCHMARKS.md, "Live replanner"; inline, each such period would overrun and resend the
+//! previous slice).
 //!
 //! The law is [`Replanner`]'s with `lead_steps` = one period: at a replanning knot `k` the
 //! controller predicts the state of knot `k0 = k + lead` (over the commands in flight, then over

@@ -214,7 +214,7 @@ impl Ilqg {
         // The value Hessian `S_{k+1}` the knot reads is `s_mat`, and `S_k` goes to `spare`,
         // which then takes its place; `S_0` ends in `s_mat` ([`Ilqg::value_scale`]). A
         // stochastic pass keeps each `S_{k+1}` for the merit in the rows where the noise acts
-        // only: the delayed plant's 2 of 42 (a whole 42×42 matrix per knot was a stream of
+        // only: the delayed plant's 2 of 42 (a whole 42×42 matrix per knot would be a stream of
         // 2 MB written per pass).
         let mut s_mat = take(&mut bw.s_mat);
         let noise = traj.noise_rows();
@@ -482,7 +482,7 @@ impl Backward {
         // S = Q_xx + Lᵀ (Q_uu L + Q_ux) + Q_uxᵀ L as 2m rank-one updates, each an axpy on
         // contiguous columns of the transposed thin factors (nalgebra's transposed products
         // are plain dot loops). Each column of `Q_xx` is formed just before its column of `S`
-        // (in L1, where a whole `Q_xx` was a pass over memory of its own), and the first
+        // (in L1, where a whole `Q_xx` would be a pass over memory of its own), and the first
         // update reads it where the others read `S`.
         transpose(gain, &mut self.lt);
         transpose(&self.qux, &mut self.xt);

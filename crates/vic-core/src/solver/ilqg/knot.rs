@@ -2,8 +2,8 @@
 //! torque or torque and stiffness, the two-link arm with either, the VSA arm): the Q-function, its
 //! regularisation and the value update of [`super::backward`] with every size a constant, so that
 //! the compiler unrolls the products and keeps the blocks in registers instead of walking
-//! `DMatrix` storage through run-time sizes and bounds checks (the two-link reach spent 55 % of a
-//! solve in the backward pass that way).
+//! `DMatrix` storage through run-time sizes and bounds checks (the backward pass is most of a
+//! solve of the two-link reach that way).
 //!
 //! The operations are the dynamic path's, in its order: the products by the Jacobians' nonzeros
 //! in ascending row order (`sparse::nonzero_dot`), nalgebra 0.35's `gemv` and `dot` for the

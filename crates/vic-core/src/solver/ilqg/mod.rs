@@ -385,8 +385,8 @@ impl Ilqg {
 
     /// [`Ilqg::try_solve`] into `out`, reusing its storage when it holds a solution of the same
     /// size (a loop of solves then allocates nothing: the reach's 301 vectors and matrices per
-    /// returned solution cost 6 % of its solve in `malloc` and `free`). On an error `out` is
-    /// left as it was.
+    /// returned solution would otherwise cost a noticeable share of its solve in `malloc` and
+    /// `free`). On an error `out` is left as it was.
     pub fn try_solve_into(
         &mut self,
         problem: &Problem,
@@ -465,8 +465,8 @@ impl Ilqg {
         let mut record = Convergence::untested(&self.options, reg.mu);
         // Which step length to linearise on the way: in a deterministic solve, the one accepted
         // last (the next step likely has it too). Not in stochastic solves: there a full step
-        // after a full step was rejected 3 times in 4 on the iCub elbow and the VSA arm (μ
-        // falls after a full step and the next one overshoots).
+        // after a full step is mostly rejected on the iCub elbow and the VSA arm (μ falls after
+        // a full step and the next one overshoots).
         let mut fuse = (!stochastic).then_some(1.0);
 
         for _ in 0..self.options.max_iterations {

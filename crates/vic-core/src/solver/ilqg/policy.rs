@@ -13,7 +13,8 @@ use crate::solver::boxqp::{MAX_QP, QpStatus, SmallCholesky, solve_box_qp};
 /// Newton step and is not run. (Skipping it also whenever the Newton step happens to land inside
 /// a finite box would be the same mathematics, but the QP reaches that point along another
 /// sequence of roundings; the stochastic single joint, whose optimum is flat in the stiffness,
-/// then settles 3 % away in expected cost.) False when `Q_uu` is not positive definite.
+/// then settles at another stop, percents away in expected cost.) False when `Q_uu` is not
+/// positive definite.
 ///
 /// Inlined, so that on the stack path ([`super::knot`]) the sizes, read off the slices of its
 /// arrays, are constants.

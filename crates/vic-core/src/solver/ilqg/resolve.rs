@@ -31,7 +31,7 @@ impl Ilqg {
     /// `tail` (clamped to the limits; they run open loop in the first rollout), for a plan
     /// whose last controls were free: the delayed plant's last `d` commands act after the
     /// horizon, so the plan leaves them at their control cost's minimum, and shifted they act
-    /// within it (`core::delay`'s planner replaces them with its undelayed guess).
+    /// within it (the `delay` module's planner replaces them with its undelayed guess).
     pub fn resolve_shifted_with_tail(
         &mut self,
         problem: &Problem,

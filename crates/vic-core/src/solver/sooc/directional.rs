@@ -23,7 +23,7 @@ const MAX_NV: usize = MAX_NX + MAX_NU;
 /// `∂_aa`, and `w = e_a + e_b` gives `∂_aa + 2 ∂_ab + ∂_bb`, hence `∂_ab`. [`LANES2`]
 /// directions share one flow on a [`Taylor`] of order 2 (as [`flow_third_contracted`] does at
 /// order 3): `nv (nv + 1) / 2` directions in `⌈nv (nv + 1) / 24⌉` flows, where nested duals
-/// (`Dual<Dual64>`) took one flow per entry. An entry `∂_ab` is a combination of three
+/// (`Dual<Dual64>`) take one flow per entry. An entry `∂_ab` is a combination of three
 /// directions, so its rounding is relative to the largest of them (1e-15), not bit for bit that
 /// of the nested duals.
 pub(super) fn flow_second_derivatives(at: At, s: &mut MomentExpansion) {

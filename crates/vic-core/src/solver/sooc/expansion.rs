@@ -186,7 +186,7 @@ impl MomentExpansion {
     ///   2 tr(Λ dCx_{i,a} P dCx_{i,b}ᵀ)` — the bilinear part of `A P Aᵀ` that makes stiffness
     ///   worth buying, and that a Gauss–Newton model drops;
     ///   and the third derivatives of the flow, `2 tr(Λ ∂²A/∂v_a∂v_b P Aᵀ)`, of the same size
-    ///   (measured: leaving them out changes this block by half and stalls Newton);
+    ///   (leaving them out stalls Newton near the optimum);
     /// * noise gain nonlinear in the state: `2 c_iᵀ Λ ∂²c_i + 2 tr(Λ ∂²Cx_i P Cx_iᵀ)`;
     /// * covariance, `P`–`v`: `tr((T_a + T_aᵀ) E_e)` with `T_a = Aᵀ Λ dA_a + Σ_i Cx_iᵀ Λ dCx_{i,a}`
     ///   (`P⁺` is linear in `P`, so `P`–`P` is zero).

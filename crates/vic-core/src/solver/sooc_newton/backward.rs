@@ -232,7 +232,7 @@ impl SoocSolver {
             // w_st = 1e-4 the stiffness's ℓ_uu is ~1e-4 of what a unit of stiffness does to
             // the expected cost through the covariance, so a μ relative to ℓ_uu could not
             // convexify an indefinite Newton model before μ reached its limit, and the solver
-            // fell back to Gauss–Newton steps that crawl (the VSA plans stalled that way).
+            // would fall back to Gauss–Newton steps that crawl (the VSA plans stall that way).
             let costate_term = if newton {
                 self.curvatures[k].huu[(j, j)]
             } else {
@@ -291,11 +291,11 @@ pub(super) struct Backstep {
 /// indefinite. Adding `½ δuᵀ (|Q| − Q) δu`, positive semidefinite, to one stage's model keeps the
 /// others' Newton steps; the modified model is convex in the controls, so its minimiser is a
 /// descent direction of `J` (the saddle-free Newton step of Dauphin et al. 2014, stage by stage),
-/// and along negative curvature it moves by `|g / λ|` instead of stopping. Measured: the same
-/// optima in fewer steps where few stages are indefinite (two_link_divergent 52 → 42, the single
-/// joint 88 → 54), more steps on the torque-only arm (251 → 339). On the light VSA (B/10) it is
-/// what converges at all: about 4300 steps to J = 1.224e5, where one μ for every stage still
-/// creeps at 1.97e5 after 2000 (docs/BENCHMARKS.md, thirty-ninth session).
+/// and along negative curvature it moves by `|g / λ|` instead of stopping. It reaches the same
+/// optima in fewer steps where few stages are indefinite (the divergent arm, the single joint),
+/// in more on the torque-only arm; on the light VSA arm (B/10) it is what converges at all,
+/// where one μ for every stage still creeps far above the optimum after thousands of steps
+/// (docs/BENCHMARKS.md, "Every scenario", gives the light VSA arm's SOOC plan).
 fn convexify(quu: &mut DMatrix<f64>, curvature: &[f64], reg: &[f64]) {
     let m = curvature.len();
     let s: [f64; MAX_QP] = std::array::from_fn(|j| {

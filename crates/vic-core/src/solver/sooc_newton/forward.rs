@@ -17,7 +17,7 @@ impl SoocSolver {
     /// step could cost and still be accepted: the verdict is the same, and the steps taken are
     /// the same to the bit. Far from the optimum the backward pass can predict decreases many
     /// times `J` (its value recursion grows through the unstable field), which no nonnegative
-    /// cost can realise: such a step now costs one knot of a rollout per `α` instead of a whole
+    /// cost can realise: such a step then costs one knot of a rollout per `α`, not a whole
     /// rollout.
     pub(super) fn line_search(
         &mut self,

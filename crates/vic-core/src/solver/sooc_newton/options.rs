@@ -22,14 +22,13 @@ pub struct SoocOptions {
     /// exact Hessian, which the convergence to a stated criterion needs; see
     /// [`crate::solver::sooc::MomentDynamics::second_order`]). They are about two thirds
     /// of a Newton iteration on the arm (third derivatives along 116 directions per knot, eight
-    /// to a flow; the solver bench's three exact steps against three without them: 66–68 ms
-    /// against 20–25 ms). Without them the model keeps the
-    /// curvature that makes stiffness worth buying (the covariance's `A P Aᵀ` is quadratic in
+    /// to a flow; `docs/BENCHMARKS.md`, "Why targets are missed"). Without them the model keeps
+    /// the curvature that makes stiffness worth buying (the covariance's `A P Aᵀ` is quadratic in
     /// the controls through the flow's *second* derivatives) and drops the costate-weighted
     /// change of `∂A/∂v` along `v`: a model that is no longer the exact Hessian, so far from the
-    /// optimum its steps are as good, near it convergence slows to linear (measured on the
-    /// divergent arm: 220 iterations do not reach the tolerances that 52 exact ones do). What a
-    /// few warm-started iterations per re-solve need (the `replan` strategy), not a plan.
+    /// optimum its steps are as good, near it convergence slows to linear (on the divergent arm
+    /// hundreds of such iterations do not reach the tolerances that a few dozen exact ones do).
+    /// What a few warm-started iterations per re-solve need (the `replan` strategy), not a plan.
     pub flow_third_derivatives: bool,
     /// With `flow_third_derivatives`: the Newton model leaves them out while the last accepted
     /// step gained more than this fraction of `J`, and adds them for good once a step gains
@@ -48,9 +47,10 @@ pub struct SoocOptions {
     /// A step on kept derivatives is never an exact one: it cannot declare convergence, and when
     /// it finds no descent at any μ the derivatives are taken anew. They are not kept after an
     /// exact step that predicted less than a thousand times `decrease_tolerance`: the next point
-    /// is then likely the optimum, which only a fresh exact model can certify. Measured per scenario
-    /// (`docs/BENCHMARKS.md`): it pays on the arms in the divergent field (fewer or as many steps,
-    /// a third of them cheap) and not where the third derivatives are in from the first step.
+    /// is then likely the optimum, which only a fresh exact model can certify. It pays on the
+    /// arms in the divergent field (fewer or as many steps, a third of them cheap) and not where
+    /// the third derivatives are in from the first step; keeping them two or three steps in a
+    /// row does not pay (`docs/BENCHMARKS.md`, "Approaches that did not pay").
     pub keep_third_derivatives: bool,
     /// What a backward pass does with a stage whose Newton `Q_uu` is not positive definite
     /// (default [`Indefinite::Regularize`]).

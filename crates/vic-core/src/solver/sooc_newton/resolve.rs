@@ -29,7 +29,7 @@ impl SoocSolver {
     }
 
     /// Re-solves the rest of the movement `advanced` knots later: `problem` is the previous one
-    /// from knot `advanced` on (`planning::setup::Setup::remaining`: the same plant, the
+    /// from knot `advanced` on (`vic_plan::setup::Setup::remaining`: the same plant, the
     /// reference and the exogenous inputs from that knot, `advanced` knots fewer) from a new
     /// initial state, warm-started with the previous solution's tail. The workspace shrinks
     /// with the horizon (nothing is allocated; later calls continue from the shorter horizon).
