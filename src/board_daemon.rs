@@ -77,8 +77,9 @@ pub struct RtArgs {
     /// Pin the loop to this CPU (default: the last CPU, where there are several).
     #[arg(long, value_name = "N")]
     pub cpu: Option<usize>,
-    /// No real-time requests: the normal scheduler, no pinning, no spin (memory locking is
-    /// still tried).
+    /// Without the real-time settings: the normal scheduler instead of SCHED_FIFO, no pinning
+    /// to a CPU and no spin before each deadline unless --spin-us asks (mlockall is still
+    /// tried).
     #[arg(long)]
     pub no_rt: bool,
 }

@@ -406,14 +406,15 @@ fn delayed_linearization_matches_finite_differences() {
     }
 }
 
-/// A relinearisation (`Dynamics::relinearize`) into a buffer that holds the model's
+/// A relinearisation (`Dynamics::linearize_with`, `refill`) into a buffer that holds the model's
 /// linearisation at another state and control is the fresh linearisation there, bit for bit:
 /// the entries it leaves alone are the ones every linearisation writes the same. Also when the
 /// last call was noise-free and left the noise Jacobians as they were (emulated by junk in
 /// them). And every nonzero of `A`, `B`, the noise columns and their Jacobians lies where
-/// `state_support` says, and its unit columns hold their one, so reading the nonzeros there (and taking the
-/// unit columns' ones unread) finds them all. The fused calls (`step_linearized` into a
-/// poisoned buffer, `step_relinearized` into one that holds another point's) give the same
+/// the support of `Dynamics::structure` says, and its unit columns hold their one, so reading the
+/// nonzeros there (and taking the unit columns' ones unread) finds them all. The fused calls
+/// (`linearize_with` and the step into a poisoned buffer, and refilling one that holds another
+/// point's) give the same
 /// linearisation and the step to the bit, and the model without its noise (`NoiseFree`) the
 /// same `A` and `B` into a buffer without noise channels, marked noise-free.
 #[test]
@@ -430,7 +431,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
         for d in [0, 1, 2, 5] {
             let delayed = Delayed::new(base.clone(), d);
             let mut support = vic_core::dynamics::StateSupport::default();
-            assert!(delayed.state_support(&mut support));
+            assert!(delayed.structure(Some(&mut support)).supported);
             let point = |rng: &mut StdRng| {
                 let mut x = random_state(&model, rng);
                 for _ in 0..d {
@@ -443,7 +444,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                 let ((x1, u1), (x2, u2)) = (point(&mut rng), point(&mut rng));
                 let fresh = linearize(&delayed, k, &x2, &u2);
                 let mut lin = linearize(&delayed, k, &x1, &u1);
-                delayed.relinearize(k, &x2, &u2, &mut lin);
+                delayed.linearize_with(k, &x2, &u2, None, true, &mut lin);
                 assert_eq!(bits(&lin), bits(&fresh), "{name}");
                 if delayed.nw() > 0 {
                     let mut lin = linearize(&delayed, k, &x1, &u1);
@@ -452,7 +453,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                     for m in lin.cx.iter_mut().chain(lin.cu.iter_mut()) {
                         m.fill(f64::NAN);
                     }
-                    delayed.relinearize(k, &x2, &u2, &mut lin);
+                    delayed.linearize_with(k, &x2, &u2, None, true, &mut lin);
                     assert_eq!(bits(&lin), bits(&fresh), "{name}: after a noise-free call");
                 }
                 let mut step = vec![f64::NAN; delayed.nx()];
@@ -460,7 +461,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                 let step = step_bits(&step);
                 let mut next = vec![f64::NAN; delayed.nx()];
                 let mut lin = linearize(&delayed, k, &x1, &u1);
-                delayed.step_relinearized(k, &x2, &u2, &mut next, &mut lin);
+                delayed.linearize_with(k, &x2, &u2, Some(&mut next), true, &mut lin);
                 assert_eq!(bits(&lin), bits(&fresh), "{name}: fused relinearisation");
                 assert_eq!(
                     step_bits(&next),
@@ -472,7 +473,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                     m.fill(f64::NAN);
                 }
                 next.fill(f64::NAN);
-                delayed.step_linearized(k, &x2, &u2, &mut next, &mut lin);
+                delayed.linearize_with(k, &x2, &u2, Some(&mut next), false, &mut lin);
                 assert_eq!(bits(&lin), bits(&fresh), "{name}: fused linearisation");
                 assert_eq!(step_bits(&next), step, "{name}: fused linearisation's step");
                 let quiet = NoiseFree(Delayed::new(base.clone(), d));
@@ -486,7 +487,7 @@ fn relinearization_is_a_fresh_linearization_and_the_support_holds_every_nonzero(
                 assert_eq!(plain(&lin), plain(&fresh), "{name}: without the noise");
                 assert_eq!(lin.noise, vic_core::dynamics::NoiseKind::None, "{name}");
                 next.fill(f64::NAN);
-                quiet.step_relinearized(k, &x1, &u1, &mut next, &mut lin);
+                quiet.linearize_with(k, &x1, &u1, Some(&mut next), true, &mut lin);
                 let other = linearize(&delayed, k, &x1, &u1);
                 assert_eq!(
                     plain(&lin),

@@ -502,7 +502,7 @@ fn written_out_jacobians_match_the_dual_numbers() {
     }
 }
 
-/// The fused step ([`Dynamics::step_linearized`], what a rollout that will be linearised calls)
+/// The fused step ([`Dynamics::linearize_with`] with the step, what a rollout that will be linearised calls)
 /// is the step and its linearisation computed apart, to the bit: the end state is the chain
 /// rule's last sub-step state, and the solver's plans must not depend on which path a knot took.
 #[test]
@@ -526,7 +526,7 @@ fn the_fused_step_is_the_step_and_its_linearisation_bit_for_bit() {
                 );
                 d.linearize(0, &x, &u, &mut apart);
                 let mut next = vec![f64::NAN; nx];
-                d.step_linearized(0, &x, &u, &mut next, &mut fused);
+                d.linearize_with(0, &x, &u, Some(&mut next), false, &mut fused);
                 assert_eq!(
                     bits(&next),
                     bits(&euler_step(&d, 0, &x, &u)),

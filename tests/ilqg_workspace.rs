@@ -368,8 +368,14 @@ impl vic_core::dynamics::Dynamics for Filled<'_> {
             m.iter_mut().filter(|v| **v == 0.0).for_each(|v| *v = 1e-3);
         }
     }
-    fn parallel_linearization(&self) -> bool {
-        false
+    fn structure(
+        &self,
+        _support: Option<&mut vic_core::dynamics::StateSupport>,
+    ) -> vic_core::dynamics::Structure {
+        vic_core::dynamics::Structure {
+            parallel_linearization: false,
+            supported: false,
+        }
     }
 }
 

@@ -41,7 +41,8 @@ pub trait Cost: Send + Sync {
     /// cost whose derivatives are zero outside fixed entries writes only those: the tracking
     /// cost's Hessian is a diagonal over the joints' angles and velocities, and clearing it
     /// whole at every knot is a pass over a 42×42 matrix per knot on the delayed plant.
-    /// The solvers call it where they call [`crate::dynamics::Dynamics::relinearize`].
+    /// The solvers call it where they ask the plant to refill a linearisation (`refill` of
+    /// [`crate::dynamics::Dynamics::linearize_with`]).
     /// Default: [`Cost::running_derivatives`].
     fn running_derivatives_again(&self, k: usize, x: &[f64], u: &[f64], d: &mut CostDerivatives) {
         self.running_derivatives(k, x, u, d);

@@ -28,20 +28,15 @@ pub fn available() -> bool {
     }
 }
 
-/// The environment variable that, set to anything but `0` or the empty string, keeps the
-/// portable kernels (for timing the difference, or on a machine that misreports AVX2).
-pub const OPT_OUT: &str = "VIC_NO_WIDE_VECTORS";
-
-/// Whether the gated kernels run their AVX2 copies: by default wherever the CPU has AVX2 and
-/// [`OPT_OUT`] is not set.
+/// Whether the gated kernels run their AVX2 copies: wherever the CPU has AVX2, unless
+/// [`set_enabled`] forbade them.
 #[inline]
 pub fn enabled() -> bool {
     match STATE.load(Ordering::Relaxed) {
         ON => true,
         OFF => false,
         _ => {
-            let opted_out = std::env::var_os(OPT_OUT).is_some_and(|v| !v.is_empty() && v != "0");
-            let on = available() && !opted_out;
+            let on = available();
             STATE.store(if on { ON } else { OFF }, Ordering::Relaxed);
             on
         }

@@ -14,7 +14,7 @@
 //! the paper's Eq. 13. For `d = 0` the wrapper is the plain model.
 
 use crate::dense::zero;
-use crate::dynamics::{Column, Dynamics, Linearization, NoiseKind, StateSupport};
+use crate::dynamics::{Column, Dynamics, Linearization, NoiseKind, StateSupport, Structure};
 use nalgebra::DMatrix;
 use std::sync::Mutex;
 
@@ -110,42 +110,38 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
         out.view_mut((0, 0), (n, g.ncols())).copy_from(g);
     }
 
-    fn parallel_linearization(&self) -> bool {
-        // The augmented part is a fixed shift: the cost is the base model's.
-        self.base.parallel_linearization()
-    }
-
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         self.write_linearization(k, x, u, lin, true, None);
     }
 
-    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.write_linearization(k, x, u, lin, false, None);
-    }
-
-    fn step_linearized(
+    fn linearize_with(
         &self,
         k: usize,
         x: &[f64],
         u: &[f64],
-        next: &mut [f64],
+        next: Option<&mut [f64]>,
+        refill: bool,
         lin: &mut Linearization,
     ) {
-        self.write_linearization(k, x, u, lin, true, Some(next));
+        self.write_linearization(k, x, u, lin, !refill, next);
     }
 
-    fn step_relinearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        self.write_linearization(k, x, u, lin, false, Some(next));
+    fn structure(&self, support: Option<&mut StateSupport>) -> Structure {
+        // The augmented part is a fixed shift: the cost of a linearisation is the base model's.
+        let parallel_linearization = self.base.structure(None).parallel_linearization;
+        if let Some(support) = support {
+            self.fill_support(support);
+        }
+        Structure {
+            parallel_linearization,
+            supported: true,
+        }
     }
+}
 
-    fn state_support(&self, support: &mut StateSupport) -> bool {
+impl<D: Dynamics> Delayed<D> {
+    /// The support [`Dynamics::structure`] declares.
+    fn fill_support(&self, support: &mut StateSupport) {
         // What `write_linearization` writes: the plant's Jacobians in the plant's rows of the
         // first n + m columns (its own state and the command acting now), then column
         // n + m + i holds the shift's one in row n + i, and B the new command's ones in the
@@ -176,19 +172,16 @@ impl<D: Dynamics> Dynamics for Delayed<D> {
                 support.cu.push(0..0);
             }
         }
-        true
     }
-}
 
-impl<D: Dynamics> Delayed<D> {
     /// The augmented linearisation: the plant's Jacobians in the plant's rows, the shift of the
     /// commands in flight below. With `clear` every entry is written; without, `lin` holds this
-    /// model's linearisation from an earlier call ([`Dynamics::relinearize`]), whose entries
+    /// model's linearisation from an earlier call (`refill` of [`Dynamics::linearize_with`]), whose entries
     /// outside the plant's blocks are the zeros and ones a clearing call wrote, so only the
     /// blocks are written (clearing 42² entries of `A` and of each noise Jacobian at every knot is
     /// a sizeable part of a stochastic solve of the delayed single joint). The noise Jacobians are
     /// cleared when the noise kind changed: a noise-free call leaves them as they were. With
-    /// `next` the step is taken on the way ([`Dynamics::step_linearized`]): the plant's step
+    /// `next` the step is taken on the way ([`Dynamics::linearize_with`]): the plant's step
     /// comes from its own fused call, bit for bit its [`Dynamics::step`].
     fn write_linearization(
         &self,
@@ -213,13 +206,13 @@ impl<D: Dynamics> Delayed<D> {
             Some(next) => {
                 let acting = self.acting(x, u);
                 self.base
-                    .step_linearized(k, &x[..n], acting, &mut next[..n], base);
+                    .linearize_with(k, &x[..n], acting, Some(&mut next[..n]), false, base);
                 self.shift(x, u, next);
             }
             None => self.base.linearize(k, &x[..n], self.acting(x, u), base),
         }
         if clear && self.steps > 0 {
-            // The shift register's ones (its unit columns in `state_support`), written once:
+            // The shift register's ones (its unit columns in the declared support), written once:
             // a relinearisation finds them in place, and touching them again would cost a cache
             // line per column of a 42×42 `A` at every knot.
             zero(&mut lin.a);

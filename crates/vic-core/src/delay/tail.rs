@@ -3,7 +3,7 @@
 //! the delayed planner and for replanning from a later knot.
 
 use crate::cost::{Cost, CostDerivatives};
-use crate::dynamics::{Dynamics, Linearization, StateSupport};
+use crate::dynamics::{Dynamics, Linearization, StateSupport, Structure};
 use nalgebra::DMatrix;
 
 /// A model or cost read `offset` knots later: knot `k` of the wrapper is knot `k + offset` of
@@ -40,35 +40,20 @@ impl<T: Dynamics + ?Sized> Dynamics for Offset<'_, T> {
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         self.inner.linearize(k + self.offset, x, u, lin);
     }
-    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.inner.relinearize(k + self.offset, x, u, lin);
-    }
-    fn step_linearized(
+    fn linearize_with(
         &self,
         k: usize,
         x: &[f64],
         u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        self.inner.step_linearized(k + self.offset, x, u, next, lin);
-    }
-    fn step_relinearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
+        next: Option<&mut [f64]>,
+        refill: bool,
         lin: &mut Linearization,
     ) {
         self.inner
-            .step_relinearized(k + self.offset, x, u, next, lin);
+            .linearize_with(k + self.offset, x, u, next, refill, lin);
     }
-    fn state_support(&self, support: &mut StateSupport) -> bool {
-        self.inner.state_support(support)
-    }
-    fn parallel_linearization(&self) -> bool {
-        self.inner.parallel_linearization()
+    fn structure(&self, support: Option<&mut StateSupport>) -> Structure {
+        self.inner.structure(support)
     }
 }
 
@@ -124,33 +109,18 @@ impl<D: Dynamics> Dynamics for NoiseFree<D> {
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
         self.0.linearize(k, x, u, lin);
     }
-    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
-        self.0.relinearize(k, x, u, lin);
-    }
-    fn state_support(&self, support: &mut StateSupport) -> bool {
-        self.0.state_support(support)
-    }
-    fn step_linearized(
+    fn linearize_with(
         &self,
         k: usize,
         x: &[f64],
         u: &[f64],
-        next: &mut [f64],
+        next: Option<&mut [f64]>,
+        refill: bool,
         lin: &mut Linearization,
     ) {
-        self.0.step_linearized(k, x, u, next, lin);
+        self.0.linearize_with(k, x, u, next, refill, lin);
     }
-    fn step_relinearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        self.0.step_relinearized(k, x, u, next, lin);
-    }
-    fn parallel_linearization(&self) -> bool {
-        self.0.parallel_linearization()
+    fn structure(&self, support: Option<&mut StateSupport>) -> Structure {
+        self.0.structure(support)
     }
 }

@@ -134,7 +134,33 @@ impl StateSupport {
     }
 }
 
-/// A discrete-time stochastic plant with exact first derivatives.
+/// What a plant tells the solvers about its linearisations beyond their values
+/// ([`Dynamics::structure`]): performance hints only, never a change of the result.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Structure {
+    /// One linearisation costs enough (microseconds or more) that the solvers linearise the
+    /// knots of a trajectory in parallel. Cheap models (a few states, first derivatives only) say
+    /// false and are linearised in order, without allocating.
+    pub parallel_linearization: bool,
+    /// The plant declares where its Jacobians can be nonzero ([`StateSupport`]), and filled the
+    /// support it was given.
+    pub supported: bool,
+}
+
+impl Default for Structure {
+    /// Every entry may be nonzero; linearised in parallel.
+    fn default() -> Self {
+        Structure {
+            parallel_linearization: true,
+            supported: false,
+        }
+    }
+}
+
+/// A discrete-time stochastic plant with exact first derivatives: six methods every plant gives
+/// (its sizes, the step, the noise gain, the linearisation), and two optional capabilities with
+/// defaults that a plant with more structure overrides ([`Dynamics::linearize_with`],
+/// [`Dynamics::structure`]).
 pub trait Dynamics: Send + Sync {
     /// State dimension.
     fn nx(&self) -> usize;
@@ -147,66 +173,50 @@ pub trait Dynamics: Send + Sync {
     /// Noise gain `G = √Δ F` (n×p) of the step.
     fn noise_gain(&self, k: usize, x: &[f64], u: &[f64], out: &mut DMatrix<f64>);
     /// Linearisation of the step around (x, u). A `lin` made without noise channels
-    /// (`Linearization::new(nx, nu, 0)`, as the delay planner's noise-free tail problem asks for) receives the deterministic
-    /// part only, and its noise kind is [`NoiseKind::None`].
+    /// (`Linearization::new(nx, nu, 0)`, as the delay planner's noise-free tail problem asks for)
+    /// receives the deterministic part only, and its noise kind is [`NoiseKind::None`].
     fn linearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization);
-    /// [`Dynamics::linearize`] into a `lin` that holds this model's linearisation at knot `k`
-    /// from an earlier call (at another state and control), with the same result. A model whose
-    /// Jacobians are zero outside fixed blocks (the delay-augmented plant: 46 of 42² entries of
-    /// `A` can be nonzero) writes only those blocks instead of clearing and refilling every
-    /// entry. The solvers call it for the second and later linearisations of a knot within one
-    /// solve. Default: [`Dynamics::linearize`].
-    fn relinearize(&self, k: usize, x: &[f64], u: &[f64], lin: &mut Linearization) {
+    /// Optional capability: [`Dynamics::linearize`] (the same `lin`, bit for bit) with what the
+    /// caller offers a plant that can use it.
+    ///
+    /// - `next`: the step is wanted too, into `next` as [`Dynamics::step`] gives it, bit for
+    ///   bit. A rollout that will be linearised anyway asks for it, and a plant whose Jacobian
+    ///   computes the step on the way (the chain rule runs through the same sub-step states)
+    ///   saves a second evaluation of its drift.
+    /// - `refill`: `lin` holds this model's linearisation at knot `k` from an earlier call (at
+    ///   another state and control) or, for a plant that declares a support
+    ///   ([`Dynamics::structure`]), a linearisation of *any* model with the same support. A
+    ///   plant whose Jacobians are zero outside fixed blocks (the delay-augmented plant: 46 of
+    ///   42² entries of `A` can be nonzero) then writes only those blocks instead of clearing
+    ///   and refilling every entry. The solvers pass it for the second and later linearisations
+    ///   of a knot, and keep such buffers from one solve to the next when the support is the
+    ///   same.
+    ///
+    /// Default: the step if asked, then [`Dynamics::linearize`].
+    fn linearize_with(
+        &self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        next: Option<&mut [f64]>,
+        refill: bool,
+        lin: &mut Linearization,
+    ) {
+        let _ = refill;
+        if let Some(next) = next {
+            self.step(k, x, u, next);
+        }
         self.linearize(k, x, u, lin);
     }
-    /// Where `A`, `B` and the noise Jacobians can be nonzero, if the model knows: `false` (the
-    /// default) when any entry may be; else `true`, with `support` filled ([`StateSupport`]).
-    /// The solvers then read a linearisation's nonzeros only there, and take its unit columns
-    /// without reading them. A model that declares a support promises more of
-    /// [`Dynamics::relinearize`]: into a buffer that holds a linearisation of *any* model with
-    /// the same support (the entries the support fixes are then in place), it gives the fresh
-    /// linearisation; the solvers keep such buffers from one solve to the next instead of
-    /// clearing them.
-    fn state_support(&self, support: &mut StateSupport) -> bool {
+    /// Optional capability: what the solvers may exploit ([`Structure`]). With `support` given
+    /// and a plant that knows where `A`, `B` and the noise Jacobians can be nonzero, fills it
+    /// ([`StateSupport`]) and says `supported`; the solvers then read a linearisation's nonzeros
+    /// only there and take its unit columns without reading them. `None` asks for the flags
+    /// only. Default: [`Structure::default`] (every entry may be nonzero, linearised in
+    /// parallel).
+    fn structure(&self, support: Option<&mut StateSupport>) -> Structure {
         let _ = support;
-        false
-    }
-    /// The step and its linearisation at once: `next` as [`Dynamics::step`] gives it and `lin`
-    /// as [`Dynamics::linearize`] does, bit for bit. A rollout that will be linearised anyway
-    /// calls this, and a plant whose Jacobian computes the step on the way (the chain rule runs
-    /// through the same sub-step states) saves a second evaluation of its drift. Default: the
-    /// two calls.
-    fn step_linearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        self.step(k, x, u, next);
-        self.linearize(k, x, u, lin);
-    }
-    /// [`Dynamics::step_linearized`] into a `lin` that holds this model's linearisation at knot
-    /// `k` from an earlier call, as [`Dynamics::relinearize`] is to [`Dynamics::linearize`]:
-    /// the solvers' rollouts after the first linearisation of a trajectory. Default: the step
-    /// and [`Dynamics::relinearize`].
-    fn step_relinearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        self.step(k, x, u, next);
-        self.relinearize(k, x, u, lin);
-    }
-    /// Whether one linearisation costs enough (microseconds or more) that the solvers should
-    /// linearise the knots of a trajectory in parallel. Default true; cheap models (a few states,
-    /// first derivatives only) say false and are linearised in order, without allocating.
-    fn parallel_linearization(&self) -> bool {
-        true
+        Structure::default()
     }
 }
 
@@ -381,14 +391,19 @@ impl Dynamics for DiscreteDynamics {
         self.noise_linearization(x, u, lin);
     }
 
-    fn step_linearized(
+    fn linearize_with(
         &self,
         k: usize,
         x: &[f64],
         u: &[f64],
-        next: &mut [f64],
+        next: Option<&mut [f64]>,
+        _refill: bool,
         lin: &mut Linearization,
     ) {
+        // Every entry is written anyway: a relinearisation is a linearisation.
+        let Some(next) = next else {
+            return self.linearize(k, x, u, lin);
+        };
         let (a, b) = (lin.a.as_mut_slice(), lin.b.as_mut_slice());
         if !self.flow_jacobian_by_size(k, x, u, a, b, Some(&mut *next)) {
             self.flow(k, x, u, next);
@@ -397,21 +412,12 @@ impl Dynamics for DiscreteDynamics {
         self.noise_linearization(x, u, lin);
     }
 
-    fn step_relinearized(
-        &self,
-        k: usize,
-        x: &[f64],
-        u: &[f64],
-        next: &mut [f64],
-        lin: &mut Linearization,
-    ) {
-        // Every entry is written anyway: a relinearisation is a linearisation.
-        self.step_linearized(k, x, u, next, lin);
-    }
-
-    fn parallel_linearization(&self) -> bool {
+    fn structure(&self, _support: Option<&mut StateSupport>) -> Structure {
         // One flow with a vector dual number: well under a microsecond for the paper's limbs.
-        false
+        Structure {
+            parallel_linearization: false,
+            supported: false,
+        }
     }
 }
 

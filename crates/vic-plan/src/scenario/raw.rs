@@ -8,7 +8,6 @@ use super::sections::TAGGED;
 use crate::method::Method;
 use serde::Deserialize;
 use vic_core::dynamics::Integrator;
-use vic_core::solver::IlqgOptions;
 use vic_core::solver::sooc_newton::Indefinite;
 
 #[derive(Debug, Deserialize)]
@@ -230,51 +229,31 @@ fn euler() -> Integrator {
     Integrator::Euler
 }
 
-/// `[solver]`: every key optional, the defaults those of [`IlqgOptions`].
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+/// `[solver]`: every key optional. An absent key keeps the solver's own default
+/// ([`IlqgOptions::default`](vic_core::solver::IlqgOptions), [`SoocOptions::default`](vic_core::solver::sooc_newton::SoocOptions)):
+/// the defaults live there only.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub(super) struct RawSolver {
+    #[serde(default)]
     pub method: Method,
-    pub max_iterations: usize,
-    pub tolerance: f64,
-    pub gradient_tolerance: f64,
-    pub mu_init: f64,
-    pub mu_min: f64,
-    pub mu_max: f64,
-    pub stochastic: bool,
-    pub damp_short_steps: bool,
-    /// SOOC: fractions of the noise solved in turn, ending at 1.
-    pub noise_continuation: Vec<f64>,
+    /// ILQG's and SOOC's (per noise stage) iteration limit.
+    pub max_iterations: Option<usize>,
+    pub tolerance: Option<f64>,
+    pub gradient_tolerance: Option<f64>,
+    pub mu_init: Option<f64>,
+    pub mu_min: Option<f64>,
+    pub mu_max: Option<f64>,
+    pub stochastic: Option<bool>,
+    pub damp_short_steps: Option<bool>,
     /// SOOC: what to do with an indefinite Newton model.
-    pub indefinite: Indefinite,
+    pub indefinite: Option<Indefinite>,
     /// SOOC: the relative gain per step below which the Newton model adds the flow's third
-    /// derivatives (absent: always).
+    /// derivatives.
     pub third_derivatives_below: Option<f64>,
     /// SOOC: every other Newton step keeps the previous point's third derivatives.
-    pub keep_third_derivatives: bool,
+    pub keep_third_derivatives: Option<bool>,
     /// Deterministic solves hold an impedance's stiffness at its lower limit first, then free
-    /// it (default true).
-    pub hold_stiffness_first: bool,
-}
-
-impl Default for RawSolver {
-    fn default() -> Self {
-        let d = IlqgOptions::default();
-        RawSolver {
-            method: Method::default(),
-            max_iterations: d.max_iterations,
-            tolerance: d.tolerance,
-            gradient_tolerance: d.gradient_tolerance,
-            mu_init: d.mu_init,
-            mu_min: d.mu_min,
-            mu_max: d.mu_max,
-            stochastic: d.stochastic,
-            damp_short_steps: d.damp_short_steps,
-            noise_continuation: vec![1.0],
-            indefinite: Indefinite::default(),
-            third_derivatives_below: None,
-            keep_third_derivatives: false,
-            hold_stiffness_first: true,
-        }
-    }
+    /// it (default true; see [`super::solver::held_first`]).
+    pub hold_stiffness_first: Option<bool>,
 }

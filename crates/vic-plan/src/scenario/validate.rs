@@ -50,7 +50,7 @@ pub(super) fn validate(
     let initial_stiffness =
         check.non_negative(initial_stiffness, "actuator", "initial_stiffness")?;
     check_substep(&model, &task, &bounds, &check)?;
-    let hold_stiffness_first = raw.solver.hold_stiffness_first;
+    let hold_stiffness_first = raw.solver.hold_stiffness_first();
     let mut solver = raw.solver.resolve(&check)?;
     solver.options.held_first = super::solver::held_first(&model, hold_stiffness_first);
     let board = raw.board.resolve(dof, &check)?;

@@ -138,12 +138,12 @@ struct Trajectory {
     /// by a complete fused rollout, cleared when a rollout starts).
     linearized: bool,
     /// Whether every `lin[k]` holds a linearisation of this solve's plant at knot `k` (from any
-    /// state), or of any plant with the same support, so that [`Dynamics::relinearize`] may
-    /// refill it: set by a complete linearisation, kept when the next solve's plant declares
+    /// state), or of any plant with the same support, so that the plant may refill it (`refill`
+    /// of [`Dynamics::linearize_with`]): set by a complete linearisation, kept when the next solve's plant declares
     /// the same support (it then writes every entry the support leaves open, and the others
     /// are fixed by it), cleared otherwise (another solve may bring another plant).
     ///
-    /// [`Dynamics::relinearize`]: crate::dynamics::Dynamics::relinearize
+    /// [`Dynamics::linearize_with`]: crate::dynamics::Dynamics::linearize_with
     relinearizable: bool,
     /// Whether every `derivs[k]` holds the derivatives of this solve's cost at knot `k` (from
     /// any state), so that [`Cost::running_derivatives_again`] may refill them: set by a
@@ -153,10 +153,14 @@ struct Trajectory {
     /// [`Cost::running_derivatives_again`]: crate::cost::Cost::running_derivatives_again
     differentiated: bool,
     /// Where the plant's `A` and `Cx_i` can be nonzero, when it says
-    /// ([`Dynamics::state_support`](crate::dynamics::Dynamics::state_support)): the
+    /// ([`Dynamics::structure`](crate::dynamics::Dynamics::structure)): the
     /// nonzeros are then read there only.
     support: StateSupport,
     supported: bool,
+    /// Whether the plant's knots are linearised in parallel
+    /// ([`Structure::parallel_linearization`](crate::dynamics::Structure)), read with its
+    /// support.
+    parallel: bool,
     /// The support of the last solve's plant (kept to compare with the next one's).
     last_support: StateSupport,
     /// Where the cost's `l_xx` can be nonzero ([`Cost::hessian_support`], all of the state
@@ -186,6 +190,7 @@ impl Trajectory {
             differentiated: false,
             support: StateSupport::with_capacity(nx, nu),
             supported: false,
+            parallel: true,
             last_support: StateSupport::with_capacity(nx, nu),
             hessian: 0..nx,
         }
@@ -210,8 +215,9 @@ impl Trajectory {
         let (nx, nu) = (problem.dynamics.nx(), problem.dynamics.nu());
         let refillable = self.relinearizable && self.supported;
         std::mem::swap(&mut self.support, &mut self.last_support);
-        self.supported =
-            problem.dynamics.state_support(&mut self.support) && self.support.fits(nx, nu);
+        let structure = problem.dynamics.structure(Some(&mut self.support));
+        self.supported = structure.supported && self.support.fits(nx, nu);
+        self.parallel = structure.parallel_linearization;
         self.relinearizable = refillable && self.supported && self.support == self.last_support;
         self.make_room(nx, nu);
         self.differentiated = false;

@@ -13,7 +13,7 @@ pub(super) type Policy<'a> = (&'a Trajectory, &'a [DVector<f64>], &'a [DMatrix<f
 /// negative, whose total can then only be larger).
 ///
 /// With `fused` (and a model linearised in order, see [`linearize`]) the knots are linearised on
-/// the way ([`Dynamics::step_linearized`]): a complete rollout leaves `traj` as [`linearize`]
+/// the way ([`Dynamics::linearize_with`] with the step): a complete rollout leaves `traj` as [`linearize`]
 /// would, without evaluating the drift twice per knot. The callers fuse the rollouts that are
 /// accepted unless the line search backtracks: the first guess and the full step.
 pub(super) fn rollout(
@@ -25,7 +25,7 @@ pub(super) fn rollout(
     limit: f64,
     fused: bool,
 ) -> Result<(), usize> {
-    let fused = fused && !problem.dynamics.parallel_linearization();
+    let fused = fused && !traj.parallel;
     let pattern = fused && !reads_in_place(problem.dynamics.nx(), problem.dynamics.nu());
     traj.linearized = false;
     let mut cost = 0.0;
@@ -58,11 +58,10 @@ pub(super) fn rollout(
             // (a rollout stopped early leaves new ones in its first knots): the model and the
             // cost then write only what can change.
             let (lin, d) = (&mut traj.lin[k], &mut traj.derivs[k]);
-            if traj.relinearizable {
-                problem.dynamics.step_relinearized(k, x, u, next, lin);
-            } else {
-                problem.dynamics.step_linearized(k, x, u, next, lin);
-            }
+            let refill = traj.relinearizable;
+            problem
+                .dynamics
+                .linearize_with(k, x, u, Some(next), refill, lin);
             if traj.differentiated {
                 problem.cost.running_derivatives_again(k, x, u, d);
             } else {
@@ -101,7 +100,7 @@ pub(super) fn rollout(
 
 /// Linearises the dynamics and differentiates the cost along `traj`. Knots are independent: when
 /// the model says a linearisation is expensive
-/// ([`Dynamics::parallel_linearization`](crate::dynamics::Dynamics::parallel_linearization)) they
+/// ([`Structure::parallel_linearization`](crate::dynamics::Structure)) they
 /// are linearised in parallel, otherwise in order (thread hand-offs would cost more than they
 /// save, and a sequential pass allocates nothing). Each knot's result is computed the same way
 /// either way, so the solution does not depend on the thread count.
@@ -118,7 +117,7 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
                 d: &mut CostDerivatives| {
         let (x, u) = (xs[k].as_slice(), us[k].as_slice());
         if again {
-            problem.dynamics.relinearize(k, x, u, lin);
+            problem.dynamics.linearize_with(k, x, u, None, true, lin);
         } else {
             problem.dynamics.linearize(k, x, u, lin);
         }
@@ -131,7 +130,7 @@ pub(super) fn linearize(problem: &Problem, traj: &mut Trajectory) {
             problem.cost.running_derivatives(k, x, u, d);
         }
     };
-    if problem.dynamics.parallel_linearization() {
+    if traj.parallel {
         traj.lin[..h]
             .par_iter_mut()
             .zip(traj.sparse[..h].par_iter_mut())
@@ -164,7 +163,9 @@ impl Trajectory {
         let d = problem.dynamics;
         let (nx, nu) = (d.nx(), d.nu());
         let mut traj = Trajectory::new(nx, nu, d.nw(), horizon);
-        traj.supported = d.state_support(&mut traj.support) && traj.support.fits(nx, nu);
+        let structure = d.structure(Some(&mut traj.support));
+        traj.supported = structure.supported && traj.support.fits(nx, nu);
+        traj.parallel = structure.parallel_linearization;
         traj.make_room(nx, nu);
         traj
     }

@@ -103,7 +103,7 @@ impl Dynamics for MomentDynamics<'_> {
         // The mean's step and `A` from one pass through the sub-steps (the chain rule runs
         // through the step's own states), `A` being the one the expansion at this point uses.
         self.base
-            .step_linearized(k, &z[..n], u, &mut next[..n], &mut s.lin);
+            .linearize_with(k, &z[..n], u, Some(&mut next[..n]), false, &mut s.lin);
         unpack(n, &z[n..], &mut s.p);
         zero(&mut s.next);
         add_sandwich(&mut s.next, 1.0, &s.lin.a, &s.p, &s.lin.a, &mut s.t1);
