@@ -103,7 +103,13 @@ pub fn pin_to_cpu(cpu: usize) -> Result<(), SchedError> {
     }
 }
 
-/// Releases the memory locked by `lock_memory` (in `rt::realtime`, which imports this module).
+/// Tries to lock the process's memory (`mlockall`); a failure is only a warning for callers.
+pub fn lock_memory() -> bool {
+    // SAFETY: mlockall takes flags only.
+    unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0 }
+}
+
+/// Releases the memory locked by [`lock_memory`].
 pub fn unlock_memory() -> bool {
     // SAFETY: munlockall takes no argument.
     unsafe { libc::munlockall() == 0 }
