@@ -9,6 +9,37 @@ use crate::record::{RecordProducer, Sample};
 use crate::transport::{BoardEvent, BoardPorts, Header, Percentiles, Telemetry, monotonic_ns};
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// The sample of a board step, made here so that `record` needs nothing of the board (the
+/// board's runner uses `record`).
+impl Sample {
+    /// The sample of loop tick `tick` at `deadline_ns`, from what [`Board::step`] returned.
+    /// Allocation-free.
+    pub fn from_step(tick: u64, deadline_ns: u64, board: &Board, out: &Outputs) -> Sample {
+        let s = &out.state;
+        Sample {
+            tick,
+            dropped_before: 0,
+            deadline_ns,
+            trial: s.trial,
+            mode: s.mode,
+            trial_time_ns: s.trial_time_ns,
+            periods: out.periods,
+            command_seq: s.command_seq,
+            disturbance_seq: s.disturbance_seq,
+            q: s.q,
+            qd: s.qd,
+            qdd: out.qdd,
+            tau: s.tau,
+            tau_ext: s.tau_ext,
+            tau_ff: out.knot.tau_ff,
+            stiffness: out.knot.stiffness,
+            damping: board.damping(&out.knot.stiffness),
+            q_d: out.knot.q_d,
+            qd_d: out.knot.qd_d,
+        }
+    }
+}
+
 /// Options of the live board loop.
 #[derive(Debug, Clone)]
 pub struct BoardLoopOptions {
