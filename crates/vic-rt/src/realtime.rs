@@ -21,7 +21,7 @@ pub fn sleep_until(deadline_ns: u64, spin_ns: u64) {
 /// [`sleep_until`], running `prepare` once at the start of the spin when there is one and the
 /// deadline has not passed: work that may be done before the deadline, done in time the thread
 /// would otherwise spend polling the clock. Without a spin `prepare` does not run.
-pub fn sleep_until_preparing(deadline_ns: u64, spin_ns: u64, prepare: impl FnOnce()) {
+pub(crate) fn sleep_until_preparing(deadline_ns: u64, spin_ns: u64, prepare: impl FnOnce()) {
     let wake = deadline_ns.saturating_sub(spin_ns);
     let ts = libc::timespec {
         tv_sec: (wake / 1_000_000_000) as libc::time_t,
@@ -102,7 +102,7 @@ impl Periodic {
     /// [`Periodic::wait`], running `prepare` in the spin before the deadline
     /// ([`sleep_until_preparing`]). The wake-up is taken after it, so a `prepare` that ran past
     /// the deadline shows as lateness.
-    pub fn wait_preparing(&mut self, prepare: impl FnOnce()) -> Wake {
+    pub(crate) fn wait_preparing(&mut self, prepare: impl FnOnce()) -> Wake {
         let deadline = self.next_ns;
         sleep_until_preparing(deadline, self.spin_ns, prepare);
         let woke = monotonic_ns();

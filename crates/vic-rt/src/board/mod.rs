@@ -315,7 +315,7 @@ impl Board {
         self.applied
     }
     /// Sequence number and tick of the last disturbance applied.
-    pub fn last_disturbance(&self) -> (u64, u64) {
+    pub(crate) fn last_disturbance(&self) -> (u64, u64) {
         (self.disturbance_seq, self.disturbance_tick)
     }
     /// External torque now in force [N m].

@@ -9,11 +9,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// How long a reset may go unacknowledged (no state carrying its `reset_seq`) [ns].
-pub const RESET_ACK_DEADLINE_NS: u64 = 500_000_000;
+pub(crate) const RESET_ACK_DEADLINE_NS: u64 = 500_000_000;
 /// The board is lost when no state at all arrived for this many planner periods, and at least
 /// this long [ns]: it publishes one every millisecond, so a pause this long is no scheduling hiccup.
-pub const BOARD_LOST_PERIODS: u64 = 10;
-pub const BOARD_LOST_MIN_NS: u64 = 200_000_000;
+pub(crate) const BOARD_LOST_PERIODS: u64 = 10;
+pub(crate) const BOARD_LOST_MIN_NS: u64 = 200_000_000;
 
 /// Why a live run stopped before its last trial. The trials finished before are kept.
 #[derive(Debug, thiserror::Error)]
