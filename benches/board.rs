@@ -15,8 +15,9 @@ use std::hint::black_box;
 use std::path::Path;
 use vic::bench::loop_bench::{PERIOD_NS, board_config, hold_slice};
 use vic_plan::scenario::Scenario;
+use vic_rt::board::live::{BoardHistograms, board_tick};
 use vic_rt::board::{Board, Inputs};
-use vic_rt::realtime::{BoardHistograms, Wake, board_tick};
+use vic_rt::realtime::Wake;
 use vic_rt::transport::{BoardPorts, CentralPorts, Control, ControlKind, Header};
 
 fn running_board() -> (Board, Vec<f64>, usize) {

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use vic_plan::plan::setup;
 use vic_plan::scenario::{ConfigError, Scenario};
 use vic_rt::board::Board;
-use vic_rt::realtime::{BoardLoopOptions, BoardStats, PercentilesJson, run_board};
+use vic_rt::board::live::{BoardLoopOptions, BoardStats, PercentilesJson, run_board};
 use vic_rt::record::{RecordOptions, Recorder};
 use vic_rt::sched::RtRequest;
 use vic_rt::transport::BoardPorts;
@@ -123,7 +123,7 @@ pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
             "removed the resources of {cleaned_dead_nodes} dead process(es) in namespace \"{namespace}\""
         );
     }
-    let memory_locked = vic_rt::realtime::lock_memory();
+    let memory_locked = vic_rt::sched::lock_memory();
     let request = o.rt.request();
     let loop_options = BoardLoopOptions {
         spin_ns: request.spin_us * 1000,

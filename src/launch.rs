@@ -69,10 +69,10 @@ mod tests {
     use super::*;
     use std::path::Path;
     use vic_plan::scenario::Scenario;
-    use vic_rt::central::{Central, Strategy, Timing};
+    use vic_rt::central::{Controller, Strategy, Timing};
     use vic_rt::transport::{Mode, StateMsg};
 
-    fn central() -> Central {
+    fn central() -> Controller {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let s = Scenario::load(
             &root.join("config/two_link_divergent.toml"),
@@ -91,7 +91,7 @@ mod tests {
             command_latency_ns: 0,
             lookahead_ns: 40_000_000,
         };
-        Central::new(track(&plan, &setup).unwrap(), Strategy::Stiffness, timing)
+        Controller::new(track(&plan, &setup).unwrap(), Strategy::Stiffness, timing)
     }
 
     #[test]

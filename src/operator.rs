@@ -8,8 +8,8 @@
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
+use vic_rt::board::live::PercentilesJson;
 use vic_rt::board::{FaultReason, Rejection};
-use vic_rt::realtime::PercentilesJson;
 use vic_rt::transport::{
     Disturbance, DisturbanceKind, Header, MAX_JOINTS, Mode, NodeInfo, NodeLiveness, ObserverPorts,
     Telemetry, ToolPorts, list_nodes, monotonic_ns, session_seq,
@@ -228,7 +228,7 @@ impl Status {
             late_ticks: t.late_ticks,
             missed_periods: t.missed_periods,
             rejected_messages: t.rejected_messages,
-            rejected_by_reason: vic_rt::realtime::rejections_by_name(&t.rejected_by_reason),
+            rejected_by_reason: vic_rt::board::live::rejections_by_name(&t.rejected_by_reason),
             safe_hold_ticks: t.safe_hold_ticks,
             watchdog_trips: t.watchdog_trips,
             tracking_error: t.tracking_error,

@@ -186,10 +186,10 @@ pub fn summarize(
         .iter()
         .flat_map(|t| t.x.iter().enumerate().map(|(k, x)| dist(k, x).powi(2)))
         .sum();
-    let t = &central.timing;
+    let t = &central.controller.timing;
     StrategyResult {
-        name: central.strategy.name().into(),
-        latency_ms: t.latency_steps as f64 * central.track.dt_ns as f64 * 1e-6,
+        name: central.controller.strategy.name().into(),
+        latency_ms: t.latency_steps as f64 * central.controller.track.dt_ns as f64 * 1e-6,
         sensor_latency_ms: t.sensor_latency_ns as f64 * 1e-6,
         command_latency_ms: t.command_latency_ns as f64 * 1e-6,
         trials: records.len(),

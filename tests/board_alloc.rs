@@ -1,5 +1,5 @@
 //! A board tick allocates nothing: a counting global allocator watches `Board::step`, and the
-//! I/O of the real-time loop (`rt::realtime`) around it, with a planner and a tool connected.
+//! I/O of the real-time loop (`vic_rt::board::live`) around it, with a planner and a tool connected.
 
 use crate::common;
 
@@ -89,7 +89,7 @@ fn a_board_step_does_not_allocate() {
     assert!(board.state().iter().all(|v| v.is_finite()));
 }
 
-/// What the real-time loop does with its ports each tick (`rt::realtime`): drain the controls,
+/// What the real-time loop does with its ports each tick (`vic_rt::board::live`): drain the controls,
 /// disturbances and command slices, publish the state, notify, and every 100th tick publish the
 /// telemetry and notify, with a `CentralPorts` subscribed to the states and telemetry and sending
 /// commands and controls, and a `ToolPorts` sending disturbances. Only the board's calls are

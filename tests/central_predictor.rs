@@ -13,7 +13,7 @@ use vic_plan::montecarlo::run_trials;
 use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
 use vic_plan::scenario::Scenario;
 use vic_rt::board::Board;
-use vic_rt::central::{Central, Timing, Track, TrialRecord, lockstep};
+use vic_rt::central::{Central, Controller, Timing, Track, TrialRecord, lockstep};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -184,8 +184,9 @@ fn with_noise_lockstep_and_monte_carlo_predictor_agree_within_their_spread() {
     );
 }
 
-/// One trial like [`lockstep`], except that the board misses its tick at trial time `skip_ms`,
-/// if given (it wakes a period late) and integrates both periods at the next one, as the live loop does.
+/// One trial like [`lockstep`], of the pure [`Controller`] (no clock: no period overruns),
+/// except that the board misses its tick at trial time `skip_ms`, if given (it wakes a period
+/// late) and integrates both periods at the next one, as the live loop does.
 fn lockstep_missing_a_tick(
     s: &Scenario,
     set: &Setup,
@@ -201,7 +202,7 @@ fn lockstep_missing_a_tick(
     )
     .unwrap();
     let timing = Timing::split(100.0, 10, PLANNER_PERIOD_NS);
-    let mut central = Central::new(track, strategy, timing);
+    let mut central = Controller::new(track, strategy, timing);
     let period = 1_000_000;
     let mut board = Board::new(
         s.model.clone(),

@@ -103,7 +103,13 @@ pub fn pin_to_cpu(cpu: usize) -> Result<(), SchedError> {
     }
 }
 
-/// Releases the memory locked by `lock_memory` (in `rt::realtime`, which imports this module).
+/// Tries to lock the process's memory (`mlockall`); a failure is only a warning for callers.
+pub fn lock_memory() -> bool {
+    // SAFETY: mlockall takes flags only.
+    unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0 }
+}
+
+/// Releases the memory locked by [`lock_memory`].
 pub fn unlock_memory() -> bool {
     // SAFETY: munlockall takes no argument.
     unsafe { libc::munlockall() == 0 }
@@ -154,7 +160,7 @@ pub const DEFAULT_FIFO_PRIORITY: i32 = 80;
 /// Spin before each deadline by default [µs]: with `SCHED_FIFO` what brings the wake-up p99
 /// under cyclictest's on these machines (docs/BENCHMARKS.md, "Wake-up jitter"), 10 % of one CPU
 /// at 1 kHz, far below the real-time throttling budget (95 %), so it can never trip it.
-pub const DEFAULT_SPIN_US: u64 = 100;
+pub(crate) const DEFAULT_SPIN_US: u64 = 100;
 
 impl RtRequest {
     /// The defaults: `SCHED_FIFO` 80, a CPU of its own where there is more than one, 100 µs spin.
@@ -229,7 +235,7 @@ impl RtSettings {
 }
 
 /// The CPUs the calling thread may run on.
-pub fn allowed_cpus() -> Vec<usize> {
+pub(crate) fn allowed_cpus() -> Vec<usize> {
     // SAFETY: a zeroed cpu_set_t is a valid empty set; sched_getaffinity writes into it.
     let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
     let size = std::mem::size_of::<libc::cpu_set_t>();

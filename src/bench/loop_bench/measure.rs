@@ -7,11 +7,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
 use vic_plan::scenario::Scenario;
+use vic_rt::board::live::{BoardHistograms, board_tick, board_wait};
 use vic_rt::board::{Board, Inputs};
-use vic_rt::realtime::{
-    BoardHistograms, Periodic, board_tick, board_wait, lock_memory, set_timer_slack_1ns,
-};
-use vic_rt::sched::{self, SchedPolicy};
+use vic_rt::realtime::{Periodic, set_timer_slack_1ns};
+use vic_rt::sched::{self, SchedPolicy, lock_memory};
 use vic_rt::transport::{
     BoardPorts, CentralPorts, CommandSlice, Control, ControlKind, Header, MAX_JOINTS, MAX_KNOTS,
     monotonic_ns, remove_namespace,

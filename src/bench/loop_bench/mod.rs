@@ -1,4 +1,4 @@
-//! `vic bench loop`: the board's 1 kHz loop with its real work ([`vic_rt::realtime::board_tick`]
+//! `vic bench loop`: the board's 1 kHz loop with its real work ([`vic_rt::board::live::board_tick`]
 //! on a scenario's plant, a 50 Hz planner thread streaming hold commands over the real
 //! transport), under each combination of the options real-time loops use, and `cyclictest` at
 //! the same interval for the same duration in the same run (sequentially: the variants one after

@@ -43,7 +43,7 @@ pub struct GapCounter {
 impl GapCounter {
     /// Messages missing before `h` in its session (0 for a session not in the table, a jump
     /// back or a jump of more than [`MAX_COUNTED_GAP`]); `h` becomes its session's last.
-    pub fn missing_before(&mut self, h: &Header) -> u64 {
+    pub(crate) fn missing_before(&mut self, h: &Header) -> u64 {
         self.count += 1;
         let seen = self.count;
         if let Some(slot) = self

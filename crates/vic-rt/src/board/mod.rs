@@ -3,7 +3,8 @@
 //!
 //! It knows no clock and no transport: the caller passes the tick's time and the messages that
 //! arrived, and publishes what comes out. The same code runs in the 1 kHz loop of `vic-board`, in
-//! the lockstep mode (a simulated clock) and in tests. A step allocates nothing.
+//! the lockstep mode (a simulated clock) and in tests; [`live`] is the loop of `vic-board`
+//! around it. A step allocates nothing.
 //!
 //! It is composed of: [`validation`] (every message is checked before use; a rejected one is
 //! counted by [`Rejection`] and never reaches the plant), the command buffer (the newest valid
@@ -17,6 +18,7 @@
 
 mod commands;
 pub mod gaps;
+pub mod live;
 mod plant;
 pub mod supervisor;
 pub mod validation;
@@ -313,7 +315,7 @@ impl Board {
         self.applied
     }
     /// Sequence number and tick of the last disturbance applied.
-    pub fn last_disturbance(&self) -> (u64, u64) {
+    pub(crate) fn last_disturbance(&self) -> (u64, u64) {
         (self.disturbance_seq, self.disturbance_tick)
     }
     /// External torque now in force [N m].

@@ -117,7 +117,7 @@ impl SimulatedPlant {
 
     /// The safe hold at the present position: the hold stiffness, no velocity, the torque that
     /// balances gravity and the field there (clamped to the actuator's range, like any command).
-    pub fn hold_target(&self, cfg: &BoardConfig) -> Knot {
+    pub(crate) fn hold_target(&self, cfg: &BoardConfig) -> Knot {
         let dof = self.dof;
         let mut k = Knot::default();
         k.q_d[..dof].copy_from_slice(&self.x[..dof]);

@@ -83,7 +83,13 @@ impl Supervisor {
 
     /// Starts the ramp from the knot `from` to the safe hold at the plant's position, at trial
     /// time `t`.
-    pub fn begin_hold(&mut self, from: Knot, t: u64, plant: &SimulatedPlant, cfg: &BoardConfig) {
+    pub(crate) fn begin_hold(
+        &mut self,
+        from: Knot,
+        t: u64,
+        plant: &SimulatedPlant,
+        cfg: &BoardConfig,
+    ) {
         self.hold_from = from;
         self.hold_to = plant.hold_target(cfg);
         self.hold_start_ns = t;
@@ -118,7 +124,7 @@ impl Supervisor {
     /// command covering it while the watchdog runs (the last one while none covers it); else the
     /// safe-hold ramp. `command_age_ns` gets the age of the command used, if one was.
     #[allow(clippy::too_many_arguments)]
-    pub fn knot_for(
+    pub(crate) fn knot_for(
         &mut self,
         t: u64,
         now_ns: u64,
@@ -157,7 +163,7 @@ impl Supervisor {
     }
 
     /// Latches a fault: the guard tripped for `reason`.
-    pub fn latch(&mut self, reason: FaultReason, counters: &mut Counters) {
+    pub(crate) fn latch(&mut self, reason: FaultReason, counters: &mut Counters) {
         self.mode = Mode::Fault;
         self.fault = reason;
         counters.faults += 1;

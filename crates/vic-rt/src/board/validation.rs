@@ -33,7 +33,7 @@ pub(super) struct TrialState {
 
 /// The last message of one kind that the board accepted: the sequence rules of [`Header`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct LastSeen {
+pub(crate) struct LastSeen {
     /// Nothing accepted yet (or forgotten by a reset).
     pub any: bool,
     pub session: u32,
@@ -46,7 +46,7 @@ impl LastSeen {
     /// whose time stamp is not earlier than the last message's (a restarted sender). A poisoned
     /// `u64::MAX` thus blocks its own session only, and the time stamps it could poison are
     /// bounded by the future tolerance.
-    pub fn admits(&self, h: &Header) -> bool {
+    pub(crate) fn admits(&self, h: &Header) -> bool {
         !self.any
             || if h.session == self.session {
                 h.seq > self.seq

@@ -44,9 +44,9 @@ use std::time::Duration;
 use zenoh::Wait;
 
 /// Probes per second once an estimate exists: 5.
-pub const PROBE_PERIOD: Duration = Duration::from_millis(200);
+pub(crate) const PROBE_PERIOD: Duration = Duration::from_millis(200);
 /// Probe period until the first answer: the link counts as up one round trip after it is.
-pub const FIRST_PROBE_PERIOD: Duration = Duration::from_millis(20);
+pub(crate) const FIRST_PROBE_PERIOD: Duration = Duration::from_millis(20);
 /// A message whose stamps the bridge translates: its header's `time_ns` and, for a reset, the
 /// monotonic time the trial starts at (both on the sender's clock).
 pub trait Stamped {
@@ -172,7 +172,7 @@ struct Current {
 }
 
 /// The board side's clock: probes the other bridge and translates stamps into this host's clock.
-pub struct Prober {
+pub(crate) struct Prober {
     shared: Arc<ProberShared>,
     thread: Option<std::thread::JoinHandle<()>>,
     _answers: zenoh::pubsub::Subscriber<()>,
@@ -249,7 +249,7 @@ impl Prober {
     }
 
     /// Counts a message not forwarded for want of an estimate.
-    pub fn hold_back(&self) {
+    pub(crate) fn hold_back(&self) {
         self.shared.held_back.fetch_add(1, Ordering::Relaxed);
     }
 
@@ -359,7 +359,7 @@ impl ProberShared {
 
 /// The central side's clock: answers the board side's probes, on its own clock plus a skew
 /// (0 but in tests, which pretend the hosts' clocks differ).
-pub struct Responder {
+pub(crate) struct Responder {
     answered: Arc<AtomicU64>,
     malformed: Arc<AtomicU64>,
     _probes: zenoh::pubsub::Subscriber<()>,

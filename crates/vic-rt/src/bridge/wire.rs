@@ -40,7 +40,7 @@ pub fn encode<T: Plain>(value: &T) -> &[u8] {
 
 /// Why bytes from the link were not a message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Malformed {
+pub(crate) enum Malformed {
     /// Not the size of the message type.
     Size { got: usize, expected: usize },
     /// Another protocol version (the board would reject it too; the bridge does not forward it).
@@ -48,7 +48,7 @@ pub enum Malformed {
 }
 
 /// The message in `bytes`, when they have its exact size and this protocol's version.
-pub fn decode<T: Plain>(bytes: &[u8]) -> Result<T, Malformed> {
+pub(crate) fn decode<T: Plain>(bytes: &[u8]) -> Result<T, Malformed> {
     if bytes.len() != size_of::<T>() {
         return Err(Malformed::Size {
             got: bytes.len(),

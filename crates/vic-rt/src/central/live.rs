@@ -9,11 +9,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// How long a reset may go unacknowledged (no state carrying its `reset_seq`) [ns].
-pub const RESET_ACK_DEADLINE_NS: u64 = 500_000_000;
+pub(crate) const RESET_ACK_DEADLINE_NS: u64 = 500_000_000;
 /// The board is lost when no state at all arrived for this many planner periods, and at least
 /// this long [ns]: it publishes one every millisecond, so a pause this long is no scheduling hiccup.
-pub const BOARD_LOST_PERIODS: u64 = 10;
-pub const BOARD_LOST_MIN_NS: u64 = 200_000_000;
+pub(crate) const BOARD_LOST_PERIODS: u64 = 10;
+pub(crate) const BOARD_LOST_MIN_NS: u64 = 200_000_000;
 
 /// Why a live run stopped before its last trial. The trials finished before are kept.
 #[derive(Debug, thiserror::Error)]
@@ -75,18 +75,21 @@ pub fn run_live(
         }
         let now = monotonic_ns();
         // Start on a whole millisecond, once the first slice has crossed the command line.
-        let start =
-            (now + central.lead_time_ns(planner_period_ns) + 20_000_000) / 1_000_000 * 1_000_000;
+        let start = (now + central.controller.lead_time_ns(planner_period_ns) + 20_000_000)
+            / 1_000_000
+            * 1_000_000;
         ep.publish_control(&central.begin_trial(trial, seed, start, now))?;
-        let limit = start + central.track.steps as u64 * central.track.dt_ns + 2_000_000_000;
+        let limit = start
+            + central.controller.track.steps as u64 * central.controller.track.dt_ns
+            + 2_000_000_000;
         let watch = Watch {
             reset_ns: now,
             lost_after_ns: lost_after,
         };
         let end = stream_trial(ep, central, planner_period_ns, limit, stop, &watch)?;
-        ep.publish_control(&central.stop(monotonic_ns()))?;
+        ep.publish_control(&central.controller.stop(monotonic_ns()))?;
         match end {
-            TrialEnd::Done | TrialEnd::Stalled => records.push(central.record()),
+            TrialEnd::Done | TrialEnd::Stalled => records.push(central.controller.record()),
             TrialEnd::Silent { silent_ns } => {
                 return Err(LiveError::BoardLost {
                     trial,
@@ -164,21 +167,23 @@ fn stream_trial(
     loop {
         let wake = periodic.wait();
         let now = monotonic_ns();
-        if ep.drain_states(|s| central.on_state(s, now)) > 0 {
+        if ep.drain_states(|s| central.controller.on_state(s, now)) > 0 {
             last_state_ns = now;
         }
         // Done before sending: a slice published now would reach the board in the same tick
         // as the stop that follows, be checked after it (controls go first) and be rejected as
         // `wrong-trial`, one counted rejection per trial for slices past the movement's end.
-        if central.trial_done() {
+        if central.controller.trial_done() {
             return Ok(TrialEnd::Done);
         }
         let silent = now.saturating_sub(last_state_ns);
         if silent > watch.lost_after_ns {
-            central.stalled = true;
+            central.controller.stalled = true;
             return Ok(TrialEnd::Silent { silent_ns: silent });
         }
-        if !central.acknowledged() && now.saturating_sub(watch.reset_ns) > RESET_ACK_DEADLINE_NS {
+        if !central.controller.acknowledged()
+            && now.saturating_sub(watch.reset_ns) > RESET_ACK_DEADLINE_NS
+        {
             return Ok(TrialEnd::Unacknowledged);
         }
         out.clear();
@@ -187,10 +192,10 @@ fn stream_trial(
             ep.publish_command(c)?;
         }
         if !out.is_empty() {
-            central.sent(&out, monotonic_ns());
+            central.controller.sent(&out, monotonic_ns());
         }
         if now > limit || stop.load(Ordering::Relaxed) {
-            central.stalled = true;
+            central.controller.stalled = true;
             return Ok(TrialEnd::Stalled);
         }
     }

@@ -43,11 +43,13 @@ pub fn lockstep_polled(
     let mut out = Vec::new();
     let mut records = Vec::with_capacity(trials);
     for trial in 0..trials as u32 {
-        let start = (now + central.lead_time_ns(planner_period_ns)).div_ceil(board_period_ns)
+        let start = (now + central.controller.lead_time_ns(planner_period_ns))
+            .div_ceil(board_period_ns)
             * board_period_ns;
         let reset = central.begin_trial(trial, seed, start, now);
         inputs.push_control(&reset);
-        let limit = start + (central.track.steps as u64 + 50) * central.track.dt_ns;
+        let limit =
+            start + (central.controller.track.steps as u64 + 50) * central.controller.track.dt_ns;
         while now < limit {
             if polls(now, start) {
                 out.clear();
@@ -55,20 +57,20 @@ pub fn lockstep_polled(
                 for c in &out {
                     inputs.push_command(c);
                 }
-                central.sent(&out, now);
+                central.controller.sent(&out, now);
             }
             let o = board.step(now, &mut inputs);
-            central.on_state(&o.state, now);
+            central.controller.on_state(&o.state, now);
             now += board_period_ns;
-            if central.trial_done() {
+            if central.controller.trial_done() {
                 break;
             }
         }
-        inputs.push_control(&central.stop(now));
+        inputs.push_control(&central.controller.stop(now));
         board.step(now, &mut inputs);
         now += board_period_ns;
         now = now.div_ceil(planner_period_ns) * planner_period_ns;
-        records.push(central.record());
+        records.push(central.controller.record());
     }
     records
 }

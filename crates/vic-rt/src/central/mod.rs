@@ -1,9 +1,12 @@
 //! The central controller: plays a plan back as command slices at 50 Hz, with the
 //! strategies the paper compares, behind time-stamped delay lines on the state and command paths.
 //!
-//! [`Central`] is a pure state machine like the board: it is fed the states it receives and
-//! polled with the time, and says which command slices to publish now. The live planner
-//! (`vic-planner`) and the lockstep mode ([`lockstep`]) drive the same code.
+//! [`Controller`] is a pure state machine like the board: it is fed the states it receives and
+//! polled with the time, and says which command slices to publish now. [`Central`] is the thin
+//! runtime around it ([`runtime`]): it measures each period's work on a clock into histograms,
+//! turns a period over budget into an overrun, and runs the `replan` strategy's re-solves on a
+//! worker thread ([`background`]). The live planner (`vic-planner`, [`run_live`]) and the
+//! lockstep mode ([`lockstep`]) drive the same two.
 //!
 //! Latency: the feedback of knot `k` uses the state of knot `k − D` (`D` = `latency_steps`), as
 //! the offline Monte Carlo does: on it directly (paper Eq. 13, [`Feedback::Delayed`]) or through
@@ -13,27 +16,27 @@
 //! delay line and reach the board before knot `k` acts; when the state of `k − D` is not there
 //! yet, the freshest released state is used and the knot is counted in `stale_feedback`. A knot
 //! first published after its time (a planner that woke late) is counted in `late_knots`: the
-//! board acted on the knot before in its place ([`Central::sent`]).
+//! board acted on the knot before in its place ([`Controller::sent`]).
 
 use vic_core::cost::TrackingCost;
 use vic_core::dynamics::DiscreteDynamics;
 use vic_core::model::Exogenous;
 pub use vic_core::policy::Strategy;
 use vic_core::policy::{Feedback, Policy};
-use vic_core::replan::{Executor, ReplanOptions, ReplanStats, Replanner};
+use vic_core::replan::{Executor, ReplanOptions, Replanner};
 use vic_core::scalar::{MAX_NU, MAX_NX};
 mod background;
 mod compute;
 mod live;
 mod lockstep;
+mod runtime;
 pub use compute::{ComputeTiming, ReplanTiming};
 pub use live::{LiveError, run_live};
 pub use lockstep::{lockstep, lockstep_polled};
+pub use runtime::Central;
 
-use crate::realtime::LatencyHistogram;
 use crate::transport::{
     CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, StateMsg,
-    monotonic_ns,
 };
 use nalgebra::DVector;
 use std::collections::VecDeque;
@@ -166,8 +169,9 @@ pub struct TrialRecord {
     pub stalled: bool,
 }
 
-/// The central controller.
-pub struct Central {
+/// The central controller: a pure state machine fed with the time and the states received, which
+/// says which command slices to publish. No clock, histogram or thread: [`Central`] adds those.
+pub struct Controller {
     pub track: Track,
     pub strategy: Strategy,
     pub timing: Timing,
@@ -187,7 +191,7 @@ pub struct Central {
     command_line: VecDeque<(u64, CommandSlice)>,
     knots: Vec<Knot>,
     sent_u: Vec<[f64; MAX_NU]>,
-    /// Per knot: a slice carrying it was published ([`Central::sent`]).
+    /// Per knot: a slice carrying it was published ([`Controller::sent`]).
     published: Vec<bool>,
     stale_feedback: usize,
     off_knot_states: usize,
@@ -200,30 +204,48 @@ pub struct Central {
     pub stalled: bool,
     /// The last slice published in this trial: what an overrunning period sends again.
     last_slice: Option<CommandSlice>,
-    /// The compute time of every period (all trials), on the real clock [ns].
-    compute: LatencyHistogram,
-    compute_budget_ns: u64,
-    overruns: u64,
-    clock: fn() -> u64,
-    /// Whether the clock was injected ([`Central::set_clock`]) rather than the real one.
-    clock_injected: bool,
-    /// Whether work measured on the *real* clock may turn a period into an overrun: true live,
-    /// false in [`lockstep`], where the outcome must not depend on how loaded the machine that
-    /// runs the simulation is (an injected clock still decides, as the overrun tests need).
-    real_clock_overruns: bool,
     /// The `replan` strategy's receding-horizon planner (reset at every trial).
     replanner: Option<Box<Replanner>>,
-    /// Its re-solves over all trials, and their compute time [ns] (real clock).
-    replan_stats: ReplanStats,
-    replan_time: LatencyHistogram,
-    /// Where the re-solves run when not inline ([`Central::replan_in_background`]).
-    background: Option<background::Background>,
 }
 
-impl Central {
+/// Where the `replan` strategy's command of a knot comes from: the replanner, re-solving inline
+/// ([`Inline`], the pure controller's), or the runtime's, which times the re-solves or hands
+/// them to the worker thread.
+pub(crate) trait Resolve {
+    /// The command of knot `k` into `u` (see [`Replanner::command_into`]).
+    fn command_into<'a>(
+        &mut self,
+        replanner: &mut Replanner,
+        k: usize,
+        seen: Option<(usize, &[f64])>,
+        applied: impl IntoIterator<Item = &'a [f64]>,
+        scratch: &mut [f64],
+        u: &mut [f64],
+    );
+}
+
+/// The re-solves run inline, untimed.
+pub(crate) struct Inline;
+
+impl Resolve for Inline {
+    fn command_into<'a>(
+        &mut self,
+        replanner: &mut Replanner,
+        k: usize,
+        seen: Option<(usize, &[f64])>,
+        applied: impl IntoIterator<Item = &'a [f64]>,
+        scratch: &mut [f64],
+        u: &mut [f64],
+    ) {
+        replanner.command_into(k, seen, applied, scratch, u);
+    }
+}
+
+impl Controller {
     pub fn new(track: Track, strategy: Strategy, timing: Timing) -> Self {
         let n = track.steps;
-        // One re-solve per planner period (the budget below), on the plan's grid.
+        // One re-solve per planner period (half the lookahead, the runtime's compute budget), on
+        // the plan's grid.
         let replanner = (strategy == Strategy::Replan).then(|| {
             let period_ns = (timing.lookahead_ns / 2).max(1);
             let options = ReplanOptions {
@@ -237,7 +259,7 @@ impl Central {
                 options,
             ))
         });
-        Central {
+        Controller {
             strategy,
             timing,
             trial: 0,
@@ -261,56 +283,8 @@ impl Central {
             acknowledged: false,
             stalled: false,
             last_slice: None,
-            compute: LatencyHistogram::new(),
-            // The lookahead is two planner periods by default: the budget is one period.
-            compute_budget_ns: (timing.lookahead_ns / 2).max(1),
-            overruns: 0,
-            clock: monotonic_ns,
-            clock_injected: false,
-            real_clock_overruns: true,
             replanner,
-            replan_stats: ReplanStats::default(),
-            replan_time: LatencyHistogram::new(),
-            background: None,
             track,
-        }
-    }
-
-    /// Runs the `replan` strategy's re-solves on a worker thread, one period ahead (see
-    /// [`background`]'s module documentation): a re-solve longer than the period then never holds
-    /// the slices back. `wait` waits for each at the next period (deterministic, for lockstep and
-    /// tests). Nothing for the other strategies.
-    pub fn replan_in_background(&mut self, wait: bool) {
-        if let Some(r) = &mut self.replanner {
-            r.options.lead_steps = r.options.period_steps;
-            self.background = Some(background::Background::start(r, wait));
-        }
-    }
-
-    /// Sets the compute budget of a period [ns] (default: half the lookahead, one planner period).
-    pub fn set_compute_budget_ns(&mut self, ns: u64) {
-        self.compute_budget_ns = ns.max(1);
-    }
-
-    /// Replaces the clock the compute time is measured with (monotonic ns); tests inject slow
-    /// periods with it.
-    pub fn set_clock(&mut self, clock: fn() -> u64) {
-        self.clock = clock;
-        self.clock_injected = true;
-    }
-
-    /// The compute time per period and the overruns, over every trial so far.
-    pub fn compute_timing(&self) -> ComputeTiming {
-        ComputeTiming {
-            compute_us: self.compute.percentiles(),
-            budget_us: self.compute_budget_ns as f64 * 1e-3,
-            overruns: self.overruns,
-            replan: self.replanner.as_ref().map(|_| ReplanTiming {
-                solve_us: self.replan_time.percentiles(),
-                stats: self.replan_stats,
-                late: self.background.as_ref().map_or(0, |b| b.late),
-                skipped: self.background.as_ref().map_or(0, |b| b.skipped),
-            }),
         }
     }
 
@@ -336,9 +310,6 @@ impl Central {
         self.last_slice = None;
         if let Some(r) = &mut self.replanner {
             r.reset();
-        }
-        if let Some(b) = &mut self.background {
-            b.begin_trial();
         }
         let dof = self.track.dof;
         self.control_seq += 1;
@@ -435,7 +406,7 @@ impl Central {
         self.strategy.feedback(self.timing.latency_steps)
     }
 
-    fn compute_knot(&mut self, k: usize) -> Knot {
+    fn compute_knot(&mut self, k: usize, resolve: &mut impl Resolve) -> Knot {
         let seen = self.seen_for(k);
         let feedback = self.feedback();
         let t = &self.track;
@@ -446,18 +417,9 @@ impl Central {
         let seen = seen.as_ref().map(|(l, x)| (*l, &x[..nx]));
         // The commands in flight: the controller sent them, so it knows them exactly.
         let applied = self.sent_u[from..k].iter().map(|u| &u[..nu]);
-        match (&mut self.replanner, &mut self.background) {
-            (Some(r), Some(b)) => b.command_into(r, k, seen, applied, &mut predicted, &mut u),
-            (Some(r), None) => {
-                let t0 = (self.clock)();
-                let before = r.stats;
-                r.command_into(k, seen, applied, &mut predicted, &mut u);
-                if r.stats.solves > before.solves {
-                    self.replan_time.record((self.clock)().saturating_sub(t0));
-                    self.replan_stats.add(&r.stats.since(&before));
-                }
-            }
-            (None, _) => Executor::Plan {
+        match &mut self.replanner {
+            Some(r) => resolve.command_into(r, k, seen, applied, &mut predicted, &mut u),
+            None => Executor::Plan {
                 policy: &t.policy,
                 feedback,
             }
@@ -480,18 +442,16 @@ impl Central {
     }
 
     /// Called at each planner tick: releases states from the sensor line, computes the knots due,
-    /// and returns the slices that leave the command delay line now (oldest first).
-    ///
-    /// The work of the period (releasing states, computing the knots due) is timed on the real
-    /// clock. A period whose work took longer than the budget sends the previous slice again
-    /// (the lookahead of two periods covers the one missed), never nothing: the knots it
-    /// computed, late, go out with the next period's slice.
+    /// and returns the slices that leave the command delay line now (oldest first). The pure
+    /// controller never overruns: [`Central::poll`] times the work and decides.
     pub fn poll(&mut self, now_ns: u64, out: &mut Vec<CommandSlice>) {
-        let t0 = (self.clock)();
-        if let (Some(b), Some(r)) = (&mut self.background, &mut self.replanner) {
-            let (stats, time) = (&mut self.replan_stats, &mut self.replan_time);
-            b.collect(r, self.knots.len(), stats, time);
-        }
+        self.compute_due(now_ns, &mut Inline);
+        self.publish(now_ns, false, out);
+    }
+
+    /// The work of a period: releases the states that have passed the sensor line by `now_ns` and
+    /// computes the knots due (the `replan` strategy's commands through `resolve`).
+    pub(crate) fn compute_due(&mut self, now_ns: u64, resolve: &mut impl Resolve) {
         while let Some(&(release, k, x)) = self.sensor_line.front() {
             if release > now_ns {
                 break;
@@ -502,23 +462,36 @@ impl Central {
                 self.latest_seen = Some(k);
             }
         }
-        let (dt, steps, dof) = (self.track.dt_ns, self.track.steps, self.track.dof);
-        // Trial time at which a slice sent now reaches the board.
-        let arrival = self.trial_time(now_ns + self.timing.command_latency_ns);
-        let horizon = arrival + self.timing.lookahead_ns;
+        let (dt, steps) = (self.track.dt_ns, self.track.steps);
+        let horizon = self.arrival(now_ns) + self.timing.lookahead_ns;
         while self.knots.len() < steps && (self.knots.len() as u64) * dt < horizon {
             let k = self.knots.len();
-            let knot = self.compute_knot(k);
+            let knot = self.compute_knot(k, resolve);
             self.knots.push(knot);
         }
-        let work = (self.clock)().saturating_sub(t0);
-        self.compute.record(work);
-        let first = ((arrival / dt) as usize).saturating_sub(1);
+    }
+
+    /// Trial time at which a slice sent at `now_ns` reaches the board.
+    fn arrival(&self, now_ns: u64) -> u64 {
+        self.trial_time(now_ns + self.timing.command_latency_ns)
+    }
+
+    /// After the period's work: puts the slice of the knots computed into the command delay line
+    /// (with `overrun`, the previous slice again: the lookahead of two periods covers the one
+    /// missed, and the knots computed late go out with the next period's slice), and returns in
+    /// `out` the slices that leave it now. Whether the previous slice was sent again.
+    pub(crate) fn publish(
+        &mut self,
+        now_ns: u64,
+        overrun: bool,
+        out: &mut Vec<CommandSlice>,
+    ) -> bool {
+        let (dt, dof) = (self.track.dt_ns, self.track.dof);
+        let first = ((self.arrival(now_ns) / dt) as usize).saturating_sub(1);
         let last = self.knots.len();
-        let overrun =
-            work > self.compute_budget_ns && (self.clock_injected || self.real_clock_overruns);
+        let mut resent = false;
         if overrun && let Some(mut c) = self.last_slice {
-            self.overruns += 1;
+            resent = true;
             self.seq += 1;
             c.header = Header::new(self.seq, 0);
             self.command_line
@@ -549,11 +522,13 @@ impl Central {
             c.header.time_ns = now_ns;
             out.push(c);
         }
+        resent
     }
 
-    /// The slices `sent` (what [`Central::poll`] returned) were published at monotonic `at_ns`
-    /// (live: the clock read after the last one went out; lockstep: the poll's time). Counts the
-    /// knots they bring for the first time after the knot's time has come (`late_knots`).
+    /// The slices `sent` (what [`Controller::poll`] or [`Central::poll`] returned) were published
+    /// at monotonic `at_ns` (live: the clock read after the last one went out; lockstep: the
+    /// poll's time). Counts the knots they bring for the first time after the knot's time has
+    /// come (`late_knots`).
     ///
     /// A knot `k` published at `at_ns ≤ start + k Δ` is in time for the board whatever its
     /// schedule: the board's trial time never runs ahead of the controller's (it starts at its

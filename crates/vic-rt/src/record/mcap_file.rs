@@ -26,12 +26,12 @@ pub const TICK_TOPIC: &str = "/board/tick";
 /// Topic of the board recording's gap messages.
 pub const GAP_TOPIC: &str = "/board/gap";
 /// Name of the metadata record of every `vic` recording.
-pub const METADATA_NAME: &str = "vic";
+pub(crate) const METADATA_NAME: &str = "vic";
 /// The MCAP profile field: none of the standard profiles (ros1, ros2) applies.
 const PROFILE: &str = "";
 
 /// The board's tick channel.
-pub const TICK: ChannelSpec = ChannelSpec {
+pub(crate) const TICK: ChannelSpec = ChannelSpec {
     topic: TICK_TOPIC,
     schema: "vic.BoardTick",
     doc: "One tick of the board's 1 kHz loop: state, the impedance-law inputs in use (Eq. 4), disturbances",
@@ -60,7 +60,7 @@ pub const TICK: ChannelSpec = ChannelSpec {
 };
 
 /// The board recording's gap channel.
-pub const GAP: ChannelSpec = ChannelSpec {
+pub(crate) const GAP: ChannelSpec = ChannelSpec {
     topic: GAP_TOPIC,
     ..super::schema::GAP
 };
@@ -68,7 +68,7 @@ pub const GAP: ChannelSpec = ChannelSpec {
 /// One tick as an MCAP message. `A` is `&[f64]` when writing (one entry per joint) and
 /// `Vec<Option<f64>>` when reading (`null`: a number that was not finite).
 #[derive(Debug, Serialize, Deserialize)]
-pub struct TickMsg<A> {
+pub(crate) struct TickMsg<A> {
     pub tick: u64,
     pub dropped_before: u64,
     pub deadline_ns: u64,
@@ -121,7 +121,7 @@ impl<'a> TickMsg<&'a [f64]> {
 }
 
 /// An MCAP file being written: registered channels and a reused message buffer.
-pub struct McapOut {
+pub(crate) struct McapOut {
     writer: Writer<BufWriter<std::fs::File>>,
     buf: Vec<u8>,
     sequence: BTreeMap<u16, u32>,

@@ -49,7 +49,6 @@ pub use external::{ExternalOptions, ExternalSummary, TopicCount, record_namespac
 pub use mcap_file::{GAP_TOPIC, TICK_TOPIC};
 pub use read::{BoardRecording, read_board_mcap, write_csv};
 
-use crate::board::{Board, Outputs};
 use crate::transport::MAX_JOINTS;
 use csv::CsvSink;
 use mcap_file::McapSink;
@@ -63,7 +62,8 @@ use std::time::Duration;
 /// Default queue capacity: 8192 ticks, 8 s at 1 kHz (about 3 MB).
 pub const DEFAULT_CAPACITY: usize = 8192;
 
-/// One tick as recorded: plain data, copied into the queue.
+/// One tick as recorded: plain data, copied into the queue (the board's live runner makes it
+/// from a step: [`Sample::from_step`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Sample {
     /// Loop tick (1, 2, … over a run).
@@ -89,35 +89,6 @@ pub struct Sample {
     pub damping: [f64; MAX_JOINTS],
     pub q_d: [f64; MAX_JOINTS],
     pub qd_d: [f64; MAX_JOINTS],
-}
-
-impl Sample {
-    /// The sample of loop tick `tick` at `deadline_ns`, from what [`Board::step`] returned.
-    /// Allocation-free.
-    pub fn from_step(tick: u64, deadline_ns: u64, board: &Board, out: &Outputs) -> Sample {
-        let s = &out.state;
-        Sample {
-            tick,
-            dropped_before: 0,
-            deadline_ns,
-            trial: s.trial,
-            mode: s.mode,
-            trial_time_ns: s.trial_time_ns,
-            periods: out.periods,
-            command_seq: s.command_seq,
-            disturbance_seq: s.disturbance_seq,
-            q: s.q,
-            qd: s.qd,
-            qdd: out.qdd,
-            tau: s.tau,
-            tau_ext: s.tau_ext,
-            tau_ff: out.knot.tau_ff,
-            stiffness: out.knot.stiffness,
-            damping: board.damping(&out.knot.stiffness),
-            q_d: out.knot.q_d,
-            qd_d: out.knot.qd_d,
-        }
-    }
 }
 
 /// The loop's half of a recording: pushes samples into the bounded queue.

@@ -13,7 +13,7 @@ use serde_json::{Map, Value, json};
 
 /// The type of one field.
 #[derive(Debug, Clone, Copy)]
-pub enum Kind {
+pub(crate) enum Kind {
     Int,
     Num,
     /// An array of numbers (one per joint).
@@ -37,7 +37,7 @@ pub struct Field {
 
 /// A channel of an MCAP recording: its topic, schema name and fields.
 #[derive(Debug, Clone, Copy)]
-pub struct ChannelSpec {
+pub(crate) struct ChannelSpec {
     pub topic: &'static str,
     pub schema: &'static str,
     pub doc: &'static str,
@@ -70,7 +70,7 @@ fn object_schema(fields: &[Field]) -> Value {
 
 impl ChannelSpec {
     /// The JSON Schema (draft 2020-12) of the channel's messages.
-    pub fn json_schema(&self) -> Vec<u8> {
+    pub(crate) fn json_schema(&self) -> Vec<u8> {
         let mut v = object_schema(self.fields);
         v["$schema"] = json!("https://json-schema.org/draft/2020-12/schema");
         v["title"] = json!(self.schema);
@@ -293,7 +293,7 @@ header_channel! {
 }
 
 /// A gap in a recording: ticks (or states) that did not reach the file.
-pub const GAP: ChannelSpec = ChannelSpec {
+pub(crate) const GAP: ChannelSpec = ChannelSpec {
     topic: "/gap",
     schema: "vic.Gap",
     doc: "Ticks missing from the recording just before this time",
@@ -305,7 +305,7 @@ pub const GAP: ChannelSpec = ChannelSpec {
 };
 
 /// Encodes a gap.
-pub fn gap_json(first_tick: u64, ticks: u64, reason: &str) -> Value {
+pub(crate) fn gap_json(first_tick: u64, ticks: u64, reason: &str) -> Value {
     json!({"first_tick": first_tick, "ticks": ticks, "reason": reason})
 }
 

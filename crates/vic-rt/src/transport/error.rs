@@ -87,7 +87,7 @@ pub enum PortKind {
 
 impl PortKind {
     /// The plural the messages use.
-    pub fn plural(self) -> &'static str {
+    pub(crate) fn plural(self) -> &'static str {
         match self {
             PortKind::Publisher => "publishers",
             PortKind::Subscriber => "subscribers",

@@ -41,13 +41,13 @@ fn send_relayed<T: Topic>(
 }
 
 /// The board's node name: how a second board finds the first.
-pub const BOARD_NODE: &str = "vic-board";
+pub(crate) const BOARD_NODE: &str = "vic-board";
 /// The central process's node name: how a second one finds the first.
-pub const CENTRAL_NODE: &str = "vic-planner";
+pub(crate) const CENTRAL_NODE: &str = "vic-planner";
 /// The node name of `vic inject` (the one tool with a publisher).
-pub const INJECT_NODE: &str = "vic-inject";
+pub(crate) const INJECT_NODE: &str = "vic-inject";
 /// The node name of the read-only tools (`vic status`, `vic monitor`).
-pub const OBSERVER_NODE: &str = "vic-observer";
+pub(crate) const OBSERVER_NODE: &str = "vic-observer";
 
 /// The board's ports: it receives commands, control requests and disturbances, publishes its
 /// state and telemetry, and wakes the listeners when something was applied.
@@ -384,7 +384,7 @@ impl RecorderPorts {
         drain(&self.states, f)
     }
     /// Every telemetry message received since the last call.
-    pub fn drain_telemetry(&self, f: impl FnMut(&Telemetry)) -> usize {
+    pub(crate) fn drain_telemetry(&self, f: impl FnMut(&Telemetry)) -> usize {
         drain(&self.telemetry, f)
     }
     /// Every command slice received since the last call.
@@ -441,7 +441,7 @@ impl RawPorts {
 }
 
 /// The node name of a raw sender ([`RawPorts`]).
-pub const RAW_NODE: &str = "vic-raw-sender";
+pub(crate) const RAW_NODE: &str = "vic-raw-sender";
 
 /// Whether a board is alive in the namespace (it publishes telemetry within `timeout`). Cheap
 /// enough to call from tools, not from a loop.

@@ -143,7 +143,7 @@ pub struct Knot {
 impl Knot {
     /// `self + t (other − self)` for every input: the linear interpolation between knots, and
     /// the ramp into the safe hold (linear in every input, so the joint torque stays continuous).
-    pub fn lerp(&self, other: &Knot, t: f64) -> Knot {
+    pub(crate) fn lerp(&self, other: &Knot, t: f64) -> Knot {
         let mut k = *self;
         for j in 0..MAX_JOINTS {
             k.tau_ff[j] += t * (other.tau_ff[j] - self.tau_ff[j]);
@@ -209,7 +209,7 @@ impl CommandSlice {
     }
     /// Trial time just after the last knot's interval [ns] (saturating: only a validated slice,
     /// whose end cannot overflow, is ever asked).
-    pub fn end_ns(&self) -> u64 {
+    pub(crate) fn end_ns(&self) -> u64 {
         self.duration_ns()
             .and_then(|d| self.start_ns.checked_add(d))
             .unwrap_or(u64::MAX)

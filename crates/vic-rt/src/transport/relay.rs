@@ -32,9 +32,9 @@ use iceoryx2::prelude::PortFactory;
 use iceoryx2::service::Service as IpcService;
 
 /// The event service of each direction.
-pub const FROM_BOARD_SERVICE: &str = "vic/relay-from-board";
+pub(crate) const FROM_BOARD_SERVICE: &str = "vic/relay-from-board";
 /// See [`FROM_BOARD_SERVICE`].
-pub const TO_BOARD_SERVICE: &str = "vic/relay-to-board";
+pub(crate) const TO_BOARD_SERVICE: &str = "vic/relay-to-board";
 
 /// Which way the relayed messages go.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -57,7 +57,7 @@ impl Relay {
 
 /// The notifier a publisher holds beside its publishers: it wakes a relay, if one listens. `S`:
 /// the service type of the publisher's session (the bridge's thread-safe ports have their own).
-pub struct RelayNotifier<S: IpcService = Ipc> {
+pub(crate) struct RelayNotifier<S: IpcService = Ipc> {
     notifier: Notifier<S>,
     service: EventService<S>,
 }

@@ -70,7 +70,7 @@ pub struct Estimate {
 
 impl Estimate {
     /// The offset at local time `local_ns`, the drift applied from the probe's time on.
-    pub fn offset_at(&self, local_ns: u64) -> i64 {
+    pub(crate) fn offset_at(&self, local_ns: u64) -> i64 {
         let elapsed = local_ns as i128 - self.at_ns as i128;
         let drift = elapsed * self.drift_ppb as i128 / 1_000_000_000;
         (self.offset_ns as i128 + drift).clamp(i64::MIN as i128, i64::MAX as i128) as i64
@@ -156,7 +156,7 @@ impl Estimator {
 
     /// The median round trip of the probes in the window [ns] (the link's typical latency,
     /// where the estimate takes the best).
-    pub fn median_round_trip_ns(&self) -> Option<u64> {
+    pub(crate) fn median_round_trip_ns(&self) -> Option<u64> {
         let mut rtt = [0u64; WINDOW];
         let n = self.window.len();
         for (r, s) in rtt.iter_mut().zip(&self.window) {
