@@ -1,7 +1,7 @@
 //! `vic plan`: solve a scenario's stochastic optimal control problem (ILQG for the scenario's
 //! feedback delay, or SOOC for open-loop execution), write the plan file and report its summary.
 
-use crate::cli::{Classify, print_json};
+use crate::cli::{Classify, latency_arg, print_json};
 use crate::progress::Progress;
 use std::path::PathBuf;
 use vic_plan::plan::{Method, PlanFile, plan};
@@ -15,8 +15,8 @@ pub struct PlanOptions {
     pub overrides: Vec<String>,
     /// The planning method (default: the scenario's `[solver] method`).
     pub method: Option<Method>,
-    /// The central feedback delay [ms], overriding `task.delay_ms`.
-    pub delay_ms: Option<f64>,
+    /// The central feedback latency the plan is made for [ms], instead of `task.delay_ms`.
+    pub latency_ms: Option<f64>,
     /// Where to write the plan file.
     pub out: Option<PathBuf>,
     pub json: bool,
@@ -24,11 +24,11 @@ pub struct PlanOptions {
 
 /// Plans the scenario, writes the plan file if asked and prints the summary (JSON or text).
 pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
-    let mut overrides = o.overrides.clone();
-    if let Some(d) = o.delay_ms {
-        overrides.push(format!("task.delay_ms={d}"));
+    let mut scenario = Scenario::load(&o.config, &o.overrides).input()?;
+    if let Some(ms) = o.latency_ms {
+        let latency = latency_arg("--latency-ms", ms, scenario.task.dt)?;
+        scenario = scenario.with_delay(latency);
     }
-    let scenario = Scenario::load(&o.config, &overrides).input()?;
     let method = o.method.unwrap_or(scenario.solver.method);
     let progress = Progress::spinner();
     let plan = plan(&scenario, method, progress.solver_callback())

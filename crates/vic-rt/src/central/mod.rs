@@ -17,6 +17,7 @@
 
 use vic_core::cost::TrackingCost;
 use vic_core::dynamics::DiscreteDynamics;
+pub use vic_core::latency::Latency;
 use vic_core::model::Exogenous;
 pub use vic_core::policy::Strategy;
 use vic_core::policy::{Feedback, Policy};
@@ -61,17 +62,50 @@ pub struct Timing {
 }
 
 impl Timing {
-    /// The default timing for a feedback latency of `latency_ms` (`latency_steps` plan steps) and
-    /// a planner ticking every `planner_period_ns`: a lookahead of two planner periods, the rest
-    /// of the latency split between the delay lines by [`split_latency_ms`].
-    pub fn split(latency_ms: f64, latency_steps: usize, planner_period_ns: u64) -> Self {
-        let lookahead_ms = 2.0 * planner_period_ns as f64 * 1e-6;
-        let (sensor_ms, command_ms) = split_latency_ms(latency_ms, lookahead_ms);
+    /// The timing of a controller whose feedback sees the state `latency` late, ticking every
+    /// `planner_period_ns`, with `lines` on the state and command paths; each slice reaches two
+    /// planner periods past its arrival ([`Timing::lookahead_ms`]).
+    pub fn new(latency: Latency, planner_period_ns: u64, lines: DelayLines) -> Self {
+        let ns = |ms: f64| (ms * 1e6) as u64;
         Timing {
-            latency_steps,
-            sensor_latency_ns: (sensor_ms * 1e6) as u64,
-            command_latency_ns: (command_ms * 1e6) as u64,
-            lookahead_ns: (lookahead_ms * 1e6) as u64,
+            latency_steps: latency.knots(),
+            sensor_latency_ns: ns(lines.sensor_ms),
+            command_latency_ns: ns(lines.command_ms),
+            lookahead_ns: ns(Self::lookahead_ms(planner_period_ns)),
+        }
+    }
+
+    /// [`Timing::new`] with the default delay lines ([`DelayLines::split`]).
+    pub fn split(latency: Latency, planner_period_ns: u64) -> Self {
+        Self::new(
+            latency,
+            planner_period_ns,
+            DelayLines::split(latency, planner_period_ns),
+        )
+    }
+
+    /// How far past its arrival a slice reaches [ms]: two planner periods.
+    pub fn lookahead_ms(planner_period_ns: u64) -> f64 {
+        2.0 * planner_period_ns as f64 * 1e-6
+    }
+}
+
+/// The delay lines on the state and command paths [ms].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DelayLines {
+    pub sensor_ms: f64,
+    pub command_ms: f64,
+}
+
+impl DelayLines {
+    /// The default split of a feedback latency for a planner ticking every `planner_period_ns`:
+    /// what remains after the slice lookahead and one more planner period (the planner computes
+    /// a knot at its first tick inside the lookahead), shared equally.
+    pub fn split(latency: Latency, planner_period_ns: u64) -> DelayLines {
+        let rest = (latency.ms() - 1.5 * Timing::lookahead_ms(planner_period_ns)).max(0.0);
+        DelayLines {
+            sensor_ms: rest / 2.0,
+            command_ms: rest / 2.0,
         }
     }
 }
@@ -626,12 +660,4 @@ impl Central {
             stalled: self.stalled || !self.trial_done(),
         }
     }
-}
-
-/// The default split of a feedback latency into the sensor and command delay lines [ms]: what
-/// remains after the slice lookahead and one more planner period (the planner computes a knot at
-/// its first tick inside the lookahead), shared equally.
-pub fn split_latency_ms(latency_ms: f64, lookahead_ms: f64) -> (f64, f64) {
-    let rest = (latency_ms - 1.5 * lookahead_ms).max(0.0);
-    (rest / 2.0, rest / 2.0)
 }
