@@ -9,11 +9,10 @@ use crate::cli::{
     Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, SeedArgs, divergence_or_default,
     input_error, latency_arg, non_negative_seconds, print_json, stop_on_signal,
 };
-use crate::plan_command::read_plan;
 use crate::report::{StrategyResult, Trajectories};
 use std::path::PathBuf;
 use std::time::Duration;
-use vic_plan::plan::setup;
+use vic_plan::plan::{PlanFile, setup};
 use vic_plan::scenario::Scenario;
 use vic_plan::strategy::{Latency, Strategy, StrategyPlan};
 use vic_rt::central::{Central, DelayLines, LiveError, Timing, TrialRecord, lockstep, run_live};
@@ -117,7 +116,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     // the predictors, no stiffness for the feedback-only ones).
     let request = o.strategy.plan_request(given.unwrap_or(Latency::ZERO));
     let plan = match &o.plan {
-        Some(path) => read_plan(path)?,
+        Some(path) => PlanFile::read(path).input()?,
         None => {
             tracing::info!("planning ({}) ...", request.method.name());
             request.plan(&user, None).runtime()?

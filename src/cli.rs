@@ -166,7 +166,12 @@ pub fn print_report<T: serde::Serialize>(
 /// The latency of `ms` given with `flag` on a grid of `dt` s ([`Latency::from_ms`]), else an
 /// input error naming `flag`.
 pub fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latency> {
-    Latency::from_ms(ms, dt).map_err(|e| input_error(format!("{flag}: {e}")))
+    Latency::from_ms(ms, dt).map_err(|e| {
+        input_error(format!(
+            "{flag} {}: not a whole number of {} ms plan steps",
+            e.ms, e.step_ms
+        ))
+    })
 }
 
 /// A positive, finite number of seconds given with `flag`.
@@ -259,7 +264,10 @@ mod tests {
         let e = latency_arg("--latency-ms", 205.0, 0.01)
             .unwrap_err()
             .to_string();
-        assert!(e.starts_with("--latency-ms: latency 205 ms"), "{e}");
+        assert_eq!(
+            e,
+            "--latency-ms 205: not a whole number of 10 ms plan steps"
+        );
         assert!(latency_arg("--latency-ms", -10.0, 0.01).is_err());
         assert!(latency_arg("--latency-ms", f64::NAN, 0.01).is_err());
     }

@@ -16,12 +16,12 @@ use crate::experiment::column_plot;
 use crate::live::{
     BoardFlags, PlanStore, PlannerRun, ScenarioFile, run_planner, start_board, stop_board,
 };
-use crate::plan_command::read_plan;
 use crate::report::{StrategyResult, Trajectories};
 use anyhow::anyhow;
 use serde_json::Value;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use vic_plan::plan::PlanFile;
 use vic_plan::scenario::Scenario;
 use vic_plan::strategy::{Latency, Strategy, StrategyPlan};
 use vic_rt::daemon::Children;
@@ -197,7 +197,7 @@ fn trajectories_figure(
                 .map_err(|e| anyhow!("{}: cannot read: {e}", path.display()))?;
             let traj: Trajectories = serde_json::from_str(&text)
                 .map_err(|e| anyhow!("{}: not trajectories: {e}", path.display()))?;
-            let plan = read_plan(r.plan)?;
+            let plan = PlanFile::read(r.plan).input()?;
             Ok(column_plot(&r.label(), &plan, scenario, &traj.to_trials()))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;

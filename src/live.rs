@@ -4,7 +4,6 @@
 //! same strategy, latency and seed are the same run.
 
 use crate::cli::Classify;
-use crate::plan_command::write_plan;
 use crate::report::StrategyResult;
 use anyhow::{Context, anyhow, bail};
 use serde_json::Value;
@@ -189,7 +188,7 @@ impl PlanStore {
     /// Writes `plan` to `path`, aside and renamed: a reader never sees half a plan.
     pub fn save(&self, path: &Path, plan: &PlanFile) -> anyhow::Result<()> {
         let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-        write_plan(plan, &tmp)?;
+        plan.write(&tmp).runtime()?;
         std::fs::rename(&tmp, path).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
     }
 }

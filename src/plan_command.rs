@@ -36,7 +36,7 @@ pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
         .input()?;
     drop(progress);
     if let Some(out) = &o.out {
-        write_plan(&plan, out)?;
+        plan.write(out).runtime()?;
     }
     if o.json {
         print_json(&plan.summary)
@@ -44,24 +44,6 @@ pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
         print_summary(&plan, o.out.as_ref());
         Ok(())
     }
-}
-
-/// Writes `plan` as JSON to `path`.
-pub fn write_plan(plan: &PlanFile, path: &std::path::Path) -> anyhow::Result<()> {
-    let text = serde_json::to_string(plan)?;
-    std::fs::write(path, text)
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
-        .runtime()
-}
-
-/// Reads a plan file written by `vic plan --out`; an unreadable or malformed file is the user's.
-pub fn read_plan(path: &std::path::Path) -> anyhow::Result<PlanFile> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read: {e}", path.display()))
-        .input()?;
-    serde_json::from_str(&text)
-        .map_err(|e| format!("{}: not a plan file: {e}", path.display()))
-        .input()
 }
 
 /// The convergence criterion's values against their tolerances (SOOC's optimality, or ILQG's

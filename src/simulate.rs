@@ -4,7 +4,6 @@
 //! to the plan's prediction, optionally every trial as CSV and a plot.
 
 use crate::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs, divergence_or_default, latency_arg};
-use crate::plan_command::read_plan;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use vic_plan::evaluation::{Report, summarize};
@@ -111,7 +110,7 @@ impl SimulateOptions {
 /// Runs the trials, writes the CSV and the plot if asked, prints the report.
 pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
     let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
-    let plan = read_plan(&o.plan)?;
+    let plan = PlanFile::read(&o.plan).input()?;
     let setup = setup(&scenario).input()?;
     let policy = plan
         .policy(&setup)

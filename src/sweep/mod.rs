@@ -11,7 +11,7 @@
 //! torque pulse, which no controller knows of.
 //!
 //! Each point's trials run offline (the Monte Carlo on the plan's grid, Eq. 10) or, with
-//! [`Execution::Lockstep`], through the real-time code: the 1 kHz board with its own plant
+//! [`Engine::Lockstep`], through the real-time code: the 1 kHz board with its own plant
 //! integration and the 50 Hz central controller with its delay lines, on a simulated clock.
 
 pub use vic_plan::strategy::Strategy;
@@ -106,14 +106,15 @@ pub struct SweepOptions {
     /// A torque pulse on the plant mid-movement, the same for every strategy and unknown to
     /// every controller (the disturbance-rejection variant).
     pub pulse: Option<Pulse>,
-    /// How each point's trials run.
-    pub execution: Execution,
+    /// Where each point's trials run.
+    pub execution: Engine,
 }
 
-/// How a point's trials run.
+/// Where a point's trials run (in each, the plan is executed by its strategy's [`Feedback`]
+/// at the latency).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Execution {
+pub enum Engine {
     /// The Monte Carlo: the plan's model on its grid (Euler–Maruyama, Eq. 10).
     #[default]
     Offline,
@@ -206,9 +207,9 @@ pub struct Sweep {
     pub scenario: String,
     pub trials: usize,
     pub seed: u64,
-    /// How the trials ran.
+    /// Where the trials ran.
     #[serde(default)]
-    pub execution: Execution,
+    pub execution: Engine,
     /// The pulse every trial received, if any.
     #[serde(default)]
     pub pulse: Option<Pulse>,
@@ -226,11 +227,11 @@ pub fn sweep_latency(
     opts: &SweepOptions,
     progress: &dyn Fn(&str),
 ) -> Result<Sweep, SweepError> {
-    if opts.execution != Execution::Offline && opts.pulse.is_some() {
+    if opts.execution != Engine::Offline && opts.pulse.is_some() {
         return Err(SweepError::PulseNotOffline);
     }
     let live = match opts.execution {
-        Execution::Live => Some(LiveRig::start(path, overrides)?),
+        Engine::Live => Some(LiveRig::start(path, overrides)?),
         _ => None,
     };
     let base = Scenario::load(path, overrides)?;
@@ -261,7 +262,7 @@ pub fn sweep_latency(
             let feedback = strategy.feedback(latency.knots());
             let policy = p.policy(&set).map_err(plan_error)?;
             let m = match opts.execution {
-                Execution::Live => {
+                Engine::Live => {
                     let rig = live.as_ref().expect("started above");
                     let (r, trials) =
                         rig.point(i, p, strategy, latency_ms, opts)
@@ -289,9 +290,9 @@ pub fn sweep_latency(
                         }),
                     }
                 }
-                Execution::Offline | Execution::Lockstep => {
+                Engine::Offline | Engine::Lockstep => {
                     let trials = match opts.execution {
-                        Execution::Lockstep => {
+                        Engine::Lockstep => {
                             let point = Point { strategy, latency };
                             lockstep_trials(s, &set, p, point, opts)?
                         }
