@@ -1,5 +1,5 @@
 //! Typed edits of a validated scenario: what a strategy's plan changes in the scenario it is made
-//! on ([`crate::strategy::PlanRequest`]). Each edit keeps the scenario valid and writes the new
+//! on (the strategy module's plan requests). Each edit keeps the scenario valid and writes the new
 //! values into [`Scenario::resolved`] too, so that a plan file records the scenario it was
 //! made on.
 
