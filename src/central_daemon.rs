@@ -7,17 +7,15 @@
 
 use crate::cli::{
     Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, SeedArgs, divergence_or_default,
-    input_error, non_negative_seconds, print_json, stop_on_signal, whole_steps,
+    input_error, latency_arg, non_negative_seconds, print_json, stop_on_signal,
 };
-use crate::plan_command::read_plan;
 use crate::report::{StrategyResult, Trajectories};
 use std::path::PathBuf;
 use std::time::Duration;
-use vic_plan::plan::{Method, PlanFile, plan, setup};
+use vic_plan::plan::{PlanFile, setup};
 use vic_plan::scenario::Scenario;
-use vic_rt::central::{
-    Central, LiveError, Strategy, Timing, TrialRecord, lockstep, run_live, split_latency_ms,
-};
+use vic_plan::strategy::{Latency, Strategy, StrategyPlan};
+use vic_rt::central::{Central, DelayLines, LiveError, Timing, TrialRecord, lockstep, run_live};
 use vic_rt::transport::CentralPorts;
 
 /// The central controller: streams a plan's commands to the board at 50 Hz and runs trials.
@@ -94,12 +92,6 @@ impl CentralOptions {
     }
 }
 
-/// The delay lines of a run, in ms.
-struct Delays {
-    sensor: f64,
-    command: f64,
-}
-
 /// Plays the plan for the trials and prints their summary.
 pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     crate::logging::init(o.log_level.as_deref())?;
@@ -115,36 +107,41 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         true => None,
         false => Some(CentralPorts::open(namespace).runtime()?),
     };
-    let mut overrides = o.scenario.set.overrides.clone();
-    if !o.strategy.uses_stiffness() {
-        overrides.push("actuator.stiffness_max=0".into());
-    }
-    let base = Scenario::load(&o.scenario.config, &overrides).input()?;
+    let user = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
+    let given = o.latency_ms;
+    let given = given.map(|ms| latency_arg("--latency-ms", ms, user.task.dt));
+    let given = given.transpose()?;
+    // Without a plan file: the plan the strategy asks for at the latency given (SOOC for the
+    // stiffness strategies, ILQG for the latency for `naive-delayed`, an undelayed ILQG plan for
+    // the predictors, no stiffness for the feedback-only ones).
+    let request = o.strategy.plan_request(given.unwrap_or(Latency::ZERO));
     let plan = match &o.plan {
-        Some(path) => read_plan(path)?,
-        None => plan_at_start(o, &overrides)?,
+        Some(path) => PlanFile::read(path).input()?,
+        None => {
+            tracing::info!("planning ({}) ...", request.method.name());
+            request.plan(&user, None).runtime()?
+        }
     };
-    let latency_ms = o.latency_ms.unwrap_or(plan.summary.delay_ms);
-    let latency_steps = whole_steps("--latency-ms", latency_ms, base.task.dt * 1000.0)?;
+    // The scenario the plan is played on: the feedback-only strategies command no stiffness.
+    let base = request.scenario(&user);
+    let latency = match given {
+        Some(l) => l,
+        None => latency_arg("the plan's delay", plan.summary.delay_ms, base.task.dt)?,
+    };
     let period_ns = 1_000_000_000 / o.rate_hz;
-    let lookahead_ms = 2.0 * period_ns as f64 * 1e-6;
-    let delays = delay_lines(o, latency_ms, lookahead_ms)?;
+    let lookahead_ms = Timing::lookahead_ms(period_ns);
+    let lines = delay_lines(o, latency, period_ns)?;
     let setup = setup(&base).input()?;
     let track = crate::launch::track(&plan, &setup).input()?;
-    let timing = Timing {
-        latency_steps,
-        sensor_latency_ns: (delays.sensor * 1e6) as u64,
-        command_latency_ns: (delays.command * 1e6) as u64,
-        lookahead_ns: (lookahead_ms * 1e6) as u64,
-    };
+    let timing = Timing::new(latency, period_ns, lines);
     let mut central = Central::new(track, o.strategy, timing);
     tracing::info!(
-        "{} trial(s), strategy {}, latency {latency_ms} ms (sensor {} + command {} + lookahead \
+        "{} trial(s), strategy {}, latency {latency} (sensor {} + command {} + lookahead \
          {lookahead_ms} ms), {}",
         o.trials,
         o.strategy,
-        delays.sensor,
-        delays.command,
+        lines.sensor_ms,
+        lines.command_ms,
         match o.lockstep {
             true => "in lockstep on a simulated clock".to_string(),
             false => format!("live in namespace \"{namespace}\" at {} Hz", o.rate_hz),
@@ -167,7 +164,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         if o.json.json {
             print_json(&result)?;
         } else {
-            print_result(&result, &delays);
+            print_result(&result, &lines);
         }
     }
     match lost {
@@ -219,33 +216,14 @@ fn run_trials(
     }
 }
 
-/// Without a plan file: SOOC for `stiffness`, ILQG for the latency for `naive-delayed` (Eq. 13
-/// needs the augmented plan's gains), an undelayed ILQG plan for the predictor strategies (zero
-/// stiffness for the feedback-only ones, set in `overrides`).
-fn plan_at_start(o: &CentralOptions, overrides: &[String]) -> anyhow::Result<PlanFile> {
-    let mut overrides = overrides.to_vec();
-    let method = match o.strategy {
-        Strategy::Stiffness | Strategy::Replan => Method::Sooc,
-        Strategy::NaiveDelayed => {
-            overrides.push(format!("task.delay_ms={}", o.latency_ms.unwrap_or(0.0)));
-            Method::Ilqg
-        }
-        Strategy::Predictor | Strategy::StiffnessPredictor => {
-            overrides.push("task.delay_ms=0".into());
-            Method::Ilqg
-        }
-    };
-    let s = Scenario::load(&o.scenario.config, &overrides).input()?;
-    tracing::info!("planning ({}) ...", method.name());
-    plan(&s, method, None).runtime()
-}
-
-/// The sensor and command delay lines (by default the latency less the lookahead, split in
-/// halves); warns when they exceed the latency the feedback was planned for.
-fn delay_lines(o: &CentralOptions, latency_ms: f64, lookahead_ms: f64) -> anyhow::Result<Delays> {
-    let (ds, dc) = split_latency_ms(latency_ms, lookahead_ms);
-    let sensor = o.sensor_latency_ms.unwrap_or(ds);
-    let command = o.command_latency_ms.unwrap_or(dc);
+/// The sensor and command delay lines (by default [`DelayLines::split`]); warns when they exceed
+/// the latency the feedback was planned for.
+fn delay_lines(o: &CentralOptions, latency: Latency, period_ns: u64) -> anyhow::Result<DelayLines> {
+    let split = DelayLines::split(latency, period_ns);
+    let lookahead_ms = Timing::lookahead_ms(period_ns);
+    let latency_ms = latency.ms();
+    let sensor = o.sensor_latency_ms.unwrap_or(split.sensor_ms);
+    let command = o.command_latency_ms.unwrap_or(split.command_ms);
     if !(sensor >= 0.0 && command >= 0.0 && sensor.is_finite() && command.is_finite()) {
         return Err(input_error("latencies must be finite and ≥ 0"));
     }
@@ -260,7 +238,10 @@ fn delay_lines(o: &CentralOptions, latency_ms: f64, lookahead_ms: f64) -> anyhow
              older states (counted as stale)"
         );
     }
-    Ok(Delays { sensor, command })
+    Ok(DelayLines {
+        sensor_ms: sensor,
+        command_ms: command,
+    })
 }
 
 /// A distance as printed in the tables: "diverged" when no trial completed.
@@ -268,12 +249,12 @@ pub fn distance_text(v: Option<f64>) -> String {
     v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.2}"))
 }
 
-fn print_result(result: &StrategyResult, delays: &Delays) {
+fn print_result(result: &StrategyResult, lines: &DelayLines) {
     let u = &result.unit;
     let f = distance_text;
     println!(
         "{} ({} trials, latency {} ms = sensor {} + command {} + lookahead)",
-        result.name, result.trials, result.latency_ms, delays.sensor, delays.command
+        result.name, result.trials, result.latency_ms, lines.sensor_ms, lines.command_ms
     );
     println!(
         "errors   RMS {} {u}, final mean {} / max {} {u}, max {} {u} (trials that completed)",

@@ -11,6 +11,7 @@ use anyhow::anyhow;
 use std::fmt::Display;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use vic_plan::strategy::Latency;
 use vic_rt::transport::DEFAULT_NAMESPACE;
 
 /// Marks an error as the user's: a file, a key or a flag that is wrong. Its message says which and
@@ -162,15 +163,15 @@ pub fn print_report<T: serde::Serialize>(
     }
 }
 
-/// A whole number of time steps of `dt_ms` in `ms`, else an input error naming `flag`.
-pub fn whole_steps(flag: &str, ms: f64, dt_ms: f64) -> anyhow::Result<usize> {
-    let steps = ms / dt_ms;
-    if !(steps >= 0.0 && (steps - steps.round()).abs() < 1e-6) {
-        return Err(input_error(format!(
-            "{flag} {ms}: not a whole number of {dt_ms} ms plan steps"
-        )));
-    }
-    Ok(steps.round() as usize)
+/// The latency of `ms` given with `flag` on a grid of `dt` s ([`Latency::from_ms`]), else an
+/// input error naming `flag`.
+pub fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latency> {
+    Latency::from_ms(ms, dt).map_err(|e| {
+        input_error(format!(
+            "{flag} {}: not a whole number of {} ms plan steps",
+            e.ms, e.step_ms
+        ))
+    })
 }
 
 /// A positive, finite number of seconds given with `flag`.
@@ -255,10 +256,19 @@ mod tests {
     }
 
     #[test]
-    fn whole_steps_rejects_fractions_and_negatives() {
-        assert_eq!(whole_steps("--latency-ms", 200.0, 10.0).unwrap(), 20);
-        assert!(whole_steps("--latency-ms", 205.0, 10.0).is_err());
-        assert!(whole_steps("--latency-ms", -10.0, 10.0).is_err());
-        assert!(whole_steps("--latency-ms", f64::NAN, 10.0).is_err());
+    fn latency_arg_rejects_fractions_and_negatives_naming_the_flag() {
+        assert_eq!(
+            latency_arg("--latency-ms", 200.0, 0.01).unwrap().knots(),
+            20
+        );
+        let e = latency_arg("--latency-ms", 205.0, 0.01)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "--latency-ms 205: not a whole number of 10 ms plan steps"
+        );
+        assert!(latency_arg("--latency-ms", -10.0, 0.01).is_err());
+        assert!(latency_arg("--latency-ms", f64::NAN, 0.01).is_err());
     }
 }

@@ -10,21 +10,20 @@
 //! the table's JSON in `--out-dir`. The processes and the namespace's files do not outlive the
 //! run, however it ends.
 
-use crate::cli::{Classify, DefaultScenarioArgs, JsonArg, SeedArgs, sibling_binary, whole_steps};
+use crate::cli::{Classify, DefaultScenarioArgs, JsonArg, SeedArgs, latency_arg, sibling_binary};
 use crate::demo_distributed::{DistributedLink, describe};
 use crate::experiment::column_plot;
 use crate::live::{
     BoardFlags, PlanStore, PlannerRun, ScenarioFile, run_planner, start_board, stop_board,
 };
-use crate::plan_command::read_plan;
 use crate::report::{StrategyResult, Trajectories};
 use anyhow::anyhow;
 use serde_json::Value;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use vic_plan::plan::Method;
+use vic_plan::plan::PlanFile;
 use vic_plan::scenario::Scenario;
-use vic_rt::central::Strategy;
+use vic_plan::strategy::{Latency, Strategy, StrategyPlan};
 use vic_rt::daemon::Children;
 
 /// What `vic demo` was asked for: its flags.
@@ -114,7 +113,7 @@ struct StrategyRun<'a> {
 /// and the board's timing.
 pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
     let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
-    whole_steps("--latency-ms", o.latency_ms, scenario.task.dt * 1000.0)?;
+    let latency = latency_arg("--latency-ms", o.latency_ms, scenario.task.dt)?;
     o.distributed.then(DistributedLink::available).transpose()?;
     let board_bin = sibling_binary("vic-board")?;
     let planner_bin = sibling_binary("vic-planner")?;
@@ -123,7 +122,7 @@ pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
         .input()?;
     let namespace = format!("demo{}", std::process::id());
     let store = PlanStore::new(o.plans_dir.as_deref(), &namespace)?;
-    let plans = plan_strategies(o, &store)?;
+    let plans = plan_strategies(o, &store, latency)?;
     let mut runs = strategy_runs(o, &plans);
     runs.retain(|r| o.only.is_none_or(|s| s == r.strategy));
     let mut children = Children::new(&namespace);
@@ -198,7 +197,7 @@ fn trajectories_figure(
                 .map_err(|e| anyhow!("{}: cannot read: {e}", path.display()))?;
             let traj: Trajectories = serde_json::from_str(&text)
                 .map_err(|e| anyhow!("{}: not trajectories: {e}", path.display()))?;
-            let plan = read_plan(r.plan)?;
+            let plan = PlanFile::read(r.plan).input()?;
             Ok(column_plot(&r.label(), &plan, scenario, &traj.to_trials()))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
@@ -213,38 +212,31 @@ fn trajectories_figure(
 }
 
 /// The plans of the strategies, the SOOC plan beside the ILQG ones on another thread.
-fn plan_strategies(o: &DemoOptions, store: &PlanStore) -> anyhow::Result<DemoPlans> {
-    let mut feedback_overrides = o.scenario.set.overrides.clone();
-    feedback_overrides.push("actuator.stiffness_max=0".into());
-    // The reference row: central feedback without latency (planned for none, the planner at
-    // 250 Hz so that its own loop adds only a few ms): with 0 ms latency, delayed feedback works.
-    let mut zero_overrides = feedback_overrides.clone();
-    zero_overrides.push("task.delay_ms=0".into());
-    feedback_overrides.push(format!("task.delay_ms={}", o.latency_ms));
+fn plan_strategies(
+    o: &DemoOptions,
+    store: &PlanStore,
+    latency: Latency,
+) -> anyhow::Result<DemoPlans> {
     if std::io::stderr().is_terminal() {
         eprintln!("planning (SOOC for stiffness, ILQG for delayed feedback) ...");
     }
-    let given_or_planned = |given: &Option<PathBuf>, overrides: &[String], method| match given {
+    let scenario = o.scenario_file();
+    let plan_for =
+        |strategy: Strategy, latency| store.plan(scenario, strategy.plan_request(latency));
+    let given_or_planned = |given: &Option<PathBuf>, strategy| match given {
         Some(p) => Ok(p.clone()),
-        None => store.plan(&o.scenario.config, overrides, method),
+        None => plan_for(strategy, latency),
     };
     std::thread::scope(|s| {
-        let stiffness = s
-            .spawn(|| given_or_planned(&o.stiffness_plan, &o.scenario.set.overrides, Method::Sooc));
-        let stiffness_feedback = s.spawn(|| {
-            let strategy = Strategy::StiffnessPredictor;
-            let mut overrides = o.scenario.set.overrides.clone();
-            overrides.extend(crate::sweep::plan_overrides(strategy, o.latency_ms));
-            let method = crate::sweep::method(strategy);
-            store.plan(&o.scenario.config, &overrides, method)
-        });
-        let feedback = given_or_planned(&o.feedback_plan, &feedback_overrides, Method::Ilqg);
-        let feedback_at_zero = if o.latency_ms == 0.0 {
-            Ok(None)
-        } else {
-            store
-                .plan(&o.scenario.config, &zero_overrides, Method::Ilqg)
-                .map(Some)
+        let stiffness = s.spawn(|| given_or_planned(&o.stiffness_plan, Strategy::Stiffness));
+        let stiffness_feedback = s.spawn(|| plan_for(Strategy::StiffnessPredictor, latency));
+        let feedback = given_or_planned(&o.feedback_plan, Strategy::NaiveDelayed);
+        // The reference row: central feedback without latency (planned for none, the planner at
+        // 250 Hz so that its own loop adds only a few ms): with 0 ms latency, delayed feedback
+        // works. The same plan is the predictor's undelayed one.
+        let feedback_at_zero = match latency.is_zero() {
+            true => Ok(None),
+            false => plan_for(Strategy::NaiveDelayed, Latency::ZERO).map(Some),
         };
         let stiffness = stiffness.join().map_err(|_| anyhow!("planning panicked"))?;
         let stiffness_feedback = stiffness_feedback

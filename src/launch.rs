@@ -69,7 +69,7 @@ mod tests {
     use super::*;
     use std::path::Path;
     use vic_plan::scenario::Scenario;
-    use vic_rt::central::{Controller, Strategy, Timing};
+    use vic_rt::central::{Controller, Latency, Strategy, Timing};
     use vic_rt::transport::{Mode, StateMsg};
 
     fn central() -> Controller {
@@ -85,12 +85,7 @@ mod tests {
         )
         .unwrap();
         let plan: PlanFile = serde_json::from_str(&text).unwrap();
-        let timing = Timing {
-            latency_steps: 0,
-            sensor_latency_ns: 0,
-            command_latency_ns: 0,
-            lookahead_ns: 40_000_000,
-        };
+        let timing = Timing::split(Latency::ZERO, 20_000_000);
         Controller::new(track(&plan, &setup).unwrap(), Strategy::Stiffness, timing)
     }
 

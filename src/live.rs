@@ -4,15 +4,14 @@
 //! same strategy, latency and seed are the same run.
 
 use crate::cli::Classify;
-use crate::plan_command::write_plan;
 use crate::report::StrategyResult;
 use anyhow::{Context, anyhow, bail};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use vic_plan::plan::{Method, PLAN_VERSION, PlanFile, plan};
+use vic_plan::plan::{PLAN_VERSION, PlanFile};
 use vic_plan::scenario::Scenario;
-use vic_rt::central::Strategy;
+use vic_plan::strategy::{PlanRequest, Strategy};
 use vic_rt::daemon::Children;
 
 /// The scenario every process of a run loads: the file and the user's overrides.
@@ -160,29 +159,26 @@ impl PlanStore {
         &self.dir
     }
 
-    /// The plan of `config` with `overrides` by `method`: made afresh, or reused when the
-    /// store keeps plans and holds one made from the same file text, overrides, method and
-    /// plan-file version.
-    pub fn plan(
-        &self,
-        config: &Path,
-        overrides: &[String],
-        method: Method,
-    ) -> anyhow::Result<PathBuf> {
+    /// The plan `request` asks for on `scenario`: made afresh, or reused when the store keeps
+    /// plans and holds one made from the same file text, overrides, request and plan-file
+    /// version.
+    pub fn plan(&self, scenario: ScenarioFile, request: PlanRequest) -> anyhow::Result<PathBuf> {
         use std::hash::{Hash, Hasher};
+        let config = scenario.config;
         let text = std::fs::read_to_string(config)
             .map_err(|e| format!("{}: cannot read: {e}", config.display()))
             .input()?;
+        let method = request.method.name();
         let mut h = std::collections::hash_map::DefaultHasher::new();
-        (text, overrides, method.name(), PLAN_VERSION).hash(&mut h);
-        let path = self
-            .dir
-            .join(format!("{}-{:016x}.json", method.name(), h.finish()));
+        let edits = (request.without_stiffness, request.delay.ms().to_bits());
+        (text, scenario.overrides, method, edits, PLAN_VERSION).hash(&mut h);
+        let path = self.dir.join(format!("{method}-{:016x}.json", h.finish()));
         if self.reuse && path.is_file() {
             return Ok(path);
         }
-        let scenario = Scenario::load(config, overrides).input()?;
-        let plan = plan(&scenario, method, None)
+        let base = Scenario::load(config, scenario.overrides).input()?;
+        let plan = request
+            .plan(&base, None)
             .map_err(|e| format!("{}: {e}", config.display()))
             .input()?;
         self.save(&path, &plan)?;
@@ -192,7 +188,7 @@ impl PlanStore {
     /// Writes `plan` to `path`, aside and renamed: a reader never sees half a plan.
     pub fn save(&self, path: &Path, plan: &PlanFile) -> anyhow::Result<()> {
         let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-        write_plan(plan, &tmp)?;
+        plan.write(&tmp).runtime()?;
         std::fs::rename(&tmp, path).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
     }
 }

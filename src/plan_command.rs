@@ -1,7 +1,7 @@
 //! `vic plan`: solve a scenario's stochastic optimal control problem (ILQG for the scenario's
 //! feedback delay, or SOOC for open-loop execution), write the plan file and report its summary.
 
-use crate::cli::{Classify, print_json};
+use crate::cli::{Classify, latency_arg, print_json};
 use crate::progress::Progress;
 use std::path::PathBuf;
 use vic_plan::plan::{Method, PlanFile, plan};
@@ -15,8 +15,8 @@ pub struct PlanOptions {
     pub overrides: Vec<String>,
     /// The planning method (default: the scenario's `[solver] method`).
     pub method: Option<Method>,
-    /// The central feedback delay [ms], overriding `task.delay_ms`.
-    pub delay_ms: Option<f64>,
+    /// The central feedback latency the plan is made for [ms], instead of `task.delay_ms`.
+    pub latency_ms: Option<f64>,
     /// Where to write the plan file.
     pub out: Option<PathBuf>,
     pub json: bool,
@@ -24,11 +24,11 @@ pub struct PlanOptions {
 
 /// Plans the scenario, writes the plan file if asked and prints the summary (JSON or text).
 pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
-    let mut overrides = o.overrides.clone();
-    if let Some(d) = o.delay_ms {
-        overrides.push(format!("task.delay_ms={d}"));
+    let mut scenario = Scenario::load(&o.config, &o.overrides).input()?;
+    if let Some(ms) = o.latency_ms {
+        let latency = latency_arg("--latency-ms", ms, scenario.task.dt)?;
+        scenario = scenario.with_delay(latency);
     }
-    let scenario = Scenario::load(&o.config, &overrides).input()?;
     let method = o.method.unwrap_or(scenario.solver.method);
     let progress = Progress::spinner();
     let plan = plan(&scenario, method, progress.solver_callback())
@@ -36,7 +36,7 @@ pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
         .input()?;
     drop(progress);
     if let Some(out) = &o.out {
-        write_plan(&plan, out)?;
+        plan.write(out).runtime()?;
     }
     if o.json {
         print_json(&plan.summary)
@@ -44,24 +44,6 @@ pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
         print_summary(&plan, o.out.as_ref());
         Ok(())
     }
-}
-
-/// Writes `plan` as JSON to `path`.
-pub fn write_plan(plan: &PlanFile, path: &std::path::Path) -> anyhow::Result<()> {
-    let text = serde_json::to_string(plan)?;
-    std::fs::write(path, text)
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
-        .runtime()
-}
-
-/// Reads a plan file written by `vic plan --out`; an unreadable or malformed file is the user's.
-pub fn read_plan(path: &std::path::Path) -> anyhow::Result<PlanFile> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read: {e}", path.display()))
-        .input()?;
-    serde_json::from_str(&text)
-        .map_err(|e| format!("{}: not a plan file: {e}", path.display()))
-        .input()
 }
 
 /// The convergence criterion's values against their tolerances (SOOC's optimality, or ILQG's

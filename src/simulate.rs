@@ -3,32 +3,14 @@
 //! (Eq. 13); the spread, the tracking errors, the divergence and the expected cost (Eq. 14) next
 //! to the plan's prediction, optionally every trial as CSV and a plot.
 
-use crate::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs, divergence_or_default, whole_steps};
-use crate::plan_command::read_plan;
+use crate::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs, divergence_or_default, latency_arg};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use vic_core::policy::Feedback;
 use vic_plan::evaluation::{Report, summarize};
 use vic_plan::montecarlo::{Trial, run_trials};
 use vic_plan::plan::{PlanFile, setup};
 use vic_plan::scenario::Scenario;
-
-/// How the plan is executed.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Execution {
-    /// The planned commands, no feedback.
-    OpenLoop,
-    /// The plan's gains on the current state.
-    Feedback,
-    /// The plan's gains on the state seen `delay_ms` late (default: the plan's delay).
-    DelayedFeedback { delay_ms: Option<f64> },
-    /// The plan's gains on the present state predicted from the one seen `delay_ms` late (a
-    /// Smith predictor; execute an undelayed plan with it).
-    Predictor { delay_ms: f64 },
-    /// The plan re-solved every central period from the present predicted from the state seen
-    /// `delay_ms` late ([`vic_core::replan`]).
-    Replan { delay_ms: f64 },
-}
+use vic_plan::strategy::{Feedback, Latency, Strategy};
 
 /// `--policy`: how the plan is executed (the central strategies by their names too).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -37,11 +19,11 @@ pub enum PolicyArg {
     OpenLoop,
     /// The plan's gains on the current state.
     Feedback,
-    /// The plan's gains on the state seen --delay-ms late (Eq. 13; default: the plan's delay).
+    /// The plan's gains on the state seen --latency-ms late (Eq. 13; default: the plan's delay).
     #[value(alias = "delayed-feedback")]
     NaiveDelayed,
     /// The gains of an undelayed plan on the present state predicted from the one seen
-    /// --delay-ms late, over the commands applied since (a Smith predictor).
+    /// --latency-ms late, over the commands applied since (a Smith predictor).
     Predictor,
     /// The central strategy `stiffness`: the plan's commands with no feedback (as open-loop).
     Stiffness,
@@ -50,7 +32,7 @@ pub enum PolicyArg {
     #[value(name = "stiffness+predictor")]
     StiffnessPredictor,
     /// The central strategy `replan`: the plan (give it a SOOC plan) re-solved every 20 ms from
-    /// the present predicted from the state seen --delay-ms late (default 0), played open loop
+    /// the present predicted from the state seen --latency-ms late (default 0), played open loop
     /// between re-solves. Slow: seconds per trial on the arm.
     Replan,
 }
@@ -74,10 +56,10 @@ pub struct SimulateOptions {
     pub trials: u64,
     #[command(flatten)]
     pub seed: SeedArgs,
-    /// Feedback latency for --policy delayed-feedback [ms] (default: the plan's delay) and for
-    /// --policy predictor and replan (default 0).
-    #[arg(long, value_name = "D")]
-    pub delay_ms: Option<f64>,
+    /// Feedback latency for --policy naive-delayed [ms] (default: the plan's delay) and for
+    /// --policy predictor, stiffness+predictor and replan (default 0); a whole number of steps.
+    #[arg(long, value_name = "MS", alias = "delay-ms")]
+    pub latency_ms: Option<f64>,
     /// A trial has diverged when it ends further than this from the target [mm for the arm,
     /// degrees for a single joint] (default 50 mm / 10°).
     #[arg(long, value_name = "DIST")]
@@ -92,35 +74,49 @@ pub struct SimulateOptions {
     pub json: JsonArg,
 }
 
-impl SimulateOptions {
-    /// The execution `--policy` and `--delay-ms` ask for.
-    pub fn execution(&self) -> Execution {
-        match self.policy {
-            PolicyArg::OpenLoop | PolicyArg::Stiffness => Execution::OpenLoop,
-            PolicyArg::Feedback => Execution::Feedback,
-            PolicyArg::NaiveDelayed => Execution::DelayedFeedback {
-                delay_ms: self.delay_ms,
-            },
-            PolicyArg::Predictor | PolicyArg::StiffnessPredictor => Execution::Predictor {
-                delay_ms: self.delay_ms.unwrap_or(0.0),
-            },
-            PolicyArg::Replan => Execution::Replan {
-                delay_ms: self.delay_ms.unwrap_or(0.0),
-            },
+impl PolicyArg {
+    /// The central strategy this policy executes as (`None`: no latency enters).
+    fn strategy(self) -> Option<Strategy> {
+        match self {
+            PolicyArg::OpenLoop | PolicyArg::Feedback => None,
+            PolicyArg::NaiveDelayed => Some(Strategy::NaiveDelayed),
+            PolicyArg::Predictor => Some(Strategy::Predictor),
+            PolicyArg::Stiffness => Some(Strategy::Stiffness),
+            PolicyArg::StiffnessPredictor => Some(Strategy::StiffnessPredictor),
+            PolicyArg::Replan => Some(Strategy::Replan),
         }
+    }
+}
+
+impl SimulateOptions {
+    /// How `--policy` at `--latency-ms` executes `plan` on a grid of `dt` s: the strategy's
+    /// feedback at the latency (default: the plan's delay for the naive law, which its gains
+    /// were made for, else 0).
+    pub fn feedback(&self, plan: &PlanFile, dt: f64) -> anyhow::Result<Feedback> {
+        let strategy = match self.policy.strategy() {
+            Some(s) => s,
+            None if self.policy == PolicyArg::Feedback => return Ok(Feedback::Full),
+            None => return Ok(Feedback::OpenLoop),
+        };
+        let latency = match (self.latency_ms, strategy) {
+            (Some(ms), _) => latency_arg("--latency-ms", ms, dt)?,
+            (None, Strategy::NaiveDelayed) => Latency::from_knots(plan.summary.delay_steps, dt),
+            (None, _) => Latency::ZERO,
+        };
+        Ok(strategy.feedback(latency.knots()))
     }
 }
 
 /// Runs the trials, writes the CSV and the plot if asked, prints the report.
 pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
     let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
-    let plan = read_plan(&o.plan)?;
+    let plan = PlanFile::read(&o.plan).input()?;
     let setup = setup(&scenario).input()?;
     let policy = plan
         .policy(&setup)
         .map_err(|e| format!("{}: {e}", o.plan.display()))
         .input()?;
-    let feedback = feedback(o.execution(), &plan, scenario.task.dt)?;
+    let feedback = o.feedback(&plan, scenario.task.dt)?;
     let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
     let trials = run_trials(&setup, &policy, feedback, o.trials as usize, o.seed.seed);
     let report = summarize(&setup, &trials, divergence);
@@ -144,26 +140,6 @@ pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
         print_report(o, &plan, feedback, &report, divergence, predicted);
     }
     Ok(())
-}
-
-/// The feedback of an execution; a delay must be a whole number of the scenario's steps.
-fn feedback(execution: Execution, plan: &PlanFile, dt: f64) -> anyhow::Result<Feedback> {
-    Ok(match execution {
-        Execution::OpenLoop => Feedback::OpenLoop,
-        Execution::Feedback => Feedback::Full,
-        Execution::DelayedFeedback { delay_ms } => Feedback::Delayed {
-            latency_steps: match delay_ms {
-                Some(ms) => whole_steps("--delay-ms", ms, dt * 1000.0)?,
-                None => plan.summary.delay_steps,
-            },
-        },
-        Execution::Predictor { delay_ms } => Feedback::Predicted {
-            latency_steps: whole_steps("--delay-ms", delay_ms, dt * 1000.0)?,
-        },
-        Execution::Replan { delay_ms } => Feedback::Replan {
-            latency_steps: whole_steps("--delay-ms", delay_ms, dt * 1000.0)?,
-        },
-    })
 }
 
 fn plot_trials(

@@ -9,7 +9,7 @@ use vic_core::policy::Strategy;
 use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
 use vic_plan::scenario::Scenario;
 use vic_rt::board::Board;
-use vic_rt::central::{Central, Timing, Track, lockstep};
+use vic_rt::central::{Central, Latency, Timing, Track, lockstep};
 use vic_rt::transport::CommandSlice;
 
 const PERIOD_NS: u64 = 20_000_000;
@@ -66,7 +66,10 @@ fn central(set: &Setup, p: &PlanFile, latency_ms: f64, x0: &[f64]) -> Central {
         x0,
     )
     .unwrap();
-    let timing = Timing::split(latency_ms, (latency_ms / 10.0).round() as usize, PERIOD_NS);
+    let timing = Timing::split(
+        Latency::from_ms(latency_ms, set.dynamics.dt).unwrap(),
+        PERIOD_NS,
+    );
     Central::new(track, Strategy::Predictor, timing)
 }
 

@@ -13,7 +13,7 @@ use vic_plan::montecarlo::run_trials;
 use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
 use vic_plan::scenario::Scenario;
 use vic_rt::board::Board;
-use vic_rt::central::{Central, Controller, Timing, Track, TrialRecord, lockstep};
+use vic_rt::central::{Central, Controller, Latency, Timing, Track, TrialRecord, lockstep};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -52,8 +52,8 @@ fn run_lockstep(
         x0,
     )
     .unwrap();
-    let steps = (latency_ms / (s.task.dt * 1000.0)).round() as usize;
-    let timing = Timing::split(latency_ms, steps, PLANNER_PERIOD_NS);
+    let latency = Latency::from_ms(latency_ms, s.task.dt).expect("whole steps");
+    let timing = Timing::split(latency, PLANNER_PERIOD_NS);
     let mut central = Central::new(track, strategy, timing);
     let cfg = vic::launch::board_config(s, 1_000_000);
     let mut board = Board::new(s.model.clone(), cfg, x0).expect("board");
@@ -201,7 +201,10 @@ fn lockstep_missing_a_tick(
         set.x0.as_slice(),
     )
     .unwrap();
-    let timing = Timing::split(100.0, 10, PLANNER_PERIOD_NS);
+    let timing = Timing::split(
+        Latency::from_ms(100.0, set.dynamics.dt).unwrap(),
+        PLANNER_PERIOD_NS,
+    );
     let mut central = Controller::new(track, strategy, timing);
     let period = 1_000_000;
     let mut board = Board::new(

@@ -7,7 +7,7 @@ use vic_core::policy::Strategy;
 use vic_plan::plan::{Method, plan, setup};
 use vic_plan::scenario::Scenario;
 use vic_rt::board::Board;
-use vic_rt::central::{Central, Timing, Track, TrialRecord, lockstep_polled};
+use vic_rt::central::{Central, Latency, Timing, Track, TrialRecord, lockstep_polled};
 
 const PLANNER: u64 = 20_000_000;
 const BOARD: u64 = 1_000_000;
@@ -28,7 +28,7 @@ fn trial(polls: &dyn Fn(u64, u64) -> bool) -> TrialRecord {
         set.x0.as_slice(),
     )
     .expect("track");
-    let timing = Timing::split(100.0, 10, PLANNER);
+    let timing = Timing::split(Latency::from_ms(100.0, s.task.dt).unwrap(), PLANNER);
     let mut central = Central::new(track, Strategy::Stiffness, timing);
     let cfg = vic::launch::board_config(&s, BOARD);
     let mut board = Board::new(s.model.clone(), cfg, set.x0.as_slice()).expect("board");

@@ -39,5 +39,6 @@ mod replan;
 mod sooc;
 mod sooc_newton;
 mod sooc_workspace;
+mod strategy_plan;
 mod sweep;
 mod wide_vectors;

@@ -16,7 +16,7 @@ use vic_plan::montecarlo::{
 use vic_plan::plan::{Method, PlanFile, Setup, plan, setup};
 use vic_plan::scenario::Scenario;
 use vic_rt::board::Board;
-use vic_rt::central::{Central, ReplanTiming, Timing, Track, TrialRecord, lockstep};
+use vic_rt::central::{Central, Latency, ReplanTiming, Timing, Track, TrialRecord, lockstep};
 
 const PLANNER_PERIOD_NS: u64 = 20_000_000;
 
@@ -58,7 +58,10 @@ fn replan_in_lockstep(
     background: bool,
 ) -> (TrialRecord, ReplanTiming) {
     let track = Track::new(policy, set.dynamics.clone(), set.cost.clone(), &set.x0).unwrap();
-    let timing = Timing::split(LATENCY_MS, LATENCY_STEPS, PLANNER_PERIOD_NS);
+    let timing = Timing::split(
+        Latency::from_ms(LATENCY_MS, s.task.dt).unwrap(),
+        PLANNER_PERIOD_NS,
+    );
     let mut central = Central::new(track, Strategy::Replan, timing);
     // On the simulated clock the law is executed whatever a re-solve takes on the real one (a
     // re-solve takes longer than the 20 ms period on a loaded machine, which these tests are

@@ -2,7 +2,7 @@
 //! ordering the paper's argument rests on.
 
 use std::path::Path;
-use vic::sweep::{Execution, Strategy, SweepOptions, sweep_latency, write_figure};
+use vic::sweep::{Engine, Strategy, SweepOptions, sweep_latency, write_figure};
 use vic_plan::plan::{Method, plan};
 use vic_plan::scenario::Scenario;
 
@@ -104,12 +104,12 @@ fn the_lockstep_sweep_runs_the_real_time_code_and_matches_the_monte_carlo_withou
         seed: 3,
         divergence: None,
         pulse: None,
-        execution: Execution::Offline,
+        execution: Engine::Offline,
     };
     let offline = sweep_latency(&path, &quiet, &opts, &|_| {}).expect("offline sweep");
-    opts.execution = Execution::Lockstep;
+    opts.execution = Engine::Lockstep;
     let lockstep = sweep_latency(&path, &quiet, &opts, &|_| {}).expect("lockstep sweep");
-    assert_eq!(lockstep.execution, Execution::Lockstep);
+    assert_eq!(lockstep.execution, Engine::Lockstep);
     assert_eq!(offline.points.len(), 6);
     let close = |x: Option<f64>, y: Option<f64>| {
         let (x, y) = (x.unwrap(), y.unwrap());

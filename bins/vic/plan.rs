@@ -23,9 +23,10 @@ pub struct PlanArgs {
     /// Planning method (default: the scenario's [solver] method, else ilqg).
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
-    /// Central feedback delay in ms (a whole number of time steps); overrides task.delay_ms.
-    #[arg(long, value_name = "D")]
-    delay_ms: Option<f64>,
+    /// Feedback latency of the central controller the plan is made for [ms] (a whole number of
+    /// time steps); instead of task.delay_ms.
+    #[arg(long, value_name = "MS", alias = "delay-ms")]
+    latency_ms: Option<f64>,
     /// Write the plan (time grid, controls, states, gains, resolved config) to this JSON file.
     #[arg(long, short, value_name = "FILE")]
     out: Option<PathBuf>,
@@ -43,7 +44,7 @@ impl PlanArgs {
                 MethodArg::Ilqg => Method::Ilqg,
                 MethodArg::Sooc => Method::Sooc,
             }),
-            delay_ms: self.delay_ms,
+            latency_ms: self.latency_ms,
             out: self.out,
             json: self.json.json,
         })

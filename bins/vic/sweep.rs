@@ -3,9 +3,7 @@
 use std::path::PathBuf;
 use vic::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
 use vic::progress::Progress;
-use vic::sweep::{
-    Execution, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs,
-};
+use vic::sweep::{Engine, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs};
 
 #[derive(clap::Args)]
 pub struct SweepArgs {
@@ -85,9 +83,9 @@ impl SweepArgs {
             divergence: a.divergence,
             pulse,
             execution: match (a.lockstep, a.live) {
-                (true, _) => Execution::Lockstep,
-                (_, true) => Execution::Live,
-                _ => Execution::Offline,
+                (true, _) => Engine::Lockstep,
+                (_, true) => Engine::Live,
+                _ => Engine::Offline,
             },
         };
         // A bar over the points on a terminal (nothing in pipes and scripts).

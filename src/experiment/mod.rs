@@ -9,11 +9,11 @@
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use vic_core::policy::Feedback;
 use vic_plan::evaluation::{Report, summarize};
 use vic_plan::montecarlo::{Trial, run_trials};
 use vic_plan::plan::{Method, PlanFile, ProgressFn, plan, setup};
 use vic_plan::scenario::Scenario;
+use vic_plan::strategy::{Feedback, Latency, Strategy, StrategyPlan};
 use vic_plan::unit::Unit;
 
 mod claims;
@@ -40,37 +40,32 @@ impl Figure {
     }
 }
 
-/// How a column is executed.
+/// What a column plans and executes.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Execution {
-    OpenLoop,
-    /// The plan's gains on the state seen this many ms late.
-    DelayedFeedback {
-        latency_ms: f64,
-    },
+enum Column {
+    /// The scenario's plan by a method, executed open loop.
+    OpenLoop(Method),
+    /// A central strategy's plan at a latency [ms], executed by the strategy
+    /// ([`StrategyPlan::plan_request`], [`Strategy::feedback`]).
+    Strategy(Strategy, f64),
 }
 
-/// One column of a figure: a scenario, a planning method, an execution.
+/// One column of a figure: a scenario, what is planned and how it is executed.
 #[derive(Debug, Clone)]
 struct ColumnSpec {
     name: &'static str,
     what: &'static str,
     file: &'static str,
-    overrides: &'static [&'static str],
-    method: Method,
-    execution: Execution,
+    column: Column,
 }
 
 fn columns(figure: Figure) -> Vec<ColumnSpec> {
-    use Execution::*;
     use Method::*;
-    let c = |name, what, file, overrides, method, execution| ColumnSpec {
+    let c = |name, what, file, column| ColumnSpec {
         name,
         what,
         file,
-        overrides,
-        method,
-        execution,
+        column,
     };
     match figure {
         Figure::Fig1 => vec![
@@ -78,41 +73,31 @@ fn columns(figure: Figure) -> Vec<ColumnSpec> {
                 "deterministic",
                 "type 2, no noise",
                 "two_link_deterministic.toml",
-                &[],
-                Ilqg,
-                OpenLoop,
+                Column::OpenLoop(Ilqg),
             ),
             c(
                 "torque",
                 "type 1 (torque only), noise",
                 "two_link_torque_divergent.toml",
-                &[],
-                Sooc,
-                OpenLoop,
+                Column::OpenLoop(Sooc),
             ),
             c(
                 "impedance",
                 "type 2 (torque + PD impedance), noise",
                 "two_link_divergent.toml",
-                &[],
-                Sooc,
-                OpenLoop,
+                Column::OpenLoop(Sooc),
             ),
             c(
                 "vsa",
                 "type 3 (VSA), B = 2 kg m², noise",
                 "two_link_vsa_divergent.toml",
-                &[],
-                Sooc,
-                OpenLoop,
+                Column::OpenLoop(Sooc),
             ),
             c(
                 "vsa_b_over_10",
                 "type 3 (VSA), B/10, noise",
                 "two_link_vsa_light_divergent.toml",
-                &[],
-                Sooc,
-                OpenLoop,
+                Column::OpenLoop(Sooc),
             ),
         ],
         Figure::Fig2 => vec![
@@ -120,34 +105,26 @@ fn columns(figure: Figure) -> Vec<ColumnSpec> {
                 "feedforward",
                 "torque and stiffness, no delay, open loop",
                 "icub_elbow.toml",
-                &[],
-                Sooc,
-                OpenLoop,
+                Column::OpenLoop(Sooc),
             ),
             c(
                 "delayed_feedback",
                 "no stiffness, ILQG gains on the state seen 200 ms late (Eq. 13)",
                 "single_joint_delay.toml",
-                &["actuator.stiffness_max=0"],
-                Ilqg,
-                DelayedFeedback { latency_ms: 200.0 },
+                Column::Strategy(Strategy::NaiveDelayed, 200.0),
             ),
             c(
                 "stiffness_delayed",
                 "torque and stiffness, 200 ms delay, no feedback",
                 "single_joint_delay.toml",
-                &[],
-                Sooc,
-                OpenLoop,
+                Column::OpenLoop(Sooc),
             ),
         ],
         Figure::Icub => vec![c(
             "icub_elbow",
             "identified torque noise and damping law, open loop",
             "icub_experiment.toml",
-            &[],
-            Sooc,
-            OpenLoop,
+            Column::OpenLoop(Sooc),
         )],
     }
 }
@@ -209,6 +186,11 @@ pub enum ExperimentError {
         path: PathBuf,
         source: vic_plan::plan::PlanError,
     },
+    #[error("{}: {source}", path.display())]
+    Latency {
+        path: PathBuf,
+        source: vic_plan::strategy::LatencyError,
+    },
 }
 
 /// Runs every column of `figure` with scenarios from `config_dir`.
@@ -226,33 +208,39 @@ pub fn run(
     for (i, spec) in specs.iter().enumerate() {
         on_column(i, specs.len(), spec.name);
         let path: PathBuf = config_dir.join(spec.file);
-        let overrides: Vec<String> = spec.overrides.iter().map(|s| s.to_string()).collect();
-        let scenario = Scenario::load(&path, &overrides)?;
+        let file = Scenario::load(&path, &[])?;
         let plan_error = |source| ExperimentError::Plan {
             path: path.clone(),
             source,
         };
-        let plan_file = plan(&scenario, spec.method, progress.clone()).map_err(plan_error)?;
+        // The scenario planned on, its method and the law that executes the plan.
+        let (scenario, method, policy) = match spec.column {
+            Column::OpenLoop(method) => (file, method, Feedback::OpenLoop),
+            Column::Strategy(strategy, latency_ms) => {
+                let latency = Latency::from_ms(latency_ms, file.task.dt).map_err(|source| {
+                    ExperimentError::Latency {
+                        path: path.clone(),
+                        source,
+                    }
+                })?;
+                let request = strategy.plan_request(latency);
+                let feedback = strategy.feedback(latency.knots());
+                (request.scenario(&file), request.method, feedback)
+            }
+        };
+        let plan_file = plan(&scenario, method, progress.clone()).map_err(plan_error)?;
         let set = setup(&scenario).map_err(plan_error)?;
         let exe = plan_file.policy(&set).map_err(plan_error)?;
-        let (policy, predicted) = match spec.execution {
-            Execution::OpenLoop => (
-                Feedback::OpenLoop,
-                plan_file.summary.open_loop_expected_cost,
-            ),
-            Execution::DelayedFeedback { latency_ms } => (
-                Feedback::Delayed {
-                    latency_steps: (latency_ms / 1000.0 / scenario.task.dt).round() as usize,
-                },
-                plan_file.summary.expected_cost,
-            ),
+        let predicted = match policy {
+            Feedback::OpenLoop => plan_file.summary.open_loop_expected_cost,
+            _ => plan_file.summary.expected_cost,
         };
         let trial_data = run_trials(&set, &exe, policy, trials, seed);
         out.push(column_result(
             spec.name,
             spec.what,
             spec.file,
-            spec.method,
+            method,
             &plan_file,
             &set,
             policy,

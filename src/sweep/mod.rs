@@ -11,10 +11,10 @@
 //! torque pulse, which no controller knows of.
 //!
 //! Each point's trials run offline (the Monte Carlo on the plan's grid, Eq. 10) or, with
-//! [`Execution::Lockstep`], through the real-time code: the 1 kHz board with its own plant
+//! [`Engine::Lockstep`], through the real-time code: the 1 kHz board with its own plant
 //! integration and the 50 Hz central controller with its delay lines, on a simulated clock.
 
-pub use vic_core::policy::Strategy;
+pub use vic_plan::strategy::Strategy;
 
 mod output;
 pub use output::{pulse_from_flags, write_figure, write_outputs};
@@ -23,10 +23,11 @@ use std::path::Path;
 use vic_plan::evaluation::summarize;
 pub use vic_plan::montecarlo::Pulse;
 use vic_plan::montecarlo::{Trial, run_trials_disturbed};
-use vic_plan::plan::{Method, PlanError, PlanFile, plan, setup};
+use vic_plan::plan::{PlanError, PlanFile, plan, setup};
 use vic_plan::plan_file::commanded_stiffness;
 use vic_plan::prediction::predicted_cost;
 use vic_plan::scenario::{ConfigError, Scenario};
+use vic_plan::strategy::{Latency, LatencyError, PlanRequest, StrategyPlan};
 use vic_plan::unit::Unit;
 
 /// Why a sweep stopped.
@@ -36,8 +37,8 @@ pub enum SweepError {
     #[error(transparent)]
     Config(#[from] ConfigError),
     /// A latency that is not a whole number of plan steps: bad input.
-    #[error("latency {latency_ms} ms: not a whole number of {dt_ms} ms plan steps")]
-    Latency { latency_ms: f64, dt_ms: f64 },
+    #[error(transparent)]
+    Latency(#[from] LatencyError),
     /// Planning or executing a strategy's plan failed.
     #[error("{strategy} at {latency_ms} ms: {source}")]
     Plan {
@@ -85,40 +86,12 @@ impl SweepError {
         matches!(
             self,
             SweepError::Config(_)
-                | SweepError::Latency { .. }
+                | SweepError::Latency(_)
                 | SweepError::Lockstep { .. }
                 | SweepError::Pulse
                 | SweepError::PulseNotOffline
         )
     }
-}
-
-/// How a strategy's plan is made.
-pub fn method(strategy: Strategy) -> Method {
-    match strategy {
-        Strategy::Stiffness | Strategy::Replan => Method::Sooc,
-        _ => Method::Ilqg,
-    }
-}
-
-/// The scenario overrides of a strategy's plan at `latency_ms`: the feedback-only strategies get
-/// no stiffness (feedback is all they have); only the naive law is planned for the delay (Eq. 13
-/// needs the augmented plan's gains), the predictors use the undelayed gains on their prediction.
-pub fn plan_overrides(strategy: Strategy, latency_ms: f64) -> Vec<String> {
-    let mut o: Vec<String> = if strategy.uses_stiffness() {
-        Vec::new()
-    } else {
-        vec![
-            "actuator.stiffness_min=0".into(),
-            "actuator.stiffness_max=0".into(),
-            "actuator.initial_stiffness=0".into(),
-        ]
-    };
-    o.push(match strategy {
-        Strategy::NaiveDelayed => format!("task.delay_ms={latency_ms}"),
-        _ => "task.delay_ms=0".into(),
-    });
-    o
 }
 
 /// What to sweep.
@@ -133,14 +106,15 @@ pub struct SweepOptions {
     /// A torque pulse on the plant mid-movement, the same for every strategy and unknown to
     /// every controller (the disturbance-rejection variant).
     pub pulse: Option<Pulse>,
-    /// How each point's trials run.
-    pub execution: Execution,
+    /// Where each point's trials run.
+    pub execution: Engine,
 }
 
-/// How a point's trials run.
+/// Where a point's trials run (in each, the plan is executed by its strategy's [`Feedback`]
+/// at the latency).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Execution {
+pub enum Engine {
     /// The Monte Carlo: the plan's model on its grid (Euler–Maruyama, Eq. 10).
     #[default]
     Offline,
@@ -233,9 +207,9 @@ pub struct Sweep {
     pub scenario: String,
     pub trials: usize,
     pub seed: u64,
-    /// How the trials ran.
+    /// Where the trials ran.
     #[serde(default)]
-    pub execution: Execution,
+    pub execution: Engine,
     /// The pulse every trial received, if any.
     #[serde(default)]
     pub pulse: Option<Pulse>,
@@ -244,25 +218,25 @@ pub struct Sweep {
 
 /// Runs the sweep on the scenario at `path` (with `overrides`); `progress` is told each point.
 ///
-/// A plan is made once per distinct (method, overrides): `stiffness`, `stiffness+predictor` and
-/// `replan` share the one SOOC plan, the predictor strategies the one undelayed ILQG plan, and
-/// only `naive-delayed` is planned again for each latency (Eq. 13 needs the augmented plan).
+/// A plan is made once per distinct [`PlanRequest`]: `stiffness` and `replan` share the one SOOC
+/// plan, `predictor` the one undelayed ILQG plan without stiffness, and only `naive-delayed` is
+/// planned again for each latency (Eq. 13 needs the augmented plan).
 pub fn sweep_latency(
     path: &Path,
     overrides: &[String],
     opts: &SweepOptions,
     progress: &dyn Fn(&str),
 ) -> Result<Sweep, SweepError> {
-    // (method, plan overrides) → the scenario and its plan; a handful of entries at most.
-    type PlanKey = (Method, Vec<String>);
-    if opts.execution != Execution::Offline && opts.pulse.is_some() {
+    if opts.execution != Engine::Offline && opts.pulse.is_some() {
         return Err(SweepError::PulseNotOffline);
     }
     let live = match opts.execution {
-        Execution::Live => Some(LiveRig::start(path, overrides)?),
+        Engine::Live => Some(LiveRig::start(path, overrides)?),
         _ => None,
     };
-    let mut plans: Vec<(PlanKey, (Scenario, PlanFile))> = Vec::new();
+    let base = Scenario::load(path, overrides)?;
+    // Plan request → the scenario and its plan; a handful of entries at most.
+    let mut plans: Vec<(PlanRequest, (Scenario, PlanFile))> = Vec::new();
     let mut points = Vec::new();
     for &strategy in &opts.strategies {
         for &latency_ms in &opts.latencies_ms {
@@ -272,24 +246,23 @@ pub fn sweep_latency(
                 latency_ms,
                 source,
             };
-            let key = (method(strategy), plan_overrides(strategy, latency_ms));
-            let i = match plans.iter().position(|(k, _)| *k == key) {
+            let latency = Latency::from_ms(latency_ms, base.task.dt)?;
+            let request = strategy.plan_request(latency);
+            let i = match plans.iter().position(|(r, _)| *r == request) {
                 Some(i) => i,
                 None => {
-                    let all: Vec<String> = overrides.iter().chain(&key.1).cloned().collect();
-                    let s = Scenario::load(path, &all)?;
-                    let p = plan(&s, key.0, None).map_err(plan_error)?;
-                    plans.push((key, (s, p)));
+                    let s = request.scenario(&base);
+                    let p = plan(&s, request.method, None).map_err(plan_error)?;
+                    plans.push((request, (s, p)));
                     plans.len() - 1
                 }
             };
             let (s, p) = &plans[i].1;
             let set = setup(s).map_err(plan_error)?;
-            let steps = latency_steps(latency_ms, s.task.dt)?;
-            let feedback = strategy.feedback(steps);
+            let feedback = strategy.feedback(latency.knots());
             let policy = p.policy(&set).map_err(plan_error)?;
             let m = match opts.execution {
-                Execution::Live => {
+                Engine::Live => {
                     let rig = live.as_ref().expect("started above");
                     let (r, trials) =
                         rig.point(i, p, strategy, latency_ms, opts)
@@ -317,14 +290,10 @@ pub fn sweep_latency(
                         }),
                     }
                 }
-                Execution::Offline | Execution::Lockstep => {
+                Engine::Offline | Engine::Lockstep => {
                     let trials = match opts.execution {
-                        Execution::Lockstep => {
-                            let point = Point {
-                                strategy,
-                                latency_ms,
-                                latency_steps: steps,
-                            };
+                        Engine::Lockstep => {
+                            let point = Point { strategy, latency };
                             lockstep_trials(s, &set, p, point, opts)?
                         }
                         _ => run_trials_disturbed(
@@ -458,8 +427,7 @@ fn executed_stiffness(set: &vic_plan::plan::Setup, trials: &[Trial]) -> f64 {
 #[derive(Debug, Clone, Copy)]
 struct Point {
     strategy: Strategy,
-    latency_ms: f64,
-    latency_steps: usize,
+    latency: Latency,
 }
 
 /// The board's period and the central controller's in lockstep [ns] (1 kHz, 50 Hz).
@@ -479,11 +447,11 @@ fn lockstep_trials(
     use vic_rt::central::{Central, Timing, lockstep};
     let fail = |e: Box<dyn std::error::Error + Send + Sync>| SweepError::Lockstep {
         strategy: point.strategy.name(),
-        latency_ms: point.latency_ms,
+        latency_ms: point.latency.ms(),
         source: e,
     };
     let track = crate::launch::track(plan, set).map_err(|e| fail(e.into()))?;
-    let timing = Timing::split(point.latency_ms, point.latency_steps, CENTRAL_PERIOD_NS);
+    let timing = Timing::split(point.latency, CENTRAL_PERIOD_NS);
     let mut central = Central::new(track, point.strategy, timing);
     let cfg = crate::launch::board_config(s, BOARD_PERIOD_NS);
     let mut board =
@@ -497,16 +465,4 @@ fn lockstep_trials(
         opts.seed,
     );
     Ok(crate::report::to_trials(set, &records))
-}
-
-/// A latency in whole plan steps.
-fn latency_steps(latency_ms: f64, dt: f64) -> Result<usize, SweepError> {
-    let steps = latency_ms / 1000.0 / dt;
-    if steps.is_nan() || steps < 0.0 || (steps - steps.round()).abs() > 1e-6 {
-        return Err(SweepError::Latency {
-            latency_ms,
-            dt_ms: dt * 1000.0,
-        });
-    }
-    Ok(steps.round() as usize)
 }

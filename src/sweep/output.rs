@@ -142,7 +142,7 @@ pub fn write_figure(sweep: &Sweep, png: &Path, svg: &Path) -> Result<(), crate::
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sweep::{Execution, LiveTiming, SweepPoint};
+    use crate::sweep::{Engine, LiveTiming, SweepPoint};
     use vic_core::policy::Strategy;
     use vic_plan::unit::Unit;
 
@@ -194,7 +194,7 @@ mod tests {
             scenario: "s.toml".into(),
             trials: 20,
             seed: 1,
-            execution: Execution::Live,
+            execution: Engine::Live,
             pulse: None,
             points: vec![
                 point(Strategy::NaiveDelayed, None, Some(LiveTiming::default())),

@@ -12,6 +12,7 @@ pub mod cost;
 pub mod delay;
 pub mod dense;
 pub mod dynamics;
+pub mod latency;
 pub mod model;
 pub mod policy;
 pub mod replan;

@@ -2,7 +2,8 @@
 //! validated), [`reference`] (the desired movement), [`setup`] (the Eq. 10 model, the Eq. 14 cost
 //! and the warm start), [`plan`] (solving with a [`method`]), [`plan_file`] (what `vic plan`
 //! writes and the other commands read), [`montecarlo`] (seeded trials on the stochastic plant) and
-//! [`evaluation`] (statistics in the [`unit`] a reader expects).
+//! [`evaluation`] (statistics in the [`unit`] a reader expects); [`strategy`] ties a central
+//! strategy and its latency to the plan it needs and the law that executes it.
 
 // Index loops read like the equations they implement; iterator chains over several arrays do not.
 #![allow(clippy::needless_range_loop)]
@@ -17,4 +18,5 @@ pub mod receding;
 pub mod reference;
 pub mod scenario;
 pub mod setup;
+pub mod strategy;
 pub mod unit;

@@ -8,7 +8,9 @@ use crate::setup::{PlanError, Setup};
 use crate::unit::Unit;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
 use vic_core::dynamics::Dynamics;
+use vic_core::latency::Latency;
 use vic_core::model::{Actuator, ArmModel, Exogenous};
 use vic_core::policy::Policy;
 use vic_core::solver::{Solution, StopReason};
@@ -101,6 +103,50 @@ pub struct PlanFile {
     /// angle [rad²] (single joint, 1×1), executed open loop.
     pub open_loop_final_position_covariance: Vec<Vec<f64>>,
     pub summary: PlanSummary,
+}
+
+/// Why a plan file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanFileError {
+    #[error("{}: cannot read: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: not a plan file: {source}", path.display())]
+    Parse {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+impl PlanFile {
+    /// Reads a plan file written by [`PlanFile::write`] (`vic plan --out`).
+    pub fn read(path: &Path) -> Result<PlanFile, PlanFileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| PlanFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        serde_json::from_str(&text).map_err(|source| PlanFileError::Parse {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+
+    /// Writes the plan as JSON to `path`.
+    pub fn write(&self, path: &Path) -> Result<(), PlanFileError> {
+        let write_error = |source| PlanFileError::Write {
+            path: path.to_path_buf(),
+            source,
+        };
+        let text = serde_json::to_string(self).map_err(|e| write_error(e.into()))?;
+        std::fs::write(path, text).map_err(write_error)
+    }
 }
 
 /// What executing a command sequence open loop is predicted to give (covariance propagation).
@@ -263,7 +309,7 @@ pub(crate) fn plan_file(
             max_stiffness,
             mean_stiffness,
             delay_steps: d,
-            delay_ms: d as f64 * dt * 1000.0,
+            delay_ms: Latency::from_knots(d, dt).ms(),
             final_error,
             final_error_unit: unit,
             open_loop_expected_cost: open_loop.expected_cost,

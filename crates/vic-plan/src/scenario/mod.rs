@@ -8,6 +8,7 @@
 //! be inconsistent ([`validate`]). Every error names the file, the key and what is wrong.
 
 mod board;
+mod edit;
 mod error;
 mod overrides;
 mod raw;
@@ -23,6 +24,7 @@ pub use solver::SolverSection;
 use error::FileCheck;
 use std::path::{Path, PathBuf};
 use vic_core::dynamics::Integrator;
+use vic_core::latency::Latency;
 use vic_core::model::ArmModel;
 use vic_core::solver::Bounds;
 
@@ -54,9 +56,14 @@ pub struct Task {
 }
 
 impl Task {
+    /// The central feedback delay on the task's grid.
+    pub fn delay(&self) -> Latency {
+        Latency::from_ms(self.delay_ms, self.dt).expect("validated: a whole number of steps")
+    }
+
     /// The delay in whole control steps.
     pub fn delay_steps(&self) -> usize {
-        (self.delay_ms / 1000.0 / self.dt).round() as usize
+        self.delay().knots()
     }
 }
 

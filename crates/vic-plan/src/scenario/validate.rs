@@ -9,6 +9,7 @@ use super::raw::{
 use super::stability::{check_hold_stiffness, check_substep};
 use super::{CostWeights, Scenario, Task, TaskPath};
 use std::path::Path;
+use vic_core::latency::Latency;
 use vic_core::model::{Actuator, ArmModel, Damping, Field, Noise, Plant, SingleJoint, TwoLink};
 use vic_core::solver::Bounds;
 
@@ -216,14 +217,13 @@ fn task(raw: RawTask, model: &ArmModel, check: &FileCheck) -> Result<Task, Confi
         ));
     }
     let delay_ms = check.non_negative(raw.delay_ms, "task", "delay_ms")?;
-    let delay_steps = delay_ms / 1000.0 / dt;
-    if (delay_steps - delay_steps.round()).abs() > 1e-6 {
+    if let Err(e) = Latency::from_ms(delay_ms, dt) {
         return Err(check.invalid(
             "task",
             "delay_ms",
             format!(
                 "{delay_ms} ms is not a whole number of {} ms steps",
-                dt * 1000.0
+                e.step_ms
             ),
         ));
     }

@@ -20,6 +20,7 @@
 
 use vic_core::cost::TrackingCost;
 use vic_core::dynamics::DiscreteDynamics;
+pub use vic_core::latency::Latency;
 use vic_core::model::Exogenous;
 pub use vic_core::policy::Strategy;
 use vic_core::policy::{Feedback, Policy};
@@ -30,10 +31,12 @@ mod compute;
 mod live;
 mod lockstep;
 mod runtime;
+mod timing;
 pub use compute::{ComputeTiming, ReplanTiming};
 pub use live::{LiveError, run_live};
 pub use lockstep::{lockstep, lockstep_polled};
 pub use runtime::Central;
+pub use timing::{DelayLines, Timing};
 
 use crate::transport::{
     CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, StateMsg,
@@ -49,34 +52,6 @@ pub enum TrackError {
     NotImpedance,
     #[error("the reference has {reference} knots, the policy {steps} steps")]
     ReferenceLength { reference: usize, steps: usize },
-}
-
-/// Timing of the central controller.
-#[derive(Debug, Clone, Copy)]
-pub struct Timing {
-    /// Feedback latency `D` in plan steps: knot `k` feeds back the state of knot `k − D`.
-    pub latency_steps: usize,
-    /// Delay lines on the state and command paths [ns].
-    pub sensor_latency_ns: u64,
-    pub command_latency_ns: u64,
-    /// How far past the command's arrival each slice reaches [ns] (default: two planner periods).
-    pub lookahead_ns: u64,
-}
-
-impl Timing {
-    /// The default timing for a feedback latency of `latency_ms` (`latency_steps` plan steps) and
-    /// a planner ticking every `planner_period_ns`: a lookahead of two planner periods, the rest
-    /// of the latency split between the delay lines by [`split_latency_ms`].
-    pub fn split(latency_ms: f64, latency_steps: usize, planner_period_ns: u64) -> Self {
-        let lookahead_ms = 2.0 * planner_period_ns as f64 * 1e-6;
-        let (sensor_ms, command_ms) = split_latency_ms(latency_ms, lookahead_ms);
-        Timing {
-            latency_steps,
-            sensor_latency_ns: (sensor_ms * 1e6) as u64,
-            command_latency_ns: (command_ms * 1e6) as u64,
-            lookahead_ns: (lookahead_ms * 1e6) as u64,
-        }
-    }
 }
 
 /// A policy with what the board needs besides: the reference it tracks and the start state.
@@ -601,12 +576,4 @@ impl Controller {
             stalled: self.stalled || !self.trial_done(),
         }
     }
-}
-
-/// The default split of a feedback latency into the sensor and command delay lines [ms]: what
-/// remains after the slice lookahead and one more planner period (the planner computes a knot at
-/// its first tick inside the lookahead), shared equally.
-pub fn split_latency_ms(latency_ms: f64, lookahead_ms: f64) -> (f64, f64) {
-    let rest = (latency_ms - 1.5 * lookahead_ms).max(0.0);
-    (rest / 2.0, rest / 2.0)
 }
