@@ -204,7 +204,7 @@ pub(super) fn notes(figure: Figure) -> &'static str {
             "Columns 1 and 3 are the same SOOC plan: an open-loop plan uses no feedback, so the \
              200 ms delay cannot affect it — which is the paper's point. Column 2 is ILQG planned \
              for the delay (the state augmented with the commands in flight, see \
-             src/core/delay/mod.rs) with the stiffness fixed at 0, executed with the gain block on the state seen 200 ms \
+             crates/vic-core/src/delay/mod.rs) with the stiffness fixed at 0, executed with the gain block on the state seen 200 ms \
              late (Eq. 13, no predictor). Without a predictor that controller is unstable, so its \
              trials leave the reference; the paper's column 2 shows large but bounded errors."
         }
