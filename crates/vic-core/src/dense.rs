@@ -68,7 +68,7 @@ where
 /// `0.5 (m_ij + m_ji)` (the same bits in either order), against round-off in a value Hessian.
 /// Four columns at a time, as in [`transpose`]: the entries of those columns above the
 /// diagonal pair with a contiguous run of four in each earlier column.
-pub fn symmetrize(m: &mut DMatrix<f64>) {
+pub(crate) fn symmetrize(m: &mut DMatrix<f64>) {
     let n = m.nrows();
     debug_assert_eq!(m.ncols(), n);
     let d = m.as_mut_slice();
@@ -126,7 +126,7 @@ const LANES: usize = 4;
 /// one sum), so the compiler vectorises across entries and no rounding changes. `b` is read from
 /// a copy in blocks of [`LANES`] columns kept in the workspace (no allocation once sized).
 #[derive(Debug, Clone, Default)]
-pub struct TransposedProduct {
+pub(crate) struct TransposedProduct {
     /// `b` in blocks of [`LANES`] columns, each block row by row:
     /// `blocks[(jb · rows + r) · LANES + l] = b[(r, jb · LANES + l)]`, padded with 0.
     blocks: Vec<f64>,

@@ -19,5 +19,5 @@ pub mod replan;
 pub mod rng;
 pub mod scalar;
 pub mod solver;
-pub mod taylor;
+pub(crate) mod taylor;
 pub mod wide;

@@ -203,7 +203,7 @@ impl Policy {
     /// The command at knot `k` (Eq. 9 / 13): `u = ū_k + L_j (x_l − x̄_l)` for the seen state
     /// (`j = seen.gain`, `l = seen.knot`), or `ū_k` with none; then clamped into the bounds.
     /// Allocates nothing.
-    pub fn control_into(&self, k: usize, seen: Option<Seen<'_>>, u: &mut [f64]) {
+    pub(crate) fn control_into(&self, k: usize, seen: Option<Seen<'_>>, u: &mut [f64]) {
         let nu = self.nu();
         u[..nu].copy_from_slice(self.acting[k].as_slice());
         if let Some(s) = seen.filter(|s| s.gain < self.gains.len()) {
@@ -272,7 +272,7 @@ impl Policy {
 /// The present state `x̂_k` predicted from the state `x_seen` of knot `j = k − D`: the noise-free
 /// step of `dynamics` applied over the commands `applied[j..k]` that acted since (a Smith
 /// predictor). With `D = 0` it is `x_seen` itself. Allocates nothing (`n ≤ MAX_NX`).
-pub fn predict_present<'a>(
+pub(crate) fn predict_present<'a>(
     dynamics: &dyn Dynamics,
     seen_knot: usize,
     x_seen: &[f64],

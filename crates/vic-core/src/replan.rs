@@ -47,10 +47,10 @@ use serde::{Deserialize, Serialize};
 /// (the solver bench's `slow/two_link_divergent_replan_knot2`: `docs/BENCHMARKS.md`, "Solver
 /// targets" and "Live replanner"). From a warm start the first steps take most of the decrease,
 /// and three keep a Monte Carlo of the arm affordable.
-pub const REPLAN_MAX_ITERATIONS: usize = 3;
+pub(crate) const REPLAN_MAX_ITERATIONS: usize = 3;
 
 /// The central period of the paper's iCub layer [s] (50 Hz).
-pub const CENTRAL_PERIOD_S: f64 = 0.02;
+pub(crate) const CENTRAL_PERIOD_S: f64 = 0.02;
 
 /// How often and how hard the controller replans.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -108,7 +108,7 @@ pub struct ReplanStats {
     pub converged: usize,
     /// Re-solves that failed (non-finite start) or came back worse or not finite: the old plan
     /// went on.
-    pub kept_old: usize,
+    pub(crate) kept_old: usize,
     /// Newton iterations over all re-solves.
     pub iterations: usize,
 }
@@ -217,7 +217,7 @@ impl Replanner {
 
     /// Whether the controller re-solves at knot `k`: once per period, after the start (knot 0
     /// plays the plan made from the start state) and before the last knot.
-    pub fn replans_at(&self, k: usize) -> bool {
+    pub(crate) fn replans_at(&self, k: usize) -> bool {
         k > 0 && k + 1 < self.plan.steps() && k.is_multiple_of(self.options.period_steps)
     }
 

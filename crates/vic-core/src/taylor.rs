@@ -21,11 +21,6 @@ pub struct Taylor<const K: usize, const ORDER: usize> {
     pub v: [[f64; K]; ORDER],
 }
 
-/// Second-order Taylor polynomials (second directional derivatives).
-pub type Taylor2<const K: usize> = Taylor<K, 2>;
-/// Third-order Taylor polynomials (third directional derivatives).
-pub type Taylor3<const K: usize> = Taylor<K, 3>;
-
 impl<const K: usize, const ORDER: usize> Taylor<K, ORDER> {
     /// Rejects, at compile time, an order the formulas below do not cover.
     const SUPPORTED: () = assert!(ORDER == 2 || ORDER == 3, "Taylor: ORDER must be 2 or 3");
@@ -323,7 +318,7 @@ mod tests {
         );
     }
 
-    /// A lane of [`Taylor3`] along `w` against `num-dual`'s `Dual3` seeded with `w`, on an
+    /// A lane of `Taylor<K, 3>` along `w` against `num-dual`'s `Dual3` seeded with `w`, on an
     /// expression that uses every operation (both carry the same derivatives; the sums may
     /// round differently).
     #[test]
@@ -346,7 +341,7 @@ mod tests {
         assert!(t.v[2].iter().all(|v| v.abs() > 1e-3), "{:?}", t.v[2]);
     }
 
-    /// The same for [`Taylor2`] against `Dual2`: the second-order lanes drop the third
+    /// The same for `Taylor<K, 2>` against `Dual2`: the second-order lanes drop the third
     /// derivative without changing the first two.
     #[test]
     fn second_order_lanes_match_dual2() {

@@ -18,14 +18,14 @@ pub struct Report {
     pub trials: usize,
     pub unit: Unit,
     /// Mean final position.
-    pub final_mean: Vec<f64>,
+    pub(crate) final_mean: Vec<f64>,
     /// Standard deviation of the final position: the largest principal axis for the hand.
     pub final_std: f64,
     /// Semi-axes of the 95 % confidence ellipse of the final hand position (or the 95 % half-width
     /// for a joint), largest first.
     pub ellipse_95: Vec<f64>,
     /// Orientation of the ellipse's major axis [deg from the x axis] (0 for a joint).
-    pub ellipse_angle_deg: f64,
+    pub(crate) ellipse_angle_deg: f64,
     /// RMS distance to the reference over all knots of the trials that did not diverge (`None`
     /// when every trial diverged).
     pub rms_error: Option<f64>,
@@ -129,7 +129,7 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
 
 /// The mean of `values` and its standard error (`None` for an empty set, the standard error
 /// also for a single value, or when not finite).
-pub fn mean_and_standard_error(values: &[f64]) -> (Option<f64>, Option<f64>) {
+pub(crate) fn mean_and_standard_error(values: &[f64]) -> (Option<f64>, Option<f64>) {
     if values.is_empty() {
         return (None, None);
     }

@@ -15,7 +15,7 @@ pub mod plan;
 pub mod plan_file;
 pub mod prediction;
 pub mod receding;
-pub mod reference;
+pub(crate) mod reference;
 pub mod scenario;
 pub mod setup;
 pub mod strategy;

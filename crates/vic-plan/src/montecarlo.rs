@@ -52,7 +52,7 @@ impl Pulse {
 
 /// What a trial executes: `policy` with `feedback`, or for [`Feedback::Replan`] a replanner of
 /// the policy on the controller's model (the plan's, `setup.dynamics`).
-pub fn executor<'a>(setup: &Setup, policy: &'a Policy, feedback: Feedback) -> Executor<'a> {
+pub(crate) fn executor<'a>(setup: &Setup, policy: &'a Policy, feedback: Feedback) -> Executor<'a> {
     match feedback {
         Feedback::Replan { .. } => Executor::Replan(Box::new(Replanner::new(
             policy,
@@ -62,23 +62,6 @@ pub fn executor<'a>(setup: &Setup, policy: &'a Policy, feedback: Feedback) -> Ex
         ))),
         _ => Executor::Plan { policy, feedback },
     }
-}
-
-/// Simulates one trial of `policy` with `feedback` on the stochastic plant (Euler–Maruyama,
-/// Eq. 10).
-pub fn run_trial(
-    dynamics: &DiscreteDynamics,
-    cost: &dyn vic_core::cost::Cost,
-    x0: &[f64],
-    policy: &Policy,
-    feedback: Feedback,
-    seed: u64,
-    trial: u64,
-) -> Trial {
-    let mut exec = Executor::Plan { policy, feedback };
-    run_trial_on(
-        dynamics, dynamics, cost, x0, &mut exec, feedback, seed, trial,
-    )
 }
 
 /// Simulates one trial of `exec` on the stochastic `plant` (Euler–Maruyama, Eq. 10); the

@@ -58,7 +58,7 @@ pub struct PlanSummary {
     /// Total variation of the commands per control channel, `Σ_k |u[k+1] − u[k]|`, in the
     /// channel's unit (`control_names`): how much a plan chatters.
     #[serde(default)]
-    pub total_variation: Vec<f64>,
+    pub(crate) total_variation: Vec<f64>,
     /// ILQG without delay, with noise: the knots at which the feedback's predicted standard
     /// deviation in some control exceeds the room to its nearer bound
     /// ([`crate::prediction::ClosedLoopPrediction::clamped_knots`]). Where this is not
@@ -69,7 +69,7 @@ pub struct PlanSummary {
 }
 
 /// `Σ_k |u[k+1]_j − u[k]_j|` for every channel `j` of the command sequence `u`.
-pub fn total_variation(u: &[nalgebra::DVector<f64>]) -> Vec<f64> {
+pub(crate) fn total_variation(u: &[nalgebra::DVector<f64>]) -> Vec<f64> {
     let nu = u.first().map_or(0, |v| v.len());
     (0..nu)
         .map(|j| u.windows(2).map(|w| (w[1][j] - w[0][j]).abs()).sum())
@@ -98,10 +98,10 @@ pub struct PlanFile {
     /// Reference `q_d`, `q_d'` at the knots [rad, rad/s].
     pub reference: Vec<Exogenous>,
     /// Predicted covariance of the final state executed open loop (n×n, row-major).
-    pub open_loop_final_covariance: Vec<Vec<f64>>,
+    pub(crate) open_loop_final_covariance: Vec<Vec<f64>>,
     /// Predicted covariance of the final hand position [m²] (two-link) or of the final joint
     /// angle [rad²] (single joint, 1×1), executed open loop.
-    pub open_loop_final_position_covariance: Vec<Vec<f64>>,
+    pub(crate) open_loop_final_position_covariance: Vec<Vec<f64>>,
     pub summary: PlanSummary,
 }
 

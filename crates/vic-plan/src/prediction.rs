@@ -33,7 +33,7 @@ pub fn predicted_cost(setup: &Setup, policy: &Policy, feedback: Feedback) -> Opt
 
 /// What [`predict_closed_loop`] predicts of an executed law.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ClosedLoopPrediction {
+pub(crate) struct ClosedLoopPrediction {
     /// The expected cost ([`predicted_cost`]).
     pub expected_cost: f64,
     /// The knots at which the law's predicted standard deviation in some control, `√(K Σ Kᵀ)_ii`,
@@ -41,14 +41,14 @@ pub struct ClosedLoopPrediction {
     /// clamped in more than about one trial in six, which the linear prediction does not model.
     /// The ILQG plans with stiffness in their feedback reach this (stiffness is nearly free, so
     /// its gains are huge, and the clamped plant executes another law than the predicted one).
-    pub clamped_knots: usize,
+    pub(crate) clamped_knots: usize,
     /// The knots of the law.
     pub knots: usize,
 }
 
 /// [`predicted_cost`] with the knots where the prediction's own assumption, an unclamped linear
 /// law, fails ([`ClosedLoopPrediction::clamped_knots`]).
-pub fn predict_closed_loop(
+pub(crate) fn predict_closed_loop(
     setup: &Setup,
     policy: &Policy,
     feedback: Feedback,

@@ -5,7 +5,7 @@ use vic_core::model::{Exogenous, Plant};
 
 /// Minimum-jerk position and speed fractions `s(τ) = 10τ³ − 15τ⁴ + 6τ⁵` and `ds/dt` at time `t` of
 /// a movement of duration `duration`.
-pub fn minimum_jerk(t: f64, duration: f64) -> (f64, f64) {
+pub(crate) fn minimum_jerk(t: f64, duration: f64) -> (f64, f64) {
     let tau = (t / duration).clamp(0.0, 1.0);
     let s = tau * tau * tau * (10.0 - 15.0 * tau + 6.0 * tau * tau);
     let ds = if (0.0..=duration).contains(&t) {
@@ -17,7 +17,7 @@ pub fn minimum_jerk(t: f64, duration: f64) -> (f64, f64) {
 }
 
 /// Reference at knots `k = 0..=steps` (time `k Δ`) for a minimum-jerk joint movement `q0 → q1`.
-pub fn joint_minimum_jerk(
+pub(crate) fn joint_minimum_jerk(
     q0: &[f64],
     q1: &[f64],
     duration: f64,
@@ -49,7 +49,7 @@ pub enum PathError {
 /// Reference at knots `k = 0..=steps` for a straight hand path `p0 → p1` with a minimum-jerk speed
 /// profile, through inverse kinematics (`q_d' = J⁻¹ p'`). Fails if a point is out of reach or the
 /// arm passes a singularity.
-pub fn hand_straight_line(
+pub(crate) fn hand_straight_line(
     plant: &Plant,
     p0: [f64; 2],
     p1: [f64; 2],

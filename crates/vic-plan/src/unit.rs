@@ -52,7 +52,7 @@ impl Unit {
     }
 
     /// Distance beyond which a trial counts as "far" from the target (5 cm of hand, 5° of joint).
-    pub fn far_threshold(self) -> f64 {
+    pub(crate) fn far_threshold(self) -> f64 {
         match self {
             Unit::Millimetre => 50.0,
             Unit::Degree => 5.0,

@@ -129,18 +129,6 @@ pub fn children_cpu_ns() -> u64 {
     t(ru.ru_utime) + t(ru.ru_stime)
 }
 
-/// The kernel's real-time budget: `sched_rt_runtime_us` out of `sched_rt_period_us`, if readable.
-pub fn rt_budget() -> Option<(i64, i64)> {
-    let read = |f: &str| {
-        std::fs::read_to_string(format!("/proc/sys/kernel/{f}"))
-            .ok()?
-            .trim()
-            .parse::<i64>()
-            .ok()
-    };
-    Some((read("sched_rt_runtime_us")?, read("sched_rt_period_us")?))
-}
-
 /// The real-time settings a board asks for by default (`vic-board` without `--no-rt`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RtRequest {
@@ -149,7 +137,7 @@ pub struct RtRequest {
     /// The CPU to pin the loop to; with `auto_cpu`, None picks the last CPU of the process's
     /// set when it has more than one.
     pub cpu: Option<usize>,
-    pub auto_cpu: bool,
+    pub(crate) auto_cpu: bool,
     /// Spin before each deadline [µs].
     pub spin_us: u64,
 }

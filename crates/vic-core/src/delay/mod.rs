@@ -21,7 +21,7 @@ use std::sync::Mutex;
 mod planner;
 mod tail;
 
-pub use planner::{DelayedPlanner, DelayedSolution, undelayed_guess};
+pub use planner::{DelayedPlanner, undelayed_guess};
 pub use tail::{NoiseFree, Offset};
 
 /// A discrete model whose commands act `steps` steps after they are issued.

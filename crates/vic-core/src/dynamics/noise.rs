@@ -73,7 +73,7 @@ impl DiscreteDynamics {
 
     /// The noise gain `G = √Δ F` (layout of [`crate::model::ArmModel::diffusion`]) and its derivatives
     /// `dgx[j]`, `dgu[j]` with respect to `x_j` and `u_j`, in any scalar type.
-    pub fn noise_jacobian<S: Scalar + DualNum<Primitive = f64>>(
+    pub(crate) fn noise_jacobian<S: Scalar + DualNum<Primitive = f64>>(
         &self,
         x: &[S],
         u: &[S],

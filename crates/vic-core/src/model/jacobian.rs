@@ -53,7 +53,7 @@ impl ArmModel {
     /// With `r = τ − C(q, q') − B_v q' − g(q) + Jᵀ D` and `M(q) q'' = r` (Eq. 1), the
     /// accelerations' derivatives are `∂q''/∂z = M⁻¹ (∂r/∂z − (∂M/∂z) q'')`.
     #[inline(always)]
-    pub fn f_jacobian_fixed<const N: usize, const C: usize>(
+    pub(crate) fn f_jacobian_fixed<const N: usize, const C: usize>(
         &self,
         x: &[f64],
         u: &[f64],

@@ -16,7 +16,8 @@ pub mod plant;
 pub use actuator::{Actuator, Damping};
 pub use field::Field;
 pub use noise::Noise;
-pub use plant::{Angles, Plant, SingleJoint, TwoLink};
+pub(crate) use plant::Angles;
+pub use plant::{Plant, SingleJoint, TwoLink};
 
 use crate::scalar::{Scalar, c};
 use serde::{Deserialize, Serialize};

@@ -47,12 +47,12 @@ pub struct TwoLink {
 /// joint `q2 = 0`.
 #[derive(Debug, Clone, Copy)]
 pub struct Angles<S> {
-    pub s1: S,
+    pub(crate) s1: S,
     pub c1: S,
     pub s2: S,
     pub c2: S,
-    pub s12: S,
-    pub c12: S,
+    pub(crate) s12: S,
+    pub(crate) c12: S,
 }
 
 /// The limb: which rigid-body model moves.
@@ -108,7 +108,7 @@ impl Plant {
     /// dynamics needs nothing else, and the trigonometry is a large part of a rollout. The hand's
     /// entries (`s1`, `c1`, `s12`, `c12`) are NaN, so that a kinematic use of them shows at once.
     #[inline(always)]
-    pub fn dynamics_angles<S: Scalar>(&self, q: &[S]) -> Angles<S> {
+    pub(crate) fn dynamics_angles<S: Scalar>(&self, q: &[S]) -> Angles<S> {
         match self {
             Plant::SingleJoint(_) => self.angles(q),
             Plant::TwoLink(_) => {
@@ -134,7 +134,7 @@ impl Plant {
     /// [`Plant::mass_matrix`] from the configuration's [`Angles`].
     /// Inlined: see [`crate::model::ArmModel::f`].
     #[inline(always)]
-    pub fn mass_matrix_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
+    pub(crate) fn mass_matrix_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
         match self {
             Plant::SingleJoint(p) => [[c(p.inertia), S::zero()], [S::zero(), S::one()]],
             Plant::TwoLink(p) => {
@@ -147,14 +147,15 @@ impl Plant {
     }
 
     /// Velocity- and gravity-dependent torques `C(q, q') + B_v q' + g(q)` (the bias torques).
-    pub fn bias_torque<S: Scalar>(&self, q: &[S], qd: &[S], out: &mut [S]) {
+    #[cfg(test)]
+    pub(crate) fn bias_torque<S: Scalar>(&self, q: &[S], qd: &[S], out: &mut [S]) {
         self.bias_torque_at(&self.angles(q), qd, out)
     }
 
     /// [`Plant::bias_torque`] from the configuration's [`Angles`].
     /// Inlined: see [`crate::model::ArmModel::f`].
     #[inline(always)]
-    pub fn bias_torque_at<S: Scalar>(&self, a: &Angles<S>, qd: &[S], out: &mut [S]) {
+    pub(crate) fn bias_torque_at<S: Scalar>(&self, a: &Angles<S>, qd: &[S], out: &mut [S]) {
         match self {
             Plant::SingleJoint(p) => {
                 out[0] = c::<S>(p.mass * p.gravity * p.com) * a.c1 + qd[0] * p.viscosity;
@@ -171,7 +172,7 @@ impl Plant {
     /// `∂M/∂q_j` for each joint `j` (entry `j`), from the configuration's [`Angles`]: the
     /// two-link arm's mass matrix depends on `q2` alone, a single joint's is constant. For the
     /// drift's Jacobian ([`crate::model::ArmModel::f_jacobian`]).
-    pub fn mass_matrix_gradient_at(&self, a: &Angles<f64>) -> [[[f64; 2]; 2]; 2] {
+    pub(crate) fn mass_matrix_gradient_at(&self, a: &Angles<f64>) -> [[[f64; 2]; 2]; 2] {
         match self {
             Plant::SingleJoint(_) => [[[0.0; 2]; 2]; 2],
             Plant::TwoLink(p) => {
@@ -183,7 +184,7 @@ impl Plant {
 
     /// The bias torques' Jacobians `(∂/∂q, ∂/∂q')` (row `i`: torque `i`, column `j`: joint `j`),
     /// from the configuration's [`Angles`]: [`Plant::bias_torque_at`] differentiated.
-    pub fn bias_torque_jacobian_at(
+    pub(crate) fn bias_torque_jacobian_at(
         &self,
         a: &Angles<f64>,
         qd: &[f64],
@@ -223,7 +224,7 @@ impl Plant {
     /// [`Plant::hand_position`] from the configuration's [`Angles`].
     /// Inlined: see [`crate::model::ArmModel::f`].
     #[inline(always)]
-    pub fn hand_position_at<S: Scalar>(&self, a: &Angles<S>) -> [S; 2] {
+    pub(crate) fn hand_position_at<S: Scalar>(&self, a: &Angles<S>) -> [S; 2] {
         match self {
             Plant::SingleJoint(p) => [a.c1 * p.length, a.s1 * p.length],
             Plant::TwoLink(p) => [a.c1 * p.l1 + a.c12 * p.l2, a.s1 * p.l1 + a.s12 * p.l2],
@@ -238,7 +239,7 @@ impl Plant {
     /// [`Plant::jacobian`] from the configuration's [`Angles`].
     /// Inlined: see [`crate::model::ArmModel::f`].
     #[inline(always)]
-    pub fn jacobian_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
+    pub(crate) fn jacobian_at<S: Scalar>(&self, a: &Angles<S>) -> [[S; 2]; 2] {
         match self {
             Plant::SingleJoint(p) => [[-a.s1 * p.length, S::zero()], [a.c1 * p.length, S::zero()]],
             Plant::TwoLink(p) => [
@@ -250,7 +251,7 @@ impl Plant {
 
     /// `∂J/∂q_j` for each joint `j` (entry `j`, row-major like [`Plant::jacobian_at`]), from the
     /// configuration's [`Angles`].
-    pub fn jacobian_gradient_at(&self, a: &Angles<f64>) -> [[[f64; 2]; 2]; 2] {
+    pub(crate) fn jacobian_gradient_at(&self, a: &Angles<f64>) -> [[[f64; 2]; 2]; 2] {
         match self {
             Plant::SingleJoint(p) => [
                 [[-a.c1 * p.length, 0.0], [-a.s1 * p.length, 0.0]],
@@ -264,11 +265,6 @@ impl Plant {
                 ]
             }
         }
-    }
-
-    /// Solves `M(q) a = rhs` for the joint accelerations `a`.
-    pub fn solve_mass<S: Scalar>(&self, q: &[S], rhs: &[S], out: &mut [S]) {
-        Plant::solve_with(&self.mass_matrix(q), self.dof(), rhs, out)
     }
 
     /// Solves `m a = rhs` for a mass matrix `m` of a plant with `dof` joints.

@@ -25,12 +25,13 @@ impl<const M: usize> SmallCholesky<M> {
     };
 
     /// Factorises the symmetric `h` restricted to the indices `idx`; `None` if not positive definite.
-    pub fn new(h: impl Fn(usize, usize) -> f64, idx: &[usize]) -> Option<Self> {
+    #[cfg(test)]
+    pub(crate) fn new(h: impl Fn(usize, usize) -> f64, idx: &[usize]) -> Option<Self> {
         let mut c = Self::EMPTY;
         c.factorize(h, idx).then_some(c)
     }
 
-    /// [`SmallCholesky::new`] in place; false (and the factor unusable) if `h` restricted to
+    /// Factorises the symmetric `h` restricted to the indices `idx` in place; false (and the factor unusable) if `h` restricted to
     /// `idx` is not positive definite. Only the lower triangle of the leading `idx.len()` rows
     /// is written, and only it is read.
     pub fn factorize(&mut self, h: impl Fn(usize, usize) -> f64, idx: &[usize]) -> bool {

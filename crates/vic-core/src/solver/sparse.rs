@@ -17,7 +17,7 @@ use std::ops::Range;
 
 /// A matrix stored by its nonzeros, column by column (compressed sparse column).
 #[derive(Debug, Clone)]
-pub struct SparseColumns {
+pub(crate) struct SparseColumns {
     nrows: usize,
     /// Entries of column `j` are `start[j]..start[j + 1]`.
     start: Vec<usize>,
@@ -37,7 +37,8 @@ pub struct SparseColumns {
 
 impl SparseColumns {
     /// Room for an `nrows × ncols` matrix (no allocation when refilled at this size).
-    pub fn new(nrows: usize, ncols: usize) -> Self {
+    #[cfg(test)]
+    pub(crate) fn new(nrows: usize, ncols: usize) -> Self {
         SparseColumns {
             nrows,
             start: vec![0; ncols + 1],
@@ -48,7 +49,7 @@ impl SparseColumns {
     }
 
     /// An `nrows × ncols` matrix without room for its nonzeros: see [`SparseColumns::make_room`].
-    pub fn without_room(nrows: usize, ncols: usize) -> Self {
+    pub(crate) fn without_room(nrows: usize, ncols: usize) -> Self {
         SparseColumns {
             nrows,
             start: vec![0; ncols + 1],
@@ -59,7 +60,7 @@ impl SparseColumns {
     }
 
     /// Room for `nnz` nonzeros in all (allocates only if there is less).
-    pub fn make_room(&mut self, nnz: usize) {
+    pub(crate) fn make_room(&mut self, nnz: usize) {
         self.row.reserve_exact(nnz.saturating_sub(self.row.len()));
         self.val.reserve_exact(nnz.saturating_sub(self.val.len()));
     }
@@ -70,7 +71,7 @@ impl SparseColumns {
     }
 
     /// Number of stored (nonzero) entries.
-    pub fn nnz(&self) -> usize {
+    pub(crate) fn nnz(&self) -> usize {
         self.start[self.ncols()]
     }
 
@@ -82,13 +83,13 @@ impl SparseColumns {
     /// 42 and its noise Jacobians none outside the plant block, so most blocks are skipped
     /// whole (a mask of each block's nonzeros, built entry by entry, cost a sixth of a
     /// stochastic solve of the delayed single joint).
-    pub fn assign(&mut self, m: &DMatrix<f64>) {
+    pub(crate) fn assign(&mut self, m: &DMatrix<f64>) {
         self.assign_within(m, None);
     }
 
     /// [`SparseColumns::assign`] reading column `j` in rows `rows[j]` only, when given: the
     /// caller knows the entries outside are zero ([`StateSupport`]), and the result is the same.
-    pub fn assign_within(&mut self, m: &DMatrix<f64>, rows: Option<&[Range<usize>]>) {
+    pub(crate) fn assign_within(&mut self, m: &DMatrix<f64>, rows: Option<&[Range<usize>]>) {
         debug_assert!(rows.is_none_or(|r| r.len() == m.ncols()));
         self.assign_columns(m, |j| match rows {
             Some(r) => Column::Rows(r[j].clone()),
@@ -99,7 +100,7 @@ impl SparseColumns {
     /// [`SparseColumns::assign`] reading column `j` where `columns[j]` says it can be nonzero,
     /// and a unit column's one without reading it: the caller knows the entries outside are
     /// zero and the unit entries one ([`StateSupport`]), and the result is the same.
-    pub fn assign_support(&mut self, m: &DMatrix<f64>, columns: &[Column]) {
+    pub(crate) fn assign_support(&mut self, m: &DMatrix<f64>, columns: &[Column]) {
         debug_assert_eq!(columns.len(), m.ncols());
         self.assign_columns(m, |j| columns[j].clone());
     }
@@ -166,7 +167,7 @@ impl SparseColumns {
     /// `k`; `+0` for an empty column), to the bit. Reading a row of `S` from a column is what
     /// lets the backward pass take one row of a product where it needs it instead of forming
     /// the whole `n × n` product (see `ilqg::backward`).
-    pub fn product_row(&self, s_rows: &DMatrix<f64>, i: usize, out: &mut [f64]) {
+    pub(crate) fn product_row(&self, s_rows: &DMatrix<f64>, i: usize, out: &mut [f64]) {
         let n = s_rows.nrows();
         debug_assert_eq!(n, self.nrows);
         let s = &s_rows.as_slice()[i * n..(i + 1) * n];
@@ -185,7 +186,7 @@ impl SparseColumns {
     /// the bit, from the rows of `S N` that `M` reads (`rows` is scratch, within the `n × n`
     /// it is given room for). For the delayed plant's noise term `Cuᵀ (S Cx)` those are the
     /// plant's rows, where `S Cx` itself is `n × n`.
-    pub fn tr_mul_product_add(
+    pub(crate) fn tr_mul_product_add(
         &self,
         alpha: f64,
         s_rows: &DMatrix<f64>,
@@ -261,7 +262,7 @@ enum First {
 /// nonzeros: every term `m_ij · x` with `m_ij = 0` is skipped and the others are added in
 /// ascending row order, so that [`SparseColumns`] and the backward pass on the stack (the
 /// `ilqg::knot` module, for the small plants) compute the same numbers bit for bit.
-pub trait ColumnProducts {
+pub(crate) trait ColumnProducts {
     /// `y += α Mᵀ v`.
     fn tr_mul_vec_add(&self, alpha: f64, v: &[f64], y: &mut [f64]);
 
@@ -349,7 +350,7 @@ pub(crate) fn nonzero_dot<const R: usize>(m: &[f64; R], x: &[f64]) -> f64 {
 
 /// The nonzeros of one knot's `A`, `B` and noise Jacobians `Cx_i`, `Cu_i`.
 #[derive(Debug, Clone)]
-pub struct SparseLinearization {
+pub(crate) struct SparseLinearization {
     pub a: SparseColumns,
     pub b: SparseColumns,
     pub cx: Vec<SparseColumns>,
@@ -378,7 +379,7 @@ impl SparseLinearization {
     /// entry would take 84 KB: the backward pass's few lines per knot would lie scattered over
     /// tens of MB of address space, and a noisy delayed plan would wait on page-table misses
     /// (fitting the room gains what putting the heap on huge pages gains).
-    pub fn make_room(&mut self, support: Option<&StateSupport>) {
+    pub(crate) fn make_room(&mut self, support: Option<&StateSupport>) {
         let len = |c: &Column| match c {
             Column::Rows(r) => r.len(),
             Column::Unit(_) => 1,
@@ -410,7 +411,7 @@ impl SparseLinearization {
 
     /// Refills from a dense linearisation (the noise Jacobians only when state-dependent),
     /// reading the Jacobians only within the model's `support` when it has one.
-    pub fn assign(&mut self, lin: &Linearization, support: Option<&StateSupport>) {
+    pub(crate) fn assign(&mut self, lin: &Linearization, support: Option<&StateSupport>) {
         match support {
             Some(s) => {
                 self.a.assign_support(&lin.a, &s.a);

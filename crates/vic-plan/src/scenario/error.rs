@@ -61,7 +61,12 @@ impl FileCheck<'_> {
         }
     }
 
-    pub fn non_negative(&self, v: f64, section: &str, key: &str) -> Result<f64, ConfigError> {
+    pub(crate) fn non_negative(
+        &self,
+        v: f64,
+        section: &str,
+        key: &str,
+    ) -> Result<f64, ConfigError> {
         if v.is_finite() && v >= 0.0 {
             Ok(v)
         } else {
@@ -76,14 +81,14 @@ impl FileCheck<'_> {
         }
     }
 
-    pub fn missing_section(&self, section: &str) -> ConfigError {
+    pub(crate) fn missing_section(&self, section: &str) -> ConfigError {
         self.syntax(format!("missing section [{section}]"))
     }
 
     /// Turns a deserialisation error into one that names the section and the key. Serde reports
     /// unknown and missing keys at the enclosing table, and an unknown variant at the section: the
     /// key is then recovered from the message, or is the section's tag key.
-    pub fn serde_error(
+    pub(crate) fn serde_error(
         &self,
         error: serde_path_to_error::Error<toml::de::Error>,
         tag_of: impl Fn(&str) -> Option<&'static str>,

@@ -71,8 +71,8 @@ impl Task {
 /// final velocity.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CostWeights {
-    pub w_torque: f64,
-    pub w_stiffness: f64,
+    pub(crate) w_torque: f64,
+    pub(crate) w_stiffness: f64,
     pub w_p: f64,
     pub w_v: f64,
 }

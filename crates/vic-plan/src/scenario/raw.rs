@@ -188,9 +188,9 @@ pub(super) enum RawNoise {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct RawCost {
-    pub w_torque: f64,
+    pub(crate) w_torque: f64,
     /// Required when the actuator has a stiffness.
-    pub w_stiffness: Option<f64>,
+    pub(crate) w_stiffness: Option<f64>,
     pub w_p: f64,
     pub w_v: f64,
 }
@@ -207,10 +207,10 @@ pub(super) enum PathKind {
 #[serde(deny_unknown_fields)]
 pub(super) struct RawTask {
     pub kind: PathKind,
-    pub start_deg: Option<Vec<f64>>,
-    pub target_deg: Option<Vec<f64>>,
-    pub hand_start: Option<[f64; 2]>,
-    pub hand_target: Option<[f64; 2]>,
+    pub(crate) start_deg: Option<Vec<f64>>,
+    pub(crate) target_deg: Option<Vec<f64>>,
+    pub(crate) hand_start: Option<[f64; 2]>,
+    pub(crate) hand_target: Option<[f64; 2]>,
     pub duration: f64,
     pub dt: f64,
     #[serde(default)]

@@ -86,7 +86,7 @@ fn smallest_inertia(model: &ArmModel, task: &Task) -> f64 {
 
 /// The board's tick at its default rate (1 kHz) [s]: it integrates in sub-steps no longer than
 /// this nor than the scenario's own sub-step.
-pub const BOARD_TICK_S: f64 = 1e-3;
+pub(crate) const BOARD_TICK_S: f64 = 1e-3;
 
 /// Refuses a safe-hold stiffness the board cannot hold stably: the impedance law's damping
 /// `K_D = gain(k)` (Eq. 4) must not be negative (it would pump energy in), and the board's

@@ -10,7 +10,7 @@ const SLICES: usize = 4;
 pub(super) struct Covering {
     pub knot: Knot,
     /// Publish time of the slice [ns, monotonic].
-    pub sent_ns: u64,
+    pub(crate) sent_ns: u64,
     pub seq: u64,
 }
 

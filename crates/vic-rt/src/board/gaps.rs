@@ -34,7 +34,7 @@ struct Slot {
 /// least recently seen goes when a new session arrives and the table is full), what it lost
 /// between its last message before the eviction and its first after; it is a new session then.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct GapCounter {
+pub(crate) struct GapCounter {
     slots: [Slot; GAP_SESSIONS],
     /// Messages seen (the clock of `Slot::seen`).
     count: u64,
@@ -72,7 +72,8 @@ impl GapCounter {
     }
 
     /// Sessions tracked now.
-    pub fn sessions(&self) -> usize {
+    #[cfg(test)]
+    fn sessions(&self) -> usize {
         self.slots.iter().filter(|s| s.seen != 0).count()
     }
 }

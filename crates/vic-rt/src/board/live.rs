@@ -96,7 +96,7 @@ pub type PercentilesJson = Percentiles;
 pub struct BoardHistograms {
     pub jitter: LatencyHistogram,
     pub work: LatencyHistogram,
-    pub command_age: LatencyHistogram,
+    pub(crate) command_age: LatencyHistogram,
 }
 
 /// One tick of the live board: drain the transport into `inputs`, step, publish the state. No

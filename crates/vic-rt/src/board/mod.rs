@@ -137,7 +137,7 @@ pub struct Inputs {
     dropped: u64,
     /// When the messages were taken [ns, monotonic] (0: the step's deadline). Time stamps later
     /// than this by more than the tolerance are rejected.
-    pub received_ns: u64,
+    pub(crate) received_ns: u64,
 }
 
 impl Inputs {
@@ -161,7 +161,7 @@ pub struct Outputs {
     /// The state to publish (time stamp left to the caller).
     pub state: StateMsg,
     /// Age of the command used at this tick [ns] (its publish time to `now`), if one was used.
-    pub command_age_ns: Option<u64>,
+    pub(crate) command_age_ns: Option<u64>,
     /// Plant periods integrated by this step.
     pub periods: u64,
     /// Distance of the joint angles to the equilibrium in use [rad].
@@ -339,10 +339,6 @@ impl Board {
             d[i] = self.damping.gain(k[i]);
         }
         d
-    }
-    /// Restores the configured field and noise and removes loads and pulses.
-    pub fn clear_disturbances(&mut self) {
-        self.plant.clear_disturbances();
     }
 
     fn checks(&self) -> Checks<'_> {

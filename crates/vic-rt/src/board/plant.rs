@@ -14,7 +14,6 @@ pub(super) struct SimulatedPlant {
     pub model: ArmModel,
     /// The configured noise and field, restored when disturbances are cleared.
     base_noise: Noise,
-    base_field: Field,
     pub dof: usize,
     pub nx: usize,
     /// `(q, q')` and the actuator's states.
@@ -39,7 +38,6 @@ impl SimulatedPlant {
         x[..dof].copy_from_slice(&q0[..dof]);
         SimulatedPlant {
             base_noise: model.noise,
-            base_field: model.field,
             dof,
             nx: model.nx(),
             model,
@@ -104,15 +102,6 @@ impl SimulatedPlant {
                 self.model.noise = self.base_noise.scaled(d.value);
             }
         }
-    }
-
-    /// Restores the configured field and noise and removes loads and pulses.
-    pub fn clear_disturbances(&mut self) {
-        self.model.field = self.base_field;
-        self.model.noise = self.base_noise;
-        self.noise_factor = 1.0;
-        self.load = [0.0; MAX_JOINTS];
-        self.pulse_until_ns = 0;
     }
 
     /// The safe hold at the present position: the hold stiffness, no velocity, the torque that

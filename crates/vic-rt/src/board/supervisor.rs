@@ -44,13 +44,13 @@ pub(super) struct Supervisor {
     pub mode: Mode,
     pub fault: FaultReason,
     /// Sequence number of the command slice last used.
-    pub used_command_seq: u64,
+    pub(crate) used_command_seq: u64,
     /// The knot last taken from a valid command, and the trial time it covered last.
-    pub last_knot: Knot,
-    pub last_cover_ns: u64,
+    pub(crate) last_knot: Knot,
+    pub(crate) last_cover_ns: u64,
     /// Board clock at the arrival of the last fresh valid command (or at the trial start) [ns,
     /// monotonic]; `None`: none since the reset.
-    pub fresh_ns: Option<u64>,
+    pub(crate) fresh_ns: Option<u64>,
     /// The safe hold: ramp from `hold_from` to `hold_to` starting at trial time `hold_start_ns`.
     hold_from: Knot,
     hold_to: Knot,

@@ -28,7 +28,7 @@ pub(super) struct TrialState {
     /// The last command slice accepted in this trial.
     pub last: LastSeen,
     /// The board's present trial time [ns] (0 before the start).
-    pub now_ns: u64,
+    pub(crate) now_ns: u64,
 }
 
 /// The last message of one kind that the board accepted: the sequence rules of [`Header`].

@@ -12,7 +12,7 @@ pub struct Timing {
     pub sensor_latency_ns: u64,
     pub command_latency_ns: u64,
     /// How far past the command's arrival each slice reaches [ns] (default: two planner periods).
-    pub lookahead_ns: u64,
+    pub(crate) lookahead_ns: u64,
 }
 
 impl Timing {

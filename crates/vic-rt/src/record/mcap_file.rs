@@ -75,7 +75,7 @@ pub(crate) struct TickMsg<A> {
     pub t: f64,
     pub trial: u32,
     pub mode: u32,
-    pub trial_time: f64,
+    pub(crate) trial_time: f64,
     pub periods: u64,
     pub command_seq: u64,
     pub disturbance_seq: u64,

@@ -27,7 +27,7 @@ pub struct BoardRecording {
     /// The `vic` metadata record.
     pub metadata: BTreeMap<String, String>,
     /// Messages on other channels (not read).
-    pub other_messages: u64,
+    pub(crate) other_messages: u64,
 }
 
 /// A per-joint array of a tick message whose length is not the recording's number of joints.

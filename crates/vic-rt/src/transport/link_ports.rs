@@ -21,7 +21,7 @@ use iceoryx2::prelude::EventId;
 use std::sync::Mutex;
 
 /// The node name of a bridge's link publishers.
-pub const BRIDGE_NODE: &str = "vic-bridge";
+pub(crate) const BRIDGE_NODE: &str = "vic-bridge";
 
 /// The node of the ports, kept alive as long as they are and dropped after them. iceoryx2's node
 /// is `Send` but not `Sync`; it is never used after opening, so the mutex is never locked: it
@@ -64,7 +64,7 @@ impl Node {
 
 /// What the bridge beside the board publishes: the command slices and control requests of the
 /// planner on the other host, and the disturbances of its `vic inject`.
-pub struct ToBoardLink {
+pub(crate) struct ToBoardLink {
     commands: Pub<CommandSlice, ThreadSafe>,
     controls: Pub<Control, ThreadSafe>,
     disturbances: Pub<Disturbance, ThreadSafe>,
@@ -102,7 +102,7 @@ impl ToBoardLink {
 
 /// What the bridge beside the planner publishes, playing the board: the board's states,
 /// telemetry and events from the other host.
-pub struct FromBoardLink {
+pub(crate) struct FromBoardLink {
     state: Pub<StateMsg, ThreadSafe>,
     telemetry: Pub<Telemetry, ThreadSafe>,
     events: Notifier<ThreadSafe>,

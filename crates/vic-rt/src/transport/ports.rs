@@ -103,7 +103,8 @@ impl BoardPorts {
         drain(&self.commands, f)
     }
     /// The newest command slice received since the last call, if any.
-    pub fn latest_command(&self) -> Option<CommandSlice> {
+    #[cfg(test)]
+    pub(crate) fn latest_command(&self) -> Option<CommandSlice> {
         latest(&self.commands)
     }
     /// Every control request received since the last call.
@@ -154,7 +155,7 @@ impl BoardWatch {
 
     /// Whether the board signalled an event since the last call, without blocking (the bridge
     /// checks it on every wake-up).
-    pub fn take_event(&self) -> bool {
+    pub(crate) fn take_event(&self) -> bool {
         let mut got = false;
         let _ = self.events.try_wait(|_| got = true);
         got

@@ -33,7 +33,7 @@ pub struct Convergence {
     pub mu: f64,
     pub trusted_mu: f64,
     /// The shortest step whose improvement counts (`shrink_below_step`).
-    pub min_step_length: f64,
+    pub(crate) min_step_length: f64,
 }
 
 impl Convergence {

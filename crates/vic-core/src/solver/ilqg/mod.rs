@@ -564,7 +564,7 @@ impl Ilqg {
 
     /// The dynamics linearised at every knot of the last solution's nominal (valid after a
     /// solve: the nominal is linearised after every accepted step).
-    pub fn linearizations(&self) -> &[Linearization] {
+    pub(crate) fn linearizations(&self) -> &[Linearization] {
         &self.nominal.lin
     }
 
@@ -573,7 +573,7 @@ impl Ilqg {
     /// the last pass of a solve (at the μ then in force) only approximates. Replaces the
     /// workspace's gains, which a later [`Ilqg::resolve_shifted`] rolls out with. `None` before
     /// any solve, or when some `Q_uu` is not positive definite without regularisation.
-    pub fn unregularized_gains(&mut self, problem: &Problem) -> Option<&[DMatrix<f64>]> {
+    pub(crate) fn unregularized_gains(&mut self, problem: &Problem) -> Option<&[DMatrix<f64>]> {
         if !self.solved || self.check_size(problem).is_err() {
             return None;
         }

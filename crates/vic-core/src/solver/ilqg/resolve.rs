@@ -9,7 +9,7 @@ use std::time::Instant;
 
 impl Ilqg {
     /// Whether the workspace holds a solution that [`Ilqg::resolve_shifted`] can shift.
-    pub fn has_solution(&self) -> bool {
+    pub(crate) fn has_solution(&self) -> bool {
         self.solved
     }
 

@@ -26,7 +26,7 @@ pub struct Probe {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Sample {
     /// When the answer arrived (local clock) [ns].
-    pub at_ns: u64,
+    pub(crate) at_ns: u64,
     /// Local clock − remote clock [ns].
     pub offset_ns: i64,
     pub round_trip_ns: u64,
@@ -61,7 +61,7 @@ pub struct Estimate {
     /// Local clock − remote clock at `at_ns` [ns].
     pub offset_ns: i64,
     /// The local time of the probe it comes from [ns].
-    pub at_ns: u64,
+    pub(crate) at_ns: u64,
     /// That probe's round trip: the offset is exact within ± half of it [ns].
     pub round_trip_ns: u64,
     /// How fast the offset grows [ns per s of local time, i.e. parts per billion].
