@@ -11,12 +11,12 @@
 //! run, however it ends.
 
 use crate::cli::{Classify, DefaultScenarioArgs, JsonArg, SeedArgs, latency_arg, sibling_binary};
-use crate::demo_distributed::{DistributedLink, describe};
-use crate::experiment::column_plot;
-use crate::live::{
+use crate::daemons::live::{
     BoardFlags, PlanStore, PlannerRun, ScenarioFile, run_planner, start_board, stop_board,
 };
-use crate::report::{StrategyResult, Trajectories};
+use crate::demo_distributed::{DistributedLink, describe};
+use crate::studies::experiment::column_plot;
+use crate::views::report::{StrategyResult, Trajectories};
 use anyhow::anyhow;
 use serde_json::Value;
 use std::io::IsTerminal;
@@ -204,9 +204,9 @@ fn trajectories_figure(
     let png = o.out_dir.join("trajectories.png");
     let svg = o.out_dir.join("trajectories.svg");
     if scenario.model.dof() == 2 {
-        crate::plot::arm_figure(&columns, &png, &svg)?;
+        crate::views::plot::arm_figure(&columns, &png, &svg)?;
     } else {
-        crate::plot::joint_figure(&columns, &png, &svg)?;
+        crate::views::plot::joint_figure(&columns, &png, &svg)?;
     }
     Ok([png, svg])
 }

@@ -2,7 +2,9 @@
 //! parameters from a single-joint scenario (else the iCub forearm's).
 
 use crate::cli::{Classify, input_error, print_report};
-use crate::identify::{IdentifyError, IdentifyOptions, JointParams, identify, read_log_file};
+use crate::studies::identify::{
+    IdentifyError, IdentifyOptions, JointParams, identify, read_log_file,
+};
 use std::path::{Path, PathBuf};
 use vic_core::model::Plant;
 use vic_plan::scenario::Scenario;

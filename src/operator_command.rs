@@ -1,9 +1,9 @@
 //! `vic inject`, `vic status` and `vic monitor`: the operator's commands on a running board, from
 //! the flags as typed (checked here) to the printed acknowledgement, snapshot or live view. The
-//! waiting and matching are [`crate::operator`]'s.
+//! waiting and matching are [`crate::views::operator`]'s.
 
 use crate::cli::{Classify, input_error, print_json, stop_on_signal};
-use crate::operator::{Ack, Request, inject, monitor, status};
+use crate::views::operator::{Ack, Request, inject, monitor, status};
 use std::io::{IsTerminal, Write};
 use std::time::Duration;
 
@@ -137,13 +137,13 @@ pub fn run_monitor(namespace: &str, o: MonitorOptions) -> anyhow::Result<()> {
     let plain = o.plain || o.count.is_some() || !tty;
     #[cfg(feature = "tui")]
     if !plain {
-        let settings = crate::monitor::Settings {
+        let settings = crate::views::monitor::Settings {
             pulse_torque: o.pulse_nm,
             pulse_duration: o.pulse_ms / 1e3,
             field_beta: o.field_beta,
             window_s: o.window_s,
         };
-        return crate::monitor::run(namespace, settings, &stop).runtime();
+        return crate::views::monitor::run(namespace, settings, &stop).runtime();
     }
     let mut shown = 0u64;
     monitor(

@@ -3,11 +3,11 @@
 //! paper's claims beside ours.
 
 use crate::cli::{Classify, input_error, print_json};
-use crate::experiment::{
+use crate::progress::Progress;
+use crate::studies::experiment::{
     ExperimentError, ExperimentRun, Figure, delay_markdown, results_markdown, run,
     run_delay_sweeps, to_json, write_delay_outputs, write_outputs,
 };
-use crate::progress::Progress;
 use std::path::{Path, PathBuf};
 
 /// The Monte Carlo every figure runs with, and where its scenarios are.

@@ -151,12 +151,12 @@ fn plot_trials(
 ) -> anyhow::Result<()> {
     // The figure names the execution in words ("delayed feedback (20 steps)").
     let title = feedback.to_string();
-    let column = crate::experiment::column_plot(&title, plan, scenario, trials);
+    let column = crate::studies::experiment::column_plot(&title, plan, scenario, trials);
     let svg = png.with_extension("svg");
     if scenario.model.dof() == 2 {
-        crate::plot::arm_figure(&[column], png, &svg).runtime()
+        crate::views::plot::arm_figure(&[column], png, &svg).runtime()
     } else {
-        crate::plot::joint_figure(&[column], png, &svg).runtime()
+        crate::views::plot::joint_figure(&[column], png, &svg).runtime()
     }
 }
 

@@ -3,8 +3,8 @@
 use clap::ValueEnum;
 use std::path::PathBuf;
 use vic::cli::{JsonArg, SeedArgs};
-use vic::experiment::Figure;
 use vic::reproduce::{FigureRunOptions, experiment};
+use vic::studies::experiment::Figure;
 
 #[derive(Clone, Copy, ValueEnum)]
 enum FigureArg {

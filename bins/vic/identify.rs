@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 use vic::cli::JsonArg;
-use vic::identify::IdentifyOptions;
+use vic::studies::identify::IdentifyOptions;
 
 #[derive(clap::Args)]
 pub struct IdentifyArgs {

@@ -1,9 +1,11 @@
-//! `vic sweep latency`: flags, then [`vic::sweep`].
+//! `vic sweep latency`: flags, then [`vic::studies::sweep`].
 
 use std::path::PathBuf;
 use vic::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
 use vic::progress::Progress;
-use vic::sweep::{Engine, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs};
+use vic::studies::sweep::{
+    Engine, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs,
+};
 
 #[derive(clap::Args)]
 pub struct SweepArgs {

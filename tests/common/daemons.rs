@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use vic::report::StrategyResult;
+use vic::views::report::StrategyResult;
 
 pub const CONFIG: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),

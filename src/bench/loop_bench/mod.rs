@@ -7,7 +7,7 @@
 mod measure;
 mod variants;
 
-pub use crate::launch::board_config;
+pub use crate::daemons::launch::board_config;
 pub use measure::hold_slice;
 pub use variants::{HEADLINE, Variant, variants};
 

@@ -372,7 +372,7 @@ pub fn column_plot(
     plan: &PlanFile,
     scenario: &Scenario,
     trials: &[Trial],
-) -> crate::plot::ColumnPlot {
+) -> crate::views::plot::ColumnPlot {
     let model = &scenario.model;
     let dof = model.dof();
     let hand = |x: &[f64]| -> [f64; 2] { model.plant.hand_position(&x[..2]) };
@@ -384,7 +384,7 @@ pub fn column_plot(
     } else {
         vec![]
     };
-    crate::plot::ColumnPlot {
+    crate::views::plot::ColumnPlot {
         title: title.to_string(),
         time: plan.time.clone(),
         dof,
@@ -470,7 +470,7 @@ pub fn write_outputs(run: &ExperimentRun, dir: &Path) -> Result<Vec<PathBuf>, St
     let text = serde_json::to_string_pretty(&to_json(run)).map_err(|e| e.to_string())?;
     std::fs::write(&json_path, text)
         .map_err(|e| format!("cannot write {}: {e}", json_path.display()))?;
-    let mut plots: Vec<crate::plot::ColumnPlot> = run
+    let mut plots: Vec<crate::views::plot::ColumnPlot> = run
         .columns
         .iter()
         .zip(&run.data)
@@ -485,10 +485,10 @@ pub fn write_outputs(run: &ExperimentRun, dir: &Path) -> Result<Vec<PathBuf>, St
                 let light = plots[4].ellipse;
                 plots[3].dashed_ellipse = light;
             }
-            crate::plot::arm_figure(&plots, &png, &svg).map_err(|e| e.to_string())?;
+            crate::views::plot::arm_figure(&plots, &png, &svg).map_err(|e| e.to_string())?;
         }
         Figure::Fig2 | Figure::Icub => {
-            crate::plot::joint_figure(&plots, &png, &svg).map_err(|e| e.to_string())?;
+            crate::views::plot::joint_figure(&plots, &png, &svg).map_err(|e| e.to_string())?;
         }
     }
     Ok(vec![json_path, png, svg])

@@ -5,7 +5,7 @@
 //! waits for an acknowledgement.
 
 use super::{Action, App, Key, Settings, draw};
-use crate::operator::{OperatorError, Request, inject};
+use crate::views::operator::{OperatorError, Request, inject};
 use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind, KeyModifiers};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
@@ -30,7 +30,11 @@ const SILENT: Duration = Duration::from_secs(1);
 const ACK_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// The board's answer to one request, from the sending thread.
-type Answer = (String, Request, Result<crate::operator::Ack, OperatorError>);
+type Answer = (
+    String,
+    Request,
+    Result<crate::views::operator::Ack, OperatorError>,
+);
 
 /// Runs the live view of the board in `namespace` until `q`, Esc, Ctrl-C or `stop` is set.
 pub fn run(namespace: &str, settings: Settings, stop: &AtomicBool) -> Result<(), MonitorError> {

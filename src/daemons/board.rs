@@ -102,7 +102,7 @@ impl RtArgs {
 
 /// Runs the board until the duration ends or a signal stops it, then prints its statistics.
 pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
-    crate::logging::init(o.log_level.as_deref())?;
+    crate::daemons::logging::init(o.log_level.as_deref())?;
     let _log = tracing::info_span!("vic-board").entered();
     if o.rate_hz == 0 || o.rate_hz > 10_000 {
         return Err(input_error(format!(
@@ -203,7 +203,7 @@ fn load_with_hold_stiffness(o: &BoardOptions) -> anyhow::Result<Scenario> {
 /// The board of `scenario` ticking every `period_ns`, at rest at the scenario's start.
 fn board_of(scenario: &Scenario, period_ns: u64) -> anyhow::Result<Board> {
     let setup = setup(scenario).input()?;
-    let cfg = crate::launch::board_config(scenario, period_ns);
+    let cfg = crate::daemons::launch::board_config(scenario, period_ns);
     Board::new(scenario.model.clone(), cfg, &setup.x0).input()
 }
 

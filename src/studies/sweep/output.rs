@@ -105,14 +105,18 @@ impl Sweep {
 
 /// The sweep's figure: final error (mean, spread to the worst trial) against the latency, one line
 /// per strategy, PNG and SVG.
-pub fn write_figure(sweep: &Sweep, png: &Path, svg: &Path) -> Result<(), crate::plot::PlotError> {
-    let mut curves: Vec<crate::plot::Curve> = Vec::new();
+pub fn write_figure(
+    sweep: &Sweep,
+    png: &Path,
+    svg: &Path,
+) -> Result<(), crate::views::plot::PlotError> {
+    let mut curves: Vec<crate::views::plot::Curve> = Vec::new();
     for p in &sweep.points {
         let name = p.strategy.name();
         let i = match curves.iter().position(|c| c.name == name) {
             Some(i) => i,
             None => {
-                curves.push(crate::plot::Curve {
+                curves.push(crate::views::plot::Curve {
                     name: name.into(),
                     points: Vec::new(),
                 });
@@ -124,7 +128,7 @@ pub fn write_figure(sweep: &Sweep, png: &Path, svg: &Path) -> Result<(), crate::
             .push((p.latency_ms, p.final_error_mean, p.final_error_max));
     }
     let unit = sweep.points.first().map_or("", |p| p.unit.name());
-    crate::plot::curve_figure(
+    crate::views::plot::curve_figure(
         &curves,
         &format!(
             "Delay versus stiffness: {} ({} trials)",
@@ -142,7 +146,7 @@ pub fn write_figure(sweep: &Sweep, png: &Path, svg: &Path) -> Result<(), crate::
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sweep::{Engine, LiveTiming, SweepPoint};
+    use crate::studies::sweep::{Engine, LiveTiming, SweepPoint};
     use vic_core::policy::Strategy;
     use vic_plan::unit::Unit;
 

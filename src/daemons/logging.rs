@@ -81,7 +81,7 @@ mod tests {
             assert_eq!(level(&t, "vic::demo"), Some(Level::INFO));
         }
         let t = filter(Some("vic=trace,error"), None).unwrap();
-        assert_eq!(level(&t, "vic::board_daemon"), Some(Level::TRACE));
+        assert_eq!(level(&t, "vic::daemons::board"), Some(Level::TRACE));
         assert_eq!(level(&t, "iceoryx2"), Some(Level::ERROR));
         assert_eq!(
             filter(Some("off"), None).unwrap().default_level(),

@@ -68,7 +68,7 @@ pub enum SweepError {
     Pulse,
     /// The figure could not be drawn or written (the error names its file).
     #[error(transparent)]
-    Figure(#[from] crate::plot::PlotError),
+    Figure(#[from] crate::views::plot::PlotError),
     /// The folder or the numbers could not be written.
     #[error("{}: {source}", path.display())]
     Write {
@@ -350,17 +350,17 @@ pub fn sweep_latency(
 /// (one file per plan of the sweep, written when a point first needs it). Dropping it stops the
 /// board and removes the namespace and the plans.
 struct LiveRig<'a> {
-    scenario: crate::live::ScenarioFile<'a>,
+    scenario: crate::daemons::live::ScenarioFile<'a>,
     namespace: String,
     planner: std::path::PathBuf,
-    store: crate::live::PlanStore,
+    store: crate::daemons::live::PlanStore,
     _board: vic_rt::daemon::Children,
 }
 
 impl<'a> LiveRig<'a> {
     fn start(path: &'a Path, overrides: &'a [String]) -> Result<Self, SweepError> {
         use crate::cli::sibling_binary;
-        use crate::live::{BoardFlags, PlanStore, ScenarioFile, start_board};
+        use crate::daemons::live::{BoardFlags, PlanStore, ScenarioFile, start_board};
         let namespace = format!("sweep{}", std::process::id());
         let scenario = ScenarioFile {
             config: path,
@@ -391,8 +391,8 @@ impl<'a> LiveRig<'a> {
         strategy: Strategy,
         latency_ms: f64,
         opts: &SweepOptions,
-    ) -> anyhow::Result<(crate::report::StrategyResult, Vec<Trial>)> {
-        use crate::live::{PlannerRun, run_planner};
+    ) -> anyhow::Result<(crate::views::report::StrategyResult, Vec<Trial>)> {
+        use crate::daemons::live::{PlannerRun, run_planner};
         let file = self.store.dir().join(format!("plan-{i}.json"));
         if !file.is_file() {
             self.store.save(&file, plan)?;
@@ -411,7 +411,7 @@ impl<'a> LiveRig<'a> {
         let result = run_planner(&self.planner, self.scenario, &self.namespace, &run)?;
         let text = std::fs::read_to_string(&traj)
             .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", traj.display()))?;
-        let trajectories: crate::report::Trajectories = serde_json::from_str(&text)
+        let trajectories: crate::views::report::Trajectories = serde_json::from_str(&text)
             .map_err(|e| anyhow::anyhow!("{}: not trajectories: {e}", traj.display()))?;
         Ok((result, trajectories.to_trials()))
     }
@@ -450,10 +450,10 @@ fn lockstep_trials(
         latency_ms: point.latency.ms(),
         source: e,
     };
-    let track = crate::launch::track(plan, set).map_err(|e| fail(e.into()))?;
+    let track = crate::daemons::launch::track(plan, set).map_err(|e| fail(e.into()))?;
     let timing = Timing::split(point.latency, CENTRAL_PERIOD_NS);
     let mut central = Central::new(track, point.strategy, timing);
-    let cfg = crate::launch::board_config(s, BOARD_PERIOD_NS);
+    let cfg = crate::daemons::launch::board_config(s, BOARD_PERIOD_NS);
     let mut board =
         vic_rt::board::Board::new(s.model.clone(), cfg, &set.x0).map_err(|e| fail(e.into()))?;
     let records = lockstep(
@@ -464,5 +464,5 @@ fn lockstep_trials(
         opts.trials,
         opts.seed,
     );
-    Ok(crate::report::to_trials(set, &records))
+    Ok(crate::views::report::to_trials(set, &records))
 }

@@ -9,7 +9,7 @@ use crate::cli::{
     Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, SeedArgs, divergence_or_default,
     input_error, latency_arg, non_negative_seconds, print_json, stop_on_signal,
 };
-use crate::report::{StrategyResult, Trajectories};
+use crate::views::report::{StrategyResult, Trajectories};
 use std::path::PathBuf;
 use std::time::Duration;
 use vic_plan::plan::{PlanFile, setup};
@@ -94,7 +94,7 @@ impl CentralOptions {
 
 /// Plays the plan for the trials and prints their summary.
 pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
-    crate::logging::init(o.log_level.as_deref())?;
+    crate::daemons::logging::init(o.log_level.as_deref())?;
     let _log = tracing::info_span!("vic-planner").entered();
     o.board_timeout()?;
     if o.rate_hz == 0 || o.rate_hz > 1000 || o.trials == 0 {
@@ -132,7 +132,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     let lookahead_ms = Timing::lookahead_ms(period_ns);
     let lines = delay_lines(o, latency, period_ns)?;
     let setup = setup(&base).input()?;
-    let track = crate::launch::track(&plan, &setup).input()?;
+    let track = crate::daemons::launch::track(&plan, &setup).input()?;
     let timing = Timing::new(latency, period_ns, lines);
     let mut central = Central::new(track, o.strategy, timing);
     tracing::info!(
@@ -160,7 +160,7 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     }
     let divergence = divergence_or_default(o.divergence, &setup.dynamics.model);
     if !records.is_empty() || lost.is_none() {
-        let result = crate::report::summarize(&setup, &central, &records, divergence);
+        let result = crate::views::report::summarize(&setup, &central, &records, divergence);
         if o.json.json {
             print_json(&result)?;
         } else {
@@ -187,7 +187,7 @@ fn run_trials(
 ) -> anyhow::Result<Result<Vec<TrialRecord>, LiveError>> {
     let Some(ep) = ports.filter(|_| !o.lockstep) else {
         let s = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
-        let cfg = crate::launch::board_config(&s, 1_000_000);
+        let cfg = crate::daemons::launch::board_config(&s, 1_000_000);
         let mut board = vic_rt::board::Board::new(s.model.clone(), cfg, x0).input()?;
         return Ok(Ok(lockstep(
             &mut board,

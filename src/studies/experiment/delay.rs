@@ -1,9 +1,11 @@
 //! The "Delay versus stiffness" section of docs/RESULTS.md: the latency sweep
-//! ([`crate::sweep`]) for the single joint of Fig. 2 and the two-link arm in the divergent
+//! ([`crate::studies::sweep`]) for the single joint of Fig. 2 and the two-link arm in the divergent
 //! field of Fig. 1, its figures, its table and the latency at which the best delayed feedback
 //! (the predictor) stops beating the open-loop stiffness plan.
 
-use crate::sweep::{Strategy, Sweep, SweepOptions, SweepPoint, sweep_latency, write_figure};
+use crate::studies::sweep::{
+    Strategy, Sweep, SweepOptions, SweepPoint, sweep_latency, write_figure,
+};
 use std::path::{Path, PathBuf};
 
 /// The latencies of the section [ms].
@@ -26,10 +28,10 @@ pub enum DelaySweepError {
     #[error("{}: {source}", scenario.display())]
     Sweep {
         scenario: PathBuf,
-        source: Box<crate::sweep::SweepError>,
+        source: Box<crate::studies::sweep::SweepError>,
     },
     #[error(transparent)]
-    Plot(#[from] crate::plot::PlotError),
+    Plot(#[from] crate::views::plot::PlotError),
     #[error("cannot write {}: {source}", path.display())]
     Write {
         path: PathBuf,

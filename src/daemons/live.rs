@@ -4,7 +4,7 @@
 //! same strategy, latency and seed are the same run.
 
 use crate::cli::Classify;
-use crate::report::StrategyResult;
+use crate::views::report::StrategyResult;
 use anyhow::{Context, anyhow, bail};
 use serde_json::Value;
 use std::path::{Path, PathBuf};

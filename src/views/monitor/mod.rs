@@ -7,7 +7,7 @@
 //! (updated from the board's states and telemetry, a key turns into an [`Action`]), [`draw`] renders
 //! an `App` into a frame (tested with ratatui's `TestBackend`), and [`run`] is the thin terminal
 //! loop (raw mode, the transport, the keys, sending what an action asks through
-//! [`crate::operator::inject`]).
+//! [`crate::views::operator::inject`]).
 
 mod draw;
 mod run;
@@ -15,7 +15,7 @@ mod run;
 pub use draw::draw;
 pub use run::run;
 
-use crate::operator::{Ack, OperatorError, Request, Status};
+use crate::views::operator::{Ack, OperatorError, Request, Status};
 use std::collections::VecDeque;
 use vic_rt::transport::{MAX_JOINTS, StateMsg, Telemetry};
 
