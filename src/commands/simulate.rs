@@ -42,7 +42,7 @@ pub enum PolicyArg {
 #[command(mut_arg("config", |a| a.help(
     "Scenario file (TOML): the plant the plan runs on (it may differ from the plan's, e.g. in noise)"
 )))]
-pub struct SimulateOptions {
+pub(crate) struct Args {
     #[command(flatten)]
     pub scenario: ScenarioArgs,
     /// Plan file written by `vic plan --out`.
@@ -88,7 +88,7 @@ impl PolicyArg {
     }
 }
 
-impl SimulateOptions {
+impl Args {
     /// How `--policy` at `--latency-ms` executes `plan` on a grid of `dt` s: the strategy's
     /// feedback at the latency (default: the plan's delay for the naive law, which its gains
     /// were made for, else 0).
@@ -108,7 +108,8 @@ impl SimulateOptions {
 }
 
 /// Runs the trials, writes the CSV and the plot if asked, prints the report.
-pub fn run(o: &SimulateOptions) -> anyhow::Result<()> {
+pub(crate) fn run(o: Args) -> anyhow::Result<()> {
+    let o = &o;
     let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
     let plan = PlanFile::read(&o.plan).input()?;
     let setup = setup(&scenario).input()?;
@@ -161,7 +162,7 @@ fn plot_trials(
 }
 
 fn print_report(
-    o: &SimulateOptions,
+    o: &Args,
     plan: &PlanFile,
     feedback: Feedback,
     report: &Report,

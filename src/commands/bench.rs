@@ -1,13 +1,16 @@
-//! `vic bench loop` and `vic bench ipc`: flags, then [`vic::bench_command`].
+//! `vic bench loop`, `vic bench ipc` and `vic bench bridge`: check what the user asked for, run
+//! the benchmark, print its report (JSON or a table). The measuring is [`crate::bench`]'s.
 
+use crate::bench::{cyclictest, ipc, loop_bench};
+use crate::cli::{
+    Classify, DefaultScenarioArgs, JsonArg, input_error, print_report, sibling_binary,
+};
+use anyhow::anyhow;
 use clap::Subcommand;
 use std::path::PathBuf;
-use vic::bench::loop_bench;
-use vic::bench_command::{PairRequest, run_ipc, run_loop};
-use vic::cli::{DefaultScenarioArgs, JsonArg};
 
 #[derive(clap::Args)]
-pub struct BenchArgs {
+pub(crate) struct Args {
     #[command(subcommand)]
     which: BenchCommand,
 }
@@ -127,38 +130,114 @@ struct BenchIpcArgs {
     json: JsonArg,
 }
 
-impl BenchArgs {
-    pub fn run(self) -> anyhow::Result<()> {
-        match self.which {
-            BenchCommand::Loop(a) => {
-                let opts = loop_bench::Options {
-                    seconds: a.seconds,
-                    config: a.scenario.config,
-                    overrides: a.scenario.set.overrides,
-                    variants: a.variants,
-                    baseline: !a.no_baseline,
-                };
-                run_loop(&opts, a.require_baseline, a.json.json)
-            }
-            BenchCommand::Ipc(a) => {
-                let pair = PairRequest {
-                    config: a.scenario.config,
-                    overrides: a.scenario.set.overrides,
-                    plan: a.plan,
-                    trials: a.pair_trials,
-                };
-                run_ipc(a.iterations, pair, a.json.json)
-            }
-            #[cfg(feature = "zenoh")]
-            BenchCommand::Bridge(a) => vic::bench_command::run_bridge(
-                &vic::bench::bridge::Options {
-                    iterations: a.iterations,
-                    port: a.port,
-                    spin: a.spin,
-                    trace: a.trace,
-                },
-                a.json.json,
-            ),
+/// Runs the benchmark asked for.
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    match args.which {
+        BenchCommand::Loop(a) => {
+            let opts = loop_bench::Options {
+                seconds: a.seconds,
+                config: a.scenario.config,
+                overrides: a.scenario.set.overrides,
+                variants: a.variants,
+                baseline: !a.no_baseline,
+            };
+            run_loop(&opts, a.require_baseline, a.json.json)
+        }
+        BenchCommand::Ipc(a) => {
+            let pair = PairRequest {
+                config: a.scenario.config,
+                overrides: a.scenario.set.overrides,
+                plan: a.plan,
+                trials: a.pair_trials,
+            };
+            run_ipc(a.iterations, pair, a.json.json)
+        }
+        #[cfg(feature = "zenoh")]
+        BenchCommand::Bridge(a) => run_bridge(
+            &crate::bench::bridge::Options {
+                iterations: a.iterations,
+                port: a.port,
+                spin: a.spin,
+                trace: a.trace,
+            },
+            a.json.json,
+        ),
+    }
+}
+
+/// Progress lines on stderr, unless the output is JSON.
+fn progress(json: bool) -> impl FnMut(&str) {
+    move |m: &str| {
+        if !json {
+            eprintln!("running: {m}");
         }
     }
+}
+
+/// The board's loop against cyclictest; `require_baseline` fails when cyclictest is missing.
+fn run_loop(opts: &loop_bench::Options, require_baseline: bool, json: bool) -> anyhow::Result<()> {
+    if !opts.config.is_file() {
+        return Err(input_error(format!(
+            "{}: no such scenario file",
+            opts.config.display()
+        )));
+    }
+    if require_baseline && cyclictest::find().is_none() {
+        return Err(anyhow!(
+            "cyclictest not found: {}",
+            cyclictest::INSTALL_HINT
+        ));
+    }
+    let names: Vec<&str> = loop_bench::variants().iter().map(|v| v.name).collect();
+    if let Some(bad) = opts.variants.iter().find(|v| !names.contains(&v.as_str())) {
+        return Err(input_error(format!(
+            "--variant {bad}: choose from {}",
+            names.join(", ")
+        )));
+    }
+    let report = loop_bench::run(opts, progress(json)).runtime()?;
+    print_report(&report, json, loop_bench::print)
+}
+
+/// The running pair of `vic bench ipc` as the user gave it (the binaries are found here).
+#[derive(Debug, Clone)]
+struct PairRequest {
+    config: PathBuf,
+    overrides: Vec<String>,
+    plan: PathBuf,
+    /// Trials of the pair (0 skips it).
+    trials: u64,
+}
+
+/// The transport against a bare iceoryx2 ping-pong, then the running pair.
+fn run_ipc(iterations: u64, pair: PairRequest, json: bool) -> anyhow::Result<()> {
+    let pair = if pair.trials == 0 {
+        None
+    } else {
+        if !pair.plan.is_file() {
+            return Err(input_error(format!(
+                "--plan {}: no such file (make one with `vic plan --method sooc --out FILE`, \
+                 or skip the running pair with --pair-trials 0)",
+                pair.plan.display()
+            )));
+        }
+        Some(ipc::PairOptions {
+            board_bin: sibling_binary("vic-board")?,
+            planner_bin: sibling_binary("vic-planner")?,
+            config: pair.config,
+            overrides: pair.overrides,
+            plan: pair.plan,
+            trials: pair.trials,
+        })
+    };
+    let report = ipc::run(&ipc::Options { iterations, pair }, progress(json)).runtime()?;
+    print_report(&report, json, ipc::print)
+}
+
+/// Two bridges on loopback against bare Zenoh and shared memory (`vic bench bridge`).
+#[cfg(feature = "zenoh")]
+fn run_bridge(opts: &crate::bench::bridge::Options, json: bool) -> anyhow::Result<()> {
+    use crate::bench::bridge;
+    let report = bridge::run(opts, progress(json)).runtime()?;
+    print_report(&report, json, bridge::print)
 }

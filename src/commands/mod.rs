@@ -1,23 +1,26 @@
-//! `vic`: the command-line front end. Each subcommand's file parses its flags and makes one call
-//! into the `vic` library (where the flags are a library type, that type is the subcommand);
-//! errors end the process with exit code 2 (bad input) or 1 (a failure).
+//! The `vic` command line: [`Cli`] (what `bins/vic.rs` parses) and one module per
+//! subcommand, each with its flags (a clap `Args`) and its `run`, from the flags as typed to the
+//! printed report. A module checks what clap cannot (ranges of seconds, namespaces, latencies on
+//! the plan's grid) and calls the studies, daemons and views for the work; errors carry the exit
+//! code of [`crate::cli`]'s convention (2: the user's input, 1: a failure).
 
 mod bench;
 #[cfg(feature = "zenoh")]
 mod bridge;
 mod convert;
+mod demo;
 mod experiment;
 mod identify;
 mod inject;
 mod monitor;
 mod plan;
-mod record;
+pub mod record;
 mod results;
+mod simulate;
 mod status;
 mod sweep;
 
 use clap::{Parser, Subcommand};
-use std::process::ExitCode;
 
 /// Plan and run variable-impedance control under noise, unstable force fields and feedback
 /// delays.
@@ -26,7 +29,7 @@ use std::process::ExitCode;
 /// `--set section.key=value` to override any key, e.g. `--set noise.sigma=0.1`.
 #[derive(Parser)]
 #[command(name = "vic", version, about, long_about)]
-struct Cli {
+pub struct Cli {
     #[command(subcommand)]
     command: Command,
 }
@@ -37,29 +40,29 @@ enum Command {
     /// write) the plan.
     ///
     /// Example: vic plan --config config/icub_elbow.toml --out plan.json
-    Plan(plan::PlanArgs),
+    Plan(plan::Args),
     /// Monte Carlo of a plan on the stochastic plant: spread, 95 % ellipse, tracking error,
     /// divergence and the expected cost, next to the plan's prediction.
     ///
     /// Example: vic simulate --config config/two_link_divergent.toml --plan plan.json --policy open-loop
-    Simulate(vic::simulate::SimulateOptions),
+    Simulate(simulate::Args),
     /// Reproduce a figure of the paper: plan and simulate every column, write the plots (PNG and
     /// SVG) and a JSON of the numbers into --out-dir, print a table.
     ///
     /// Example: vic experiment fig1 --trials 20 --out-dir results
-    Experiment(experiment::ExperimentArgs),
+    Experiment(experiment::Args),
     /// Regenerate docs/RESULTS.md: run fig1, fig2 and icub, write their figures and numbers into
     /// --out-dir/figures and the document that sets the paper's claims beside our numbers.
     ///
     /// Example: vic results --out-dir docs
-    Results(results::ResultsArgs),
+    Results(results::Args),
     /// Delay versus stiffness as a curve: for each feedback latency and strategy (naive-delayed,
     /// predictor, stiffness, stiffness+predictor, replan), plan, run the trials (Monte Carlo by
     /// default, --lockstep or --live on the daemons) and report the final error, divergence and
     /// cost; --pulse adds a torque pulse no controller knows of; --out-dir receives the figure.
     ///
     /// Example: vic sweep latency --config config/single_joint_delay.toml --out-dir sweep
-    Sweep(sweep::SweepArgs),
+    Sweep(sweep::Args),
     /// Run the real-time pair: start a board and a planner in a fresh namespace, run the five
     /// strategies of a central controller (naive-delayed, predictor, stiffness,
     /// stiffness+predictor, replan) at --latency-ms with the same noise seeds, and naive-delayed
@@ -68,19 +71,19 @@ enum Command {
     /// down.
     ///
     /// Example: vic demo --latency-ms 200 --trials 3
-    Demo(vic::demo::DemoOptions),
+    Demo(demo::Args),
     /// Send a disturbance to a running board and report the tick that applied it (read from its
     /// state stream), or fail (exit 1) when no board answers or it rejects the disturbance.
     ///
     /// Examples: vic inject pulse --torque 2,0 --duration-ms 50;  vic inject field --beta 0;
     /// vic inject load --torque 0,0.5;  vic inject noise --factor 2
-    Inject(inject::InjectArgs),
+    Inject(inject::Args),
     /// One snapshot of a running board's telemetry: mode (running / safe-hold / fault), tick
     /// rate, jitter, work time, command age, tracking error, stiffness, disturbances, rejected
     /// messages by reason.
     ///
     /// Example: vic status --namespace lab1 --json
-    Status(status::StatusArgs),
+    Status(status::Args),
     /// Watch a running board live: on a terminal a live view (the board's mode, rolling plots of
     /// the joint angles, tracking error, stiffness and torque, the loop's jitter and late ticks,
     /// command age, rejections by reason, the disturbances in force); piped, with --plain or with
@@ -90,25 +93,25 @@ enum Command {
     /// the field on and off, r clears the plots and the disturbances, q / Esc / Ctrl-C quit.
     ///
     /// Example: vic monitor --namespace lab1
-    Monitor(monitor::MonitorArgs),
+    Monitor(monitor::Args),
     /// One end of a namespace split across two hosts over Zenoh: beside the board
     /// (`--side board`) or beside the central process (`--side central`). Messages cross as
     /// their wire bytes with the sender's session, sequence number and time stamp.
     ///
     /// Example: vic bridge --side board --namespace lab1 --listen tcp/0.0.0.0:7447
     #[cfg(feature = "zenoh")]
-    Bridge(bridge::BridgeArgs),
+    Bridge(bridge::Args),
     /// Record a running namespace to MCAP from outside the board: states (1 kHz), command
     /// slices, control requests, disturbances and telemetry, each on its own JSON-schema channel
     /// (Foxglove and PlotJuggler open it as it is). States it missed are counted and marked.
     ///
     /// Example: vic record --namespace lab1 --out run.mcap --duration 60
-    Record(record::RecordArgs),
+    Record(record::Args),
     /// Convert a board's MCAP recording (vic-board --record run.mcap) to the CSV log that
     /// vic identify reads (gaps marked as in the board's own CSV).
     ///
     /// Example: vic convert run.mcap --csv run.csv
-    Convert(convert::ConvertArgs),
+    Convert(convert::Args),
     /// Identify the joint's torque noise from a log, the paper's procedure (Sec. III-B): bin the
     /// torque error by velocity, fit its mean and standard deviation with polynomials, estimate
     /// (a, b) of e = (a + b q') η by maximum likelihood and test the residual η for normality
@@ -119,38 +122,35 @@ enum Command {
     /// scenario), else the iCub forearm's.
     ///
     /// Example: vic identify --log elbow.csv --config config/icub_experiment.toml
-    Identify(identify::IdentifyArgs),
+    Identify(identify::Args),
     /// Benchmark against the machine's own limits: the board's 1 kHz loop against cyclictest,
     /// the transport against a bare iceoryx2 ping-pong (same run, both distributions, ratios).
     ///
     /// Example: vic bench loop --seconds 30 --json
-    Bench(bench::BenchArgs),
+    Bench(bench::Args),
 }
 
-impl Command {
-    fn run(self) -> anyhow::Result<()> {
-        match self {
-            Command::Plan(a) => a.run(),
-            Command::Simulate(o) => vic::simulate::run(&o),
-            Command::Experiment(a) => a.run(),
-            Command::Results(a) => a.run(),
-            Command::Demo(o) => vic::demo::run(&o),
-            Command::Inject(a) => a.run(),
-            Command::Status(a) => a.run(),
-            Command::Monitor(a) => a.run(),
+impl Cli {
+    /// Runs the subcommand.
+    pub fn run(self) -> anyhow::Result<()> {
+        match self.command {
+            Command::Plan(a) => plan::run(a),
+            Command::Simulate(a) => simulate::run(a),
+            Command::Experiment(a) => experiment::run(a),
+            Command::Results(a) => results::run(a),
+            Command::Demo(a) => demo::run(a),
+            Command::Inject(a) => inject::run(a),
+            Command::Status(a) => status::run(a),
+            Command::Monitor(a) => monitor::run(a),
             #[cfg(feature = "zenoh")]
-            Command::Bridge(a) => a.run(),
-            Command::Identify(a) => a.run(),
-            Command::Record(a) => a.run(),
-            Command::Convert(a) => a.run(),
-            Command::Bench(a) => a.run(),
-            Command::Sweep(a) => a.run(),
+            Command::Bridge(a) => bridge::run(a),
+            Command::Identify(a) => identify::run(a),
+            Command::Record(a) => record::run(a),
+            Command::Convert(a) => convert::run(a),
+            Command::Bench(a) => bench::run(a),
+            Command::Sweep(a) => sweep::run(a),
         }
     }
-}
-
-fn main() -> ExitCode {
-    vic::cli::finish("vic", Cli::parse().command.run())
 }
 
 #[cfg(test)]

@@ -1,47 +1,68 @@
 //! `vic plan`: solve a scenario's stochastic optimal control problem (ILQG for the scenario's
 //! feedback delay, or SOOC for open-loop execution), write the plan file and report its summary.
 
-use crate::cli::{Classify, latency_arg, print_json};
+use crate::cli::{Classify, JsonArg, ScenarioArgs, latency_arg, print_json};
 use crate::progress::Progress;
+use clap::ValueEnum;
 use std::path::PathBuf;
 use vic_plan::plan::{Method, PlanFile, plan};
 use vic_plan::plan_file::PlanSummary;
 use vic_plan::scenario::Scenario;
 
-/// What `vic plan` was asked for.
-#[derive(Debug, Clone)]
-pub struct PlanOptions {
-    pub config: PathBuf,
-    pub overrides: Vec<String>,
-    /// The planning method (default: the scenario's `[solver] method`).
-    pub method: Option<Method>,
-    /// The central feedback latency the plan is made for [ms], instead of `task.delay_ms`.
-    pub latency_ms: Option<f64>,
-    /// Where to write the plan file.
-    pub out: Option<PathBuf>,
-    pub json: bool,
+#[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    /// Iterative LQG: a nominal plan with locally optimal feedback gains (Todorov & Li 2005),
+    /// made for the scenario's feedback delay.
+    Ilqg,
+    /// Stochastic optimal open-loop control: torque and stiffness for execution without any
+    /// feedback, optimal for the open-loop plant's mean and covariance (Berret & Jean 2020).
+    Sooc,
+}
+
+#[derive(clap::Args)]
+#[command(mut_arg("json", |a| a.help("Print one JSON object with the summary instead of the readable report")))]
+pub(crate) struct Args {
+    #[command(flatten)]
+    scenario: ScenarioArgs,
+    /// Planning method (default: the scenario's [solver] method, else ilqg).
+    #[arg(long, value_enum)]
+    method: Option<MethodArg>,
+    /// Feedback latency of the central controller the plan is made for [ms] (a whole number of
+    /// time steps); instead of task.delay_ms.
+    #[arg(long, value_name = "MS", alias = "delay-ms")]
+    latency_ms: Option<f64>,
+    /// Write the plan (time grid, controls, states, gains, resolved config) to this JSON file.
+    #[arg(long, short, value_name = "FILE")]
+    out: Option<PathBuf>,
+    #[command(flatten)]
+    json: JsonArg,
 }
 
 /// Plans the scenario, writes the plan file if asked and prints the summary (JSON or text).
-pub fn run(o: &PlanOptions) -> anyhow::Result<()> {
-    let mut scenario = Scenario::load(&o.config, &o.overrides).input()?;
-    if let Some(ms) = o.latency_ms {
+pub(crate) fn run(a: Args) -> anyhow::Result<()> {
+    let config = &a.scenario.config;
+    let mut scenario = Scenario::load(config, &a.scenario.set.overrides).input()?;
+    if let Some(ms) = a.latency_ms {
         let latency = latency_arg("--latency-ms", ms, scenario.task.dt)?;
         scenario = scenario.with_delay(latency);
     }
-    let method = o.method.unwrap_or(scenario.solver.method);
+    let method = match a.method {
+        Some(MethodArg::Ilqg) => Method::Ilqg,
+        Some(MethodArg::Sooc) => Method::Sooc,
+        None => scenario.solver.method,
+    };
     let progress = Progress::spinner();
     let plan = plan(&scenario, method, progress.solver_callback())
-        .map_err(|e| format!("{}: {e}", o.config.display()))
+        .map_err(|e| format!("{}: {e}", config.display()))
         .input()?;
     drop(progress);
-    if let Some(out) = &o.out {
+    if let Some(out) = &a.out {
         plan.write(out).runtime()?;
     }
-    if o.json {
+    if a.json.json {
         print_json(&plan.summary)
     } else {
-        print_summary(&plan, o.out.as_ref());
+        print_summary(&plan, a.out.as_ref());
         Ok(())
     }
 }

@@ -10,14 +10,16 @@
 //! the table's JSON in `--out-dir`. The processes and the namespace's files do not outlive the
 //! run, however it ends.
 
+mod distributed;
+
 use crate::cli::{Classify, DefaultScenarioArgs, JsonArg, SeedArgs, latency_arg, sibling_binary};
 use crate::daemons::live::{
     BoardFlags, PlanStore, PlannerRun, ScenarioFile, run_planner, start_board, stop_board,
 };
-use crate::demo_distributed::{DistributedLink, describe};
 use crate::studies::experiment::column_plot;
 use crate::views::report::{StrategyResult, Trajectories};
 use anyhow::anyhow;
+use distributed::{DistributedLink, describe};
 use serde_json::Value;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -38,7 +40,7 @@ use vic_rt::daemon::Children;
     mut_arg("seed", |a| a.help("Seed of the board's noise (the same for every strategy)")),
     mut_arg("json", |a| a.help("Print one JSON object instead of the table")),
 )]
-pub struct DemoOptions {
+pub(crate) struct Args {
     #[command(flatten)]
     pub scenario: DefaultScenarioArgs,
     /// Feedback latency of the central controller [ms] (a whole number of plan steps).
@@ -80,7 +82,7 @@ pub struct DemoOptions {
     pub json: JsonArg,
 }
 
-impl DemoOptions {
+impl Args {
     /// The scenario the board and the planners load.
     fn scenario_file(&self) -> ScenarioFile<'_> {
         ScenarioFile {
@@ -111,7 +113,8 @@ struct StrategyRun<'a> {
 
 /// Plans, runs every strategy against one board, draws the trajectories, prints the comparison
 /// and the board's timing.
-pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
+pub(crate) fn run(o: Args) -> anyhow::Result<()> {
+    let o = &o;
     let scenario = Scenario::load(&o.scenario.config, &o.scenario.set.overrides).input()?;
     let latency = latency_arg("--latency-ms", o.latency_ms, scenario.task.dt)?;
     o.distributed.then(DistributedLink::available).transpose()?;
@@ -185,7 +188,7 @@ pub fn run(o: &DemoOptions) -> anyhow::Result<()> {
 /// The trials of every run side by side, like the paper's Fig. 1 (hand paths on top) for the
 /// arm, Fig. 2 for a single joint; returns the PNG and SVG paths.
 fn trajectories_figure(
-    o: &DemoOptions,
+    o: &Args,
     scenario: &Scenario,
     runs: &[StrategyRun],
 ) -> anyhow::Result<[PathBuf; 2]> {
@@ -212,11 +215,7 @@ fn trajectories_figure(
 }
 
 /// The plans of the strategies, the SOOC plan beside the ILQG ones on another thread.
-fn plan_strategies(
-    o: &DemoOptions,
-    store: &PlanStore,
-    latency: Latency,
-) -> anyhow::Result<DemoPlans> {
+fn plan_strategies(o: &Args, store: &PlanStore, latency: Latency) -> anyhow::Result<DemoPlans> {
     if std::io::stderr().is_terminal() {
         eprintln!("planning (SOOC for stiffness, ILQG for delayed feedback) ...");
     }
@@ -253,7 +252,7 @@ fn plan_strategies(
 
 /// The rows: naive-delayed at 0 ms (the reference, planner at 250 Hz so that its own loop adds
 /// only a few ms), then the five strategies at the latency (50 Hz).
-fn strategy_runs<'a>(o: &DemoOptions, plans: &'a DemoPlans) -> Vec<StrategyRun<'a>> {
+fn strategy_runs<'a>(o: &Args, plans: &'a DemoPlans) -> Vec<StrategyRun<'a>> {
     let at = |strategy, plan, latency_ms, rate_hz| StrategyRun {
         strategy,
         plan,
@@ -302,7 +301,7 @@ impl StrategyRun<'_> {
 /// The JSON document: the run's parameters, every strategy with the board's timing, the board's
 /// statistics and what was left in /dev/shm.
 fn document(
-    o: &DemoOptions,
+    o: &Args,
     results: &[StrategyResult],
     stats: &Value,
     leftover: &[String],
@@ -398,12 +397,12 @@ mod tests {
     use super::*;
 
     /// `vic demo --latency-ms LATENCY --trials 1 --json`, the other flags at their defaults.
-    fn options(latency_ms: f64) -> DemoOptions {
-        use clap::{Args, FromArgMatches};
+    fn options(latency_ms: f64) -> Args {
+        use clap::{Args as _, FromArgMatches};
         let latency = latency_ms.to_string();
         let args = ["demo", "--latency-ms", &latency, "--trials", "1", "--json"];
-        let matches = DemoOptions::augment_args(clap::Command::new("demo")).get_matches_from(args);
-        DemoOptions::from_arg_matches(&matches).expect("the flags parse")
+        let matches = Args::augment_args(clap::Command::new("demo")).get_matches_from(args);
+        Args::from_arg_matches(&matches).expect("the flags parse")
     }
 
     #[test]
@@ -414,7 +413,7 @@ mod tests {
             feedback: "f.json".into(),
             feedback_at_zero: Some("f0.json".into()),
         };
-        let rows = |o: &DemoOptions, plans: &DemoPlans| -> Vec<(&'static str, String, f64, u64)> {
+        let rows = |o: &Args, plans: &DemoPlans| -> Vec<(&'static str, String, f64, u64)> {
             strategy_runs(o, plans)
                 .iter()
                 .map(|r| {

@@ -1,14 +1,15 @@
-//! `vic sweep latency`: flags, then [`vic::studies::sweep`].
+//! `vic sweep latency`: the final error, divergence and cost against the feedback latency per
+//! strategy ([`crate::studies::sweep`]), as a table or JSON, and the figure in `--out-dir`.
 
-use std::path::PathBuf;
-use vic::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
-use vic::progress::Progress;
-use vic::studies::sweep::{
+use crate::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
+use crate::progress::Progress;
+use crate::studies::sweep::{
     Engine, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs,
 };
+use std::path::PathBuf;
 
 #[derive(clap::Args)]
-pub struct SweepArgs {
+pub(crate) struct Args {
     #[command(subcommand)]
     what: SweepWhat,
 }
@@ -73,47 +74,45 @@ struct LatencyArgs {
     json: JsonArg,
 }
 
-impl SweepArgs {
-    pub fn run(self) -> anyhow::Result<()> {
-        let SweepWhat::Latency(a) = self.what;
-        let pulse = pulse_from_flags(&a.pulse, a.pulse_at_ms, a.pulse_ms).input()?;
-        let opts = SweepOptions {
-            latencies_ms: a.latencies,
-            strategies: a.strategies,
-            trials: a.trials as usize,
-            seed: a.seed.seed,
-            divergence: a.divergence,
-            pulse,
-            execution: match (a.lockstep, a.live) {
-                (true, _) => Engine::Lockstep,
-                (_, true) => Engine::Live,
-                _ => Engine::Offline,
-            },
-        };
-        // A bar over the points on a terminal (nothing in pipes and scripts).
-        let points = opts.strategies.len() * opts.latencies_ms.len();
-        let progress = Progress::steps("sweep", points as u64);
-        let done = std::cell::Cell::new(0);
-        let sweep = sweep_latency(&a.scenario.config, &a.scenario.set.overrides, &opts, &|p| {
-            progress.step(done.get(), points, p);
-            done.set(done.get() + 1);
-        })
-        .map_err(|e| match e.is_input() {
-            true => vic::cli::input_error(e),
-            false => anyhow::Error::new(e),
-        })?;
-        drop(progress);
-        if let Some(dir) = &a.out_dir {
-            write_outputs(&sweep, dir)?;
-        }
-        if a.json.json {
-            println!("{}", serde_json::to_string(&sweep)?);
-            return Ok(());
-        }
-        print!("{}", sweep.table());
-        for note in sweep.schedule_notes() {
-            println!("note: {note}");
-        }
-        Ok(())
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    let SweepWhat::Latency(a) = args.what;
+    let pulse = pulse_from_flags(&a.pulse, a.pulse_at_ms, a.pulse_ms).input()?;
+    let opts = SweepOptions {
+        latencies_ms: a.latencies,
+        strategies: a.strategies,
+        trials: a.trials as usize,
+        seed: a.seed.seed,
+        divergence: a.divergence,
+        pulse,
+        execution: match (a.lockstep, a.live) {
+            (true, _) => Engine::Lockstep,
+            (_, true) => Engine::Live,
+            _ => Engine::Offline,
+        },
+    };
+    // A bar over the points on a terminal (nothing in pipes and scripts).
+    let points = opts.strategies.len() * opts.latencies_ms.len();
+    let progress = Progress::steps("sweep", points as u64);
+    let done = std::cell::Cell::new(0);
+    let sweep = sweep_latency(&a.scenario.config, &a.scenario.set.overrides, &opts, &|p| {
+        progress.step(done.get(), points, p);
+        done.set(done.get() + 1);
+    })
+    .map_err(|e| match e.is_input() {
+        true => crate::cli::input_error(e),
+        false => anyhow::Error::new(e),
+    })?;
+    drop(progress);
+    if let Some(dir) = &a.out_dir {
+        write_outputs(&sweep, dir)?;
     }
+    if a.json.json {
+        println!("{}", serde_json::to_string(&sweep)?);
+        return Ok(());
+    }
+    print!("{}", sweep.table());
+    for note in sweep.schedule_notes() {
+        println!("note: {note}");
+    }
+    Ok(())
 }
