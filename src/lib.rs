@@ -35,6 +35,6 @@ pub mod bench;
 pub mod cli;
 pub mod commands;
 pub mod daemons;
-pub mod progress;
+pub(crate) mod progress;
 pub mod studies;
 pub mod views;

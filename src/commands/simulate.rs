@@ -14,7 +14,7 @@ use vic_plan::strategy::{Feedback, Latency, Strategy};
 
 /// `--policy`: how the plan is executed (the central strategies by their names too).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum PolicyArg {
+pub(crate) enum PolicyArg {
     /// The planned commands, no feedback at all.
     OpenLoop,
     /// The plan's gains on the current state.
@@ -44,34 +44,34 @@ pub enum PolicyArg {
 )))]
 pub(crate) struct Args {
     #[command(flatten)]
-    pub scenario: ScenarioArgs,
+    pub(crate) scenario: ScenarioArgs,
     /// Plan file written by `vic plan --out`.
     #[arg(long, value_name = "FILE")]
-    pub plan: PathBuf,
+    pub(crate) plan: PathBuf,
     /// How the plan is executed.
     #[arg(long, value_enum, default_value = "open-loop")]
-    pub policy: PolicyArg,
+    pub(crate) policy: PolicyArg,
     /// Number of trials.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
-    pub trials: u64,
+    pub(crate) trials: u64,
     #[command(flatten)]
-    pub seed: SeedArgs,
+    pub(crate) seed: SeedArgs,
     /// Feedback latency for --policy naive-delayed [ms] (default: the plan's delay) and for
     /// --policy predictor, stiffness+predictor and replan (default 0); a whole number of steps.
     #[arg(long, value_name = "MS", alias = "delay-ms")]
-    pub latency_ms: Option<f64>,
+    pub(crate) latency_ms: Option<f64>,
     /// A trial has diverged when it ends further than this from the target [mm for the arm,
     /// degrees for a single joint] (default 50 mm / 10°).
     #[arg(long, value_name = "DIST")]
-    pub divergence: Option<f64>,
+    pub(crate) divergence: Option<f64>,
     /// Write every trial's states and commands to this CSV file.
     #[arg(long, value_name = "FILE")]
-    pub csv: Option<PathBuf>,
+    pub(crate) csv: Option<PathBuf>,
     /// Plot the trials (paths or angles, velocities, commands) to this PNG (and an SVG beside it).
     #[arg(long, value_name = "FILE.png")]
-    pub plot: Option<PathBuf>,
+    pub(crate) plot: Option<PathBuf>,
     #[command(flatten)]
-    pub json: JsonArg,
+    pub(crate) json: JsonArg,
 }
 
 impl PolicyArg {
@@ -92,7 +92,7 @@ impl Args {
     /// How `--policy` at `--latency-ms` executes `plan` on a grid of `dt` s: the strategy's
     /// feedback at the latency (default: the plan's delay for the naive law, which its gains
     /// were made for, else 0).
-    pub fn feedback(&self, plan: &PlanFile, dt: f64) -> anyhow::Result<Feedback> {
+    pub(crate) fn feedback(&self, plan: &PlanFile, dt: f64) -> anyhow::Result<Feedback> {
         let strategy = match self.policy.strategy() {
             Some(s) => s,
             None if self.policy == PolicyArg::Feedback => return Ok(Feedback::Full),
@@ -210,7 +210,11 @@ fn print_report(
 
 /// Every trial's states and commands, one row per knot: `trial,k,t,<states>,<controls>` (the last
 /// knot has no command: its control columns are empty).
-pub fn write_trials_csv(path: &Path, plan: &PlanFile, trials: &[Trial]) -> anyhow::Result<()> {
+pub(crate) fn write_trials_csv(
+    path: &Path,
+    plan: &PlanFile,
+    trials: &[Trial],
+) -> anyhow::Result<()> {
     write_csv(path, plan, trials)
         .map_err(|e| format!("cannot write {}: {e}", path.display()))
         .runtime()

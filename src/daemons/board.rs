@@ -28,66 +28,66 @@ use vic_rt::transport::BoardPorts;
 )]
 pub struct BoardOptions {
     #[command(flatten)]
-    pub scenario: DefaultScenarioArgs,
+    pub(crate) scenario: DefaultScenarioArgs,
     #[command(flatten)]
-    pub namespace: NamespaceArgs,
+    pub(crate) namespace: NamespaceArgs,
     /// Tick rate [Hz].
     #[arg(long, default_value_t = 1000)]
-    pub rate_hz: u64,
+    pub(crate) rate_hz: u64,
     #[command(flatten)]
-    pub rt: RtArgs,
+    pub(crate) rt: RtArgs,
     /// Stiffness of the safe hold [N m/rad] (default: the scenario's board.hold_stiffness, 100).
     /// The other limits (watchdog, ramp, joint and speed limits, disturbance limits) are keys
     /// of the scenario's [board] section: --set board.watchdog=0.1
     #[arg(long, value_name = "N_M_PER_RAD")]
-    pub hold_stiffness: Option<f64>,
+    pub(crate) hold_stiffness: Option<f64>,
     /// Stop after this many seconds (0: run until SIGINT/SIGTERM).
     #[arg(long, default_value_t = 0.0)]
-    pub duration_s: f64,
+    pub(crate) duration_s: f64,
     #[command(flatten)]
-    pub json: JsonArg,
+    pub(crate) json: JsonArg,
     /// Record every tick (state, command in use, disturbances) from a thread outside the loop:
     /// FILE.csv is the log `vic identify --log` reads, FILE.mcap opens in Foxglove and
     /// PlotJuggler (and `vic convert` turns it into the CSV). Gaps (queue full) are marked in
     /// the file and counted in the statistics.
     #[arg(long, value_name = "FILE.csv|FILE.mcap")]
-    pub record: Option<PathBuf>,
+    pub(crate) record: Option<PathBuf>,
     /// Capacity of the recording queue [ticks].
     #[arg(long, value_name = "TICKS", default_value_t = vic_rt::record::DEFAULT_CAPACITY)]
-    pub record_queue: usize,
+    pub(crate) record_queue: usize,
     /// Level of the log on stderr: error, warn, info, debug, trace, off, or per target
     /// (vic=debug,warn). Default: RUST_LOG, else info. Nothing is logged inside the loop.
     #[arg(long, value_name = "LEVEL")]
-    pub log_level: Option<String>,
+    pub(crate) log_level: Option<String>,
 }
 
 /// The board loop's real-time flags: what to ask the OS for ([`RtArgs::request`]).
 #[derive(Debug, Clone, clap::Args)]
-pub struct RtArgs {
+pub(crate) struct RtArgs {
     /// Spin this long before each deadline [µs] (0: sleep only). Default 100 (10 % of a CPU,
     /// never enough to trip the kernel's real-time throttling), 0 with --no-rt.
     #[arg(long, value_name = "US")]
-    pub spin_us: Option<u64>,
+    pub(crate) spin_us: Option<u64>,
     /// SCHED_FIFO priority of the loop (1–99). Real-time is the default: the board asks for
     /// SCHED_FIFO, mlockall, a CPU of its own (the last one, where there are several) and a
     /// spin before each deadline, prints what it got and runs on with a warning when refused.
     #[arg(long, value_name = "PRIO", default_value_t = vic_rt::sched::DEFAULT_FIFO_PRIORITY,
           value_parser = clap::value_parser!(i32).range(1..=99))]
-    pub fifo: i32,
+    pub(crate) fifo: i32,
     /// Pin the loop to this CPU (default: the last CPU, where there are several).
     #[arg(long, value_name = "N")]
-    pub cpu: Option<usize>,
+    pub(crate) cpu: Option<usize>,
     /// Without the real-time settings: the normal scheduler instead of SCHED_FIFO, no pinning
     /// to a CPU and no spin before each deadline unless --spin-us asks (mlockall is still
     /// tried).
     #[arg(long)]
-    pub no_rt: bool,
+    pub(crate) no_rt: bool,
 }
 
 impl RtArgs {
     /// The request: the real-time defaults ([`RtRequest::default_rt`]) with the flags given, or
     /// with `--no-rt` the normal scheduler, no pinning and no spin unless `--spin-us` asks.
-    pub fn request(&self) -> RtRequest {
+    pub(crate) fn request(&self) -> RtRequest {
         let mut req = if self.no_rt {
             RtRequest::none()
         } else {

@@ -30,12 +30,12 @@ use vic_rt::transport::CentralPorts;
 )]
 pub struct CentralOptions {
     #[command(flatten)]
-    pub scenario: DefaultScenarioArgs,
+    pub(crate) scenario: DefaultScenarioArgs,
     /// Plan file from `vic plan --out` (default: plan at start-up: SOOC for `stiffness`, ILQG
     /// for the latency for `naive-delayed`, undelayed ILQG for the predictor strategies; no
     /// stiffness for `naive-delayed` and `predictor`).
     #[arg(long, value_name = "FILE")]
-    pub plan: Option<PathBuf>,
+    pub(crate) plan: Option<PathBuf>,
     /// How the plan is played: `naive-delayed` (the plan's gains on the state seen
     /// --latency-ms late, Eq. 13, no stiffness), `predictor` (the gains on the present state
     /// predicted from the delayed one over the commands in flight, no stiffness), `stiffness`
@@ -43,46 +43,46 @@ pub struct CentralOptions {
     /// `replan` (SOOC re-solved every period from the predicted present, warm-started from the
     /// previous plan; a re-solve takes tens of ms, so at 50 Hz it can overrun on a slow machine).
     #[arg(long, default_value = "stiffness", value_parser = Strategy::from_name)]
-    pub strategy: Strategy,
+    pub(crate) strategy: Strategy,
     /// Feedback latency [ms]: knot k feeds back the state of k − latency (default: the plan's
     /// delay; a whole number of plan steps).
     #[arg(long, value_name = "MS")]
-    pub latency_ms: Option<f64>,
+    pub(crate) latency_ms: Option<f64>,
     /// Delay line on the state path [ms] (default: half of latency − lookahead).
     #[arg(long, value_name = "MS")]
-    pub sensor_latency_ms: Option<f64>,
+    pub(crate) sensor_latency_ms: Option<f64>,
     /// Delay line on the command path [ms] (default: half of latency − lookahead).
     #[arg(long, value_name = "MS")]
-    pub command_latency_ms: Option<f64>,
+    pub(crate) command_latency_ms: Option<f64>,
     /// Loop rate [Hz].
     #[arg(long, default_value_t = 50)]
-    pub rate_hz: u64,
+    pub(crate) rate_hz: u64,
     /// Number of trials.
     #[arg(long, default_value_t = 5)]
-    pub trials: usize,
+    pub(crate) trials: usize,
     #[command(flatten)]
-    pub seed: SeedArgs,
+    pub(crate) seed: SeedArgs,
     #[command(flatten)]
-    pub namespace: NamespaceArgs,
+    pub(crate) namespace: NamespaceArgs,
     /// A trial diverged when it ends further than this from the target [mm arm, deg joint].
     #[arg(long, value_name = "DIST")]
-    pub divergence: Option<f64>,
+    pub(crate) divergence: Option<f64>,
     /// Run board and planner in lockstep on a simulated clock in this process (no daemon).
     #[arg(long)]
-    pub lockstep: bool,
+    pub(crate) lockstep: bool,
     /// Seconds to wait for a board before giving up.
     #[arg(long, default_value_t = 5.0)]
-    pub board_timeout_s: f64,
+    pub(crate) board_timeout_s: f64,
     /// Also write the trials' recorded states and commands here (JSON: `x` per trial per knot,
     /// `u` per trial per step), e.g. for a figure.
     #[arg(long, value_name = "FILE")]
-    pub trajectories: Option<PathBuf>,
+    pub(crate) trajectories: Option<PathBuf>,
     #[command(flatten)]
-    pub json: JsonArg,
+    pub(crate) json: JsonArg,
     /// Level of the log on stderr: error, warn, info, debug, trace, off, or per target
     /// (vic=debug,warn). Default: RUST_LOG, else info. Nothing is logged inside the 50 Hz loop.
     #[arg(long, value_name = "LEVEL")]
-    pub log_level: Option<String>,
+    pub(crate) log_level: Option<String>,
 }
 
 impl CentralOptions {
@@ -245,7 +245,7 @@ fn delay_lines(o: &CentralOptions, latency: Latency, period_ns: u64) -> anyhow::
 }
 
 /// A distance as printed in the tables: "diverged" when no trial completed.
-pub fn distance_text(v: Option<f64>) -> String {
+pub(crate) fn distance_text(v: Option<f64>) -> String {
     v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.2}"))
 }
 

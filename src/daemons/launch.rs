@@ -45,7 +45,7 @@ pub fn board_config(s: &Scenario, period_ns: u64) -> BoardConfig {
 
 /// Why a plan file cannot be played on the board of a scenario.
 #[derive(Debug, thiserror::Error)]
-pub enum LaunchError {
+pub(crate) enum LaunchError {
     /// The plan does not fit the scenario (steps, dimensions).
     #[error(transparent)]
     Plan(#[from] PlanError),
@@ -55,7 +55,7 @@ pub enum LaunchError {
 }
 
 /// The track the central controller plays back for `plan` on the scenario set up as `setup`.
-pub fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, LaunchError> {
+pub(crate) fn track(plan: &PlanFile, setup: &Setup) -> Result<Track, LaunchError> {
     Ok(Track::new(
         plan.policy(setup)?,
         setup.dynamics.clone(),

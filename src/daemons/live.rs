@@ -16,9 +16,9 @@ use vic_rt::daemon::Children;
 
 /// The scenario every process of a run loads: the file and the user's overrides.
 #[derive(Debug, Clone, Copy)]
-pub struct ScenarioFile<'a> {
-    pub config: &'a Path,
-    pub overrides: &'a [String],
+pub(crate) struct ScenarioFile<'a> {
+    pub(crate) config: &'a Path,
+    pub(crate) overrides: &'a [String],
 }
 
 impl ScenarioFile<'_> {
@@ -33,15 +33,15 @@ impl ScenarioFile<'_> {
 
 /// How the board runs: its real-time settings.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct BoardFlags {
+pub(crate) struct BoardFlags {
     /// Spin before each deadline [µs] (`None`: the board's default).
-    pub spin_us: Option<u64>,
+    pub(crate) spin_us: Option<u64>,
     /// Without SCHED_FIFO, pinning or spin.
-    pub no_rt: bool,
+    pub(crate) no_rt: bool,
 }
 
 /// Starts `vic-board` (`bin`) in `namespace`, its statistics (JSON) piped.
-pub fn start_board(
+pub(crate) fn start_board(
     bin: &Path,
     scenario: ScenarioFile,
     namespace: &str,
@@ -62,7 +62,7 @@ pub fn start_board(
 }
 
 /// Stops the board (it prints its statistics at the end of the current tick) and reads them.
-pub fn stop_board(board: &mut Child) -> anyhow::Result<Value> {
+pub(crate) fn stop_board(board: &mut Child) -> anyhow::Result<Value> {
     use std::io::Read;
     Children::terminate(board);
     let mut stdout = String::new();
@@ -74,21 +74,21 @@ pub fn stop_board(board: &mut Child) -> anyhow::Result<Value> {
 
 /// One planner run: a strategy, its plan, its latency, the planner's rate and its trials.
 #[derive(Debug, Clone)]
-pub struct PlannerRun<'a> {
-    pub strategy: Strategy,
-    pub plan: &'a Path,
-    pub latency_ms: f64,
-    pub rate_hz: u64,
-    pub trials: u64,
-    pub seed: u64,
+pub(crate) struct PlannerRun<'a> {
+    pub(crate) strategy: Strategy,
+    pub(crate) plan: &'a Path,
+    pub(crate) latency_ms: f64,
+    pub(crate) rate_hz: u64,
+    pub(crate) trials: u64,
+    pub(crate) seed: u64,
     /// Where the planner writes the trials' trajectories (`None`: nowhere).
-    pub trajectories: Option<PathBuf>,
+    pub(crate) trajectories: Option<PathBuf>,
     /// The distance from the target beyond which a trial diverged (`None`: the default).
-    pub divergence: Option<f64>,
+    pub(crate) divergence: Option<f64>,
 }
 
 /// Runs `vic-planner` (`bin`) for one strategy to the end in `namespace` and reads its result.
-pub fn run_planner(
+pub(crate) fn run_planner(
     bin: &Path,
     scenario: ScenarioFile,
     namespace: &str,
@@ -132,13 +132,13 @@ pub fn run_planner(
 
 /// Where a run's plans go: the user's folder (reused across runs) or a temporary one (removed
 /// at the end).
-pub struct PlanStore {
+pub(crate) struct PlanStore {
     dir: PathBuf,
     reuse: bool,
 }
 
 impl PlanStore {
-    pub fn new(plans_dir: Option<&Path>, namespace: &str) -> anyhow::Result<Self> {
+    pub(crate) fn new(plans_dir: Option<&Path>, namespace: &str) -> anyhow::Result<Self> {
         let store = match plans_dir {
             Some(d) => PlanStore {
                 dir: d.to_path_buf(),
@@ -155,14 +155,18 @@ impl PlanStore {
     }
 
     /// The folder of the plans.
-    pub fn dir(&self) -> &Path {
+    pub(crate) fn dir(&self) -> &Path {
         &self.dir
     }
 
     /// The plan `request` asks for on `scenario`: made afresh, or reused when the store keeps
     /// plans and holds one made from the same file text, overrides, request and plan-file
     /// version.
-    pub fn plan(&self, scenario: ScenarioFile, request: PlanRequest) -> anyhow::Result<PathBuf> {
+    pub(crate) fn plan(
+        &self,
+        scenario: ScenarioFile,
+        request: PlanRequest,
+    ) -> anyhow::Result<PathBuf> {
         use std::hash::{Hash, Hasher};
         let config = scenario.config;
         let text = std::fs::read_to_string(config)
@@ -186,7 +190,7 @@ impl PlanStore {
     }
 
     /// Writes `plan` to `path`, aside and renamed: a reader never sees half a plan.
-    pub fn save(&self, path: &Path, plan: &PlanFile) -> anyhow::Result<()> {
+    pub(crate) fn save(&self, path: &Path, plan: &PlanFile) -> anyhow::Result<()> {
         let tmp = path.with_extension(format!("tmp{}", std::process::id()));
         plan.write(&tmp).runtime()?;
         std::fs::rename(&tmp, path).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))

@@ -10,12 +10,12 @@ use tracing_subscriber::layer::SubscriberExt;
 use tracing_subscriber::util::SubscriberInitExt;
 
 /// The level when neither `--log-level` nor `RUST_LOG` says.
-pub const DEFAULT_LEVEL: &str = "info";
+pub(crate) const DEFAULT_LEVEL: &str = "info";
 
 /// The filter of `flag` (the `--log-level` value), else of `RUST_LOG`, else [`DEFAULT_LEVEL`]: a
 /// level (`error`, `warn`, `info`, `debug`, `trace`, `off`) or per-target levels
 /// (`vic=debug,warn`). A bad value is the user's input (exit 2) and names where it came from.
-pub fn filter(flag: Option<&str>, rust_log: Option<&str>) -> anyhow::Result<Targets> {
+pub(crate) fn filter(flag: Option<&str>, rust_log: Option<&str>) -> anyhow::Result<Targets> {
     let (spec, source) = match (flag, rust_log.filter(|s| !s.trim().is_empty())) {
         (Some(f), _) => (f, "--log-level"),
         (None, Some(env)) => (env, "RUST_LOG"),
@@ -40,7 +40,7 @@ pub fn filter(flag: Option<&str>, rust_log: Option<&str>) -> anyhow::Result<Targ
 
 /// Sends this process's `tracing` events to stderr (colours only on a terminal). A second call
 /// keeps the first subscriber.
-pub fn init(flag: Option<&str>) -> anyhow::Result<()> {
+pub(crate) fn init(flag: Option<&str>) -> anyhow::Result<()> {
     let filter = filter(flag, std::env::var("RUST_LOG").ok().as_deref())?;
     let fmt = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)

@@ -8,5 +8,5 @@
 pub mod board;
 pub mod central;
 pub mod launch;
-pub mod live;
-pub mod logging;
+pub(crate) mod live;
+pub(crate) mod logging;

@@ -4,7 +4,7 @@
 //! view of `vic monitor`, feature `tui`).
 
 #[cfg(feature = "tui")]
-pub mod monitor;
-pub mod operator;
+pub(crate) mod monitor;
+pub(crate) mod operator;
 pub mod plot;
 pub mod report;

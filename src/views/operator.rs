@@ -17,7 +17,7 @@ use vic_rt::transport::{
 
 /// Why a tool failed.
 #[derive(Debug, thiserror::Error)]
-pub enum OperatorError {
+pub(crate) enum OperatorError {
     #[error("no board in namespace \"{0}\" (start one with vic-board --namespace {0})")]
     NoBoard(String),
     #[error("namespace \"{namespace}\": the board rejected the disturbance ({reason})")]
@@ -40,7 +40,7 @@ pub enum OperatorError {
 
 /// A disturbance as the operator states it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Request {
+pub(crate) enum Request {
     /// Torque pulse [N m] for a duration [s].
     Pulse {
         torque: [f64; MAX_JOINTS],
@@ -56,7 +56,7 @@ pub enum Request {
 
 impl Request {
     /// The message (sequence number and time stamp are set when it is sent).
-    pub fn message(&self) -> Disturbance {
+    pub(crate) fn message(&self) -> Disturbance {
         let mut d = Disturbance {
             header: Header::new(0, 0),
             ..Default::default()
@@ -86,26 +86,30 @@ impl Request {
 
 /// The board's acknowledgement of a disturbance, read from its state stream.
 #[derive(Debug, Clone, serde::Serialize)]
-pub struct Ack {
-    pub namespace: String,
-    pub seq: u64,
+pub(crate) struct Ack {
+    pub(crate) namespace: String,
+    pub(crate) seq: u64,
     /// The board tick that applied it, and that tick's publish time [ns, monotonic].
-    pub tick: u64,
-    pub board_time_ns: u64,
+    pub(crate) tick: u64,
+    pub(crate) board_time_ns: u64,
     /// From our publish to the acknowledging state's publish [µs].
-    pub latency_us: f64,
+    pub(crate) latency_us: f64,
     /// First tick whose state shows the external torque (pulse and load), and how many ticks
     /// after the acknowledgement that was.
-    pub effect_tick: Option<u64>,
-    pub effect_after_ticks: Option<u64>,
+    pub(crate) effect_tick: Option<u64>,
+    pub(crate) effect_after_ticks: Option<u64>,
     /// External torque in force at the acknowledgement [N m].
-    pub tau_ext: [f64; MAX_JOINTS],
-    pub mode: String,
+    pub(crate) tau_ext: [f64; MAX_JOINTS],
+    pub(crate) mode: String,
 }
 
 /// Sends `request` to the board of `namespace` and waits up to `timeout` for the state that
 /// acknowledges it.
-pub fn inject(namespace: &str, request: Request, timeout: Duration) -> Result<Ack, OperatorError> {
+pub(crate) fn inject(
+    namespace: &str,
+    request: Request,
+    timeout: Duration,
+) -> Result<Ack, OperatorError> {
     let ep = ToolPorts::open(namespace)?;
     let before = ep
         .wait_for_telemetry(timeout)
@@ -182,38 +186,38 @@ pub fn inject(namespace: &str, request: Request, timeout: Duration) -> Result<Ac
 
 /// One snapshot of a board's telemetry, for people and scripts.
 #[derive(Debug, Clone, serde::Serialize)]
-pub struct Status {
-    pub namespace: String,
-    pub mode: String,
-    pub fault: String,
-    pub trial: u32,
-    pub tick: u64,
-    pub tick_rate_hz: f64,
-    pub jitter_us: PercentilesJson,
-    pub work_us: PercentilesJson,
-    pub command_age_us: PercentilesJson,
-    pub late_ticks: u64,
-    pub missed_periods: u64,
-    pub rejected_messages: u64,
-    pub rejected_by_reason: BTreeMap<String, u64>,
-    pub safe_hold_ticks: u64,
-    pub watchdog_trips: u64,
+pub(crate) struct Status {
+    pub(crate) namespace: String,
+    pub(crate) mode: String,
+    pub(crate) fault: String,
+    pub(crate) trial: u32,
+    pub(crate) tick: u64,
+    pub(crate) tick_rate_hz: f64,
+    pub(crate) jitter_us: PercentilesJson,
+    pub(crate) work_us: PercentilesJson,
+    pub(crate) command_age_us: PercentilesJson,
+    pub(crate) late_ticks: u64,
+    pub(crate) missed_periods: u64,
+    pub(crate) rejected_messages: u64,
+    pub(crate) rejected_by_reason: BTreeMap<String, u64>,
+    pub(crate) safe_hold_ticks: u64,
+    pub(crate) watchdog_trips: u64,
     /// Distance of the joints to the commanded equilibrium [rad].
-    pub tracking_error: f64,
-    pub stiffness: Vec<f64>,
-    pub tau_ext: Vec<f64>,
-    pub field_beta: f64,
-    pub noise_factor: f64,
-    pub last_disturbance_seq: u64,
-    pub last_disturbance_tick: u64,
+    pub(crate) tracking_error: f64,
+    pub(crate) stiffness: Vec<f64>,
+    pub(crate) tau_ext: Vec<f64>,
+    pub(crate) field_beta: f64,
+    pub(crate) noise_factor: f64,
+    pub(crate) last_disturbance_seq: u64,
+    pub(crate) last_disturbance_tick: u64,
     /// The namespace's other processes (iceoryx2 nodes, alive or dead) when `vic status` looked
     /// (`vic status` only; empty for `vic monitor`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub nodes: Vec<NodeInfo>,
+    pub(crate) nodes: Vec<NodeInfo>,
 }
 
 impl Status {
-    pub fn from_telemetry(namespace: &str, t: &Telemetry) -> Status {
+    pub(crate) fn from_telemetry(namespace: &str, t: &Telemetry) -> Status {
         let n = (t.joints as usize).clamp(1, MAX_JOINTS);
         Status {
             namespace: namespace.into(),
@@ -243,7 +247,7 @@ impl Status {
     }
 
     /// A few lines for a terminal.
-    pub fn render(&self) -> String {
+    pub(crate) fn render(&self) -> String {
         let p = |v: &PercentilesJson| format!("{:.1} / {:.1} / {:.1}", v.p50, v.p99, v.max);
         let rejected = if self.rejected_by_reason.is_empty() {
             String::new()
@@ -296,7 +300,7 @@ impl Status {
     }
 
     /// One line (for `vic monitor` when piped).
-    pub fn line(&self) -> String {
+    pub(crate) fn line(&self) -> String {
         format!(
             "mode={} tick={} rate_hz={:.1} jitter_p50_us={:.1} jitter_p99_us={:.1} \
              jitter_max_us={:.1} command_age_p50_us={:.0} tracking_error_rad={:.4} \
@@ -318,7 +322,7 @@ impl Status {
 }
 
 /// "vic-board pid 12, vic-observer pid 13, vic-observer pid 14 (dead)": the nodes for people.
-pub fn describe_nodes(nodes: &[NodeInfo]) -> String {
+pub(crate) fn describe_nodes(nodes: &[NodeInfo]) -> String {
     if nodes.is_empty() {
         return "none".into();
     }
@@ -336,7 +340,7 @@ pub fn describe_nodes(nodes: &[NodeInfo]) -> String {
 
 /// One snapshot of the board's telemetry in `namespace`, with the namespace's processes. When
 /// no board answers or a service is full, the error lists the processes too.
-pub fn status(namespace: &str, timeout: Duration) -> Result<Status, OperatorError> {
+pub(crate) fn status(namespace: &str, timeout: Duration) -> Result<Status, OperatorError> {
     // Listed before this tool opens its own node: that needs no port (it works when every
     // port of a service is taken), and a killed process is still listed as dead before the
     // new node cleans up after it. This tool is not among them.
@@ -376,7 +380,7 @@ pub fn status(namespace: &str, timeout: Duration) -> Result<Status, OperatorErro
 
 /// Calls `show` with a snapshot about every `interval` until it returns false or `stop` is set;
 /// `show(None)` when the board has not answered for `interval` (it may come back).
-pub fn monitor(
+pub(crate) fn monitor(
     namespace: &str,
     interval: Duration,
     stop: &std::sync::atomic::AtomicBool,

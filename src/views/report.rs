@@ -9,7 +9,7 @@ use vic_rt::central::{Central, TrialRecord};
 
 /// Turns records into the offline simulation's trials (with the realised cost) for
 /// [`vic_plan::evaluation::summarize`].
-pub fn to_trials(setup: &Setup, records: &[TrialRecord]) -> Vec<Trial> {
+pub(crate) fn to_trials(setup: &Setup, records: &[TrialRecord]) -> Vec<Trial> {
     records
         .iter()
         .map(|r| {
@@ -32,13 +32,13 @@ pub fn to_trials(setup: &Setup, records: &[TrialRecord]) -> Vec<Trial> {
 /// `vic-planner --trajectories` writes and `vic demo` draws. A value that is not finite (a
 /// diverged or faulted trial) is `null`.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
-pub struct Trajectories {
-    pub x: Vec<Vec<Vec<Option<f64>>>>,
-    pub u: Vec<Vec<Vec<Option<f64>>>>,
+pub(crate) struct Trajectories {
+    pub(crate) x: Vec<Vec<Vec<Option<f64>>>>,
+    pub(crate) u: Vec<Vec<Vec<Option<f64>>>>,
 }
 
 impl Trajectories {
-    pub fn from_records(records: &[TrialRecord]) -> Self {
+    pub(crate) fn from_records(records: &[TrialRecord]) -> Self {
         let rows = |v: &[DVector<f64>]| {
             v.iter()
                 .map(|r| r.iter().map(|e| e.is_finite().then_some(*e)).collect())
@@ -51,7 +51,7 @@ impl Trajectories {
     }
 
     /// As the Monte Carlo's trials (`null` as NaN; the cost is not recorded: NaN).
-    pub fn to_trials(&self) -> Vec<Trial> {
+    pub(crate) fn to_trials(&self) -> Vec<Trial> {
         let vecs = |v: &[Vec<Option<f64>>]| {
             v.iter()
                 .map(|r| DVector::from_iterator(r.len(), r.iter().map(|e| e.unwrap_or(f64::NAN))))
@@ -74,19 +74,19 @@ impl Trajectories {
 /// a diverged trial is counted in `diverged`, never averaged in as a huge number.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct StrategyResult {
-    pub name: String,
-    pub latency_ms: f64,
-    pub sensor_latency_ms: f64,
-    pub command_latency_ms: f64,
+    pub(crate) name: String,
+    pub(crate) latency_ms: f64,
+    pub(crate) sensor_latency_ms: f64,
+    pub(crate) command_latency_ms: f64,
     pub trials: usize,
     /// Unit of the errors: "mm" (hand) or "deg" (joint).
-    pub unit: vic_plan::unit::Unit,
-    pub rms_error: Option<f64>,
-    pub final_error_mean: Option<f64>,
+    pub(crate) unit: vic_plan::unit::Unit,
+    pub(crate) rms_error: Option<f64>,
+    pub(crate) final_error_mean: Option<f64>,
     pub final_error_max: Option<f64>,
     /// Final error of every trial (`None`: diverged, stalled or not finite).
     pub final_errors: Vec<Option<f64>>,
-    pub max_error: Option<f64>,
+    pub(crate) max_error: Option<f64>,
     /// Trials that ended further than the divergence distance from the target, blew up, or
     /// tripped the board's plant guard (a fault); not those cut short by a safe hold or a stall.
     pub diverged: usize,
@@ -95,22 +95,22 @@ pub struct StrategyResult {
     pub fault_trials: usize,
     /// Trials that ended before their final state arrived (time limit, stop, board silent).
     #[serde(default)]
-    pub stalled_trials: usize,
+    pub(crate) stalled_trials: usize,
     /// Knots whose feedback used a state older than the latency (all trials).
-    pub stale_feedback: usize,
-    pub missing_states: usize,
+    pub(crate) stale_feedback: usize,
+    pub(crate) missing_states: usize,
     /// Knots whose state came from a later board tick than the knot's (all trials).
     #[serde(default)]
-    pub off_knot_states: usize,
+    pub(crate) off_knot_states: usize,
     /// Knots no slice brought to the board before their time (all trials): the board may have
     /// acted on another knot there.
     #[serde(default)]
-    pub late_knots: usize,
+    pub(crate) late_knots: usize,
     /// Monte Carlo expected cost over the trials that did not diverge.
-    pub expected_cost: Option<f64>,
+    pub(crate) expected_cost: Option<f64>,
     /// The central loop's compute time per period and its overruns (all trials).
     #[serde(default)]
-    pub central: vic_rt::central::ComputeTiming,
+    pub(crate) central: vic_rt::central::ComputeTiming,
 }
 
 /// How one trial ended, as the report counts it.
@@ -123,7 +123,7 @@ enum Outcome {
 }
 
 /// Summarises records like the offline evaluation does (`divergence` in the report's unit).
-pub fn summarize(
+pub(crate) fn summarize(
     setup: &Setup,
     central: &Central,
     records: &[TrialRecord],

@@ -9,7 +9,8 @@
 use serde_json::Value;
 
 /// The second "host"'s namespace for the demo's namespace `board_ns`.
-pub fn central_namespace(board_ns: &str) -> String {
+#[cfg(feature = "zenoh")]
+fn central_namespace(board_ns: &str) -> String {
     format!("{board_ns}c")
 }
 
@@ -19,27 +20,27 @@ mod link {
     use crate::cli::input_error;
 
     /// Without the `zenoh` feature there is no bridge, so no link is ever started.
-    pub enum DistributedLink {}
+    pub(crate) enum DistributedLink {}
 
     impl DistributedLink {
         /// Whether the demo can run distributed: not without the bridge (an input error that
         /// says how to build it).
-        pub fn available() -> anyhow::Result<()> {
+        pub(crate) fn available() -> anyhow::Result<()> {
             Err(input_error(
                 "--distributed needs the bridge: build vic with the zenoh feature \
                  (cargo build --release --features zenoh)",
             ))
         }
 
-        pub fn start(_board_ns: &str) -> anyhow::Result<Self> {
+        pub(crate) fn start(_board_ns: &str) -> anyhow::Result<Self> {
             Err(Self::available().expect_err("no bridge without the zenoh feature"))
         }
 
-        pub fn central_ns(&self) -> &str {
+        pub(crate) fn central_ns(&self) -> &str {
             match *self {}
         }
 
-        pub fn stop(self) -> anyhow::Result<Value> {
+        pub(crate) fn stop(self) -> anyhow::Result<Value> {
             match self {}
         }
     }
@@ -57,7 +58,7 @@ mod link {
     type Bridge = JoinHandle<Result<BridgeStats, bridge::BridgeError>>;
 
     /// The two bridges of a demo split across two namespaces.
-    pub struct DistributedLink {
+    pub(crate) struct DistributedLink {
         stop: Arc<AtomicBool>,
         bridges: Vec<(Side, Bridge)>,
         central_ns: String,
@@ -65,14 +66,14 @@ mod link {
     }
 
     impl DistributedLink {
-        pub fn available() -> anyhow::Result<()> {
+        pub(crate) fn available() -> anyhow::Result<()> {
             Ok(())
         }
 
         /// Starts both bridges: the board side listening on a free loopback port, the central
         /// side connecting to it. The board-side bridge translates stamps as across real hosts
         /// (the offset it measures is ~0 here, within ± half the round trip).
-        pub fn start(board_ns: &str) -> anyhow::Result<Self> {
+        pub(crate) fn start(board_ns: &str) -> anyhow::Result<Self> {
             let port = std::net::TcpListener::bind("127.0.0.1:0")
                 .and_then(|l| l.local_addr())
                 .map_err(|e| anyhow!("no free loopback port for the link: {e}"))?
@@ -109,12 +110,12 @@ mod link {
         }
 
         /// The namespace the planners run in.
-        pub fn central_ns(&self) -> &str {
+        pub(crate) fn central_ns(&self) -> &str {
             &self.central_ns
         }
 
         /// Stops both bridges and removes the second namespace; returns the link's figures.
-        pub fn stop(mut self) -> anyhow::Result<Value> {
+        pub(crate) fn stop(mut self) -> anyhow::Result<Value> {
             let mut stats = serde_json::Map::new();
             for (side, b) in self.bridges.drain(..) {
                 self.stop.store(true, Ordering::Relaxed);
@@ -151,10 +152,10 @@ mod link {
     }
 }
 
-pub use link::DistributedLink;
+pub(crate) use link::DistributedLink;
 
 /// The link's line under the table: its measured round trip beside the injected latency.
-pub fn describe(link: &Value, latency_ms: f64) -> String {
+pub(crate) fn describe(link: &Value, latency_ms: f64) -> String {
     let f = |key: &str| link[key].as_f64().map_or("?".into(), |v| format!("{v:.0}"));
     format!(
         "link (Zenoh on {}): round trip {} µs median, {} µs best (clock probes), clock offset \

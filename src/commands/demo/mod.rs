@@ -42,44 +42,44 @@ use vic_rt::daemon::Children;
 )]
 pub(crate) struct Args {
     #[command(flatten)]
-    pub scenario: DefaultScenarioArgs,
+    pub(crate) scenario: DefaultScenarioArgs,
     /// Feedback latency of the central controller [ms] (a whole number of plan steps).
     #[arg(long, default_value_t = 200.0)]
-    pub latency_ms: f64,
+    pub(crate) latency_ms: f64,
     /// Trials per strategy.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
-    pub trials: u64,
+    pub(crate) trials: u64,
     #[command(flatten)]
-    pub seed: SeedArgs,
+    pub(crate) seed: SeedArgs,
     /// Keep the plans in this folder and reuse them on the next run (default: plan afresh).
     #[arg(long, value_name = "DIR")]
-    pub plans_dir: Option<PathBuf>,
+    pub(crate) plans_dir: Option<PathBuf>,
     /// Use this plan for the `stiffness` strategy instead of planning (SOOC, `vic plan --out`).
     #[arg(long, value_name = "FILE")]
-    pub stiffness_plan: Option<PathBuf>,
+    pub(crate) stiffness_plan: Option<PathBuf>,
     /// Use this plan for `naive-delayed` instead of planning (ILQG for the latency, zero
     /// stiffness).
     #[arg(long, value_name = "FILE")]
-    pub feedback_plan: Option<PathBuf>,
+    pub(crate) feedback_plan: Option<PathBuf>,
     /// Folder for the trajectories figure (trajectories.png and .svg: hand paths per strategy,
     /// like the paper's Fig. 1), the table as JSON (demo.json) and each strategy's trials.
     #[arg(long, value_name = "DIR", default_value = "vic-demo")]
-    pub out_dir: PathBuf,
+    pub(crate) out_dir: PathBuf,
     /// Board spin before each deadline [µs] (default: the board's, 100; 0 with --no-rt).
     #[arg(long, value_name = "US")]
-    pub spin_us: Option<u64>,
+    pub(crate) spin_us: Option<u64>,
     /// Run the board without its real-time settings (no SCHED_FIFO, pinning or spin).
     #[arg(long)]
-    pub no_rt: bool,
+    pub(crate) no_rt: bool,
     /// Board and planners as two hosts: two namespaces joined by `vic bridge`s over Zenoh on
     /// loopback; the table adds the link's round trip (feature `zenoh`).
     #[arg(long)]
-    pub distributed: bool,
+    pub(crate) distributed: bool,
     /// Run only this strategy (e.g. stiffness; every plan is still made).
     #[arg(long, value_name = "STRATEGY", value_parser = Strategy::from_name)]
-    pub only: Option<Strategy>,
+    pub(crate) only: Option<Strategy>,
     #[command(flatten)]
-    pub json: JsonArg,
+    pub(crate) json: JsonArg,
 }
 
 impl Args {

@@ -223,7 +223,7 @@ pub(super) fn notes(figure: Figure) -> &'static str {
 }
 
 /// The RESULTS.md document: every experiment's figure, numbers and the paper's claims.
-pub fn results_markdown(runs: &[ExperimentRun], figure_dir: &str, command: &str) -> String {
+pub(crate) fn results_markdown(runs: &[ExperimentRun], figure_dir: &str, command: &str) -> String {
     let mut md = String::new();
     md.push_str("# Reproducing the paper: results\n\n");
     md.push_str(&format!(

@@ -9,22 +9,22 @@ use crate::studies::sweep::{
 use std::path::{Path, PathBuf};
 
 /// The latencies of the section [ms].
-pub const LATENCIES_MS: [f64; 7] = [0.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0];
+pub(crate) const LATENCIES_MS: [f64; 7] = [0.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0];
 /// The strategies of the section: all five.
-pub const STRATEGIES: [Strategy; 5] = Strategy::ALL;
+pub(crate) const STRATEGIES: [Strategy; 5] = Strategy::ALL;
 
 /// One scenario's sweep.
 #[derive(Debug, Clone)]
-pub struct DelaySweep {
+pub(crate) struct DelaySweep {
     /// File stem of its outputs (`delay_joint`, `delay_arm`).
-    pub name: &'static str,
-    pub title: &'static str,
-    pub sweep: Sweep,
+    pub(crate) name: &'static str,
+    pub(crate) title: &'static str,
+    pub(crate) sweep: Sweep,
 }
 
 /// Why the section could not be made.
 #[derive(Debug, thiserror::Error)]
-pub enum DelaySweepError {
+pub(crate) enum DelaySweepError {
     #[error("{}: {source}", scenario.display())]
     Sweep {
         scenario: PathBuf,
@@ -40,7 +40,7 @@ pub enum DelaySweepError {
 }
 
 /// Runs both sweeps with the scenarios of `config_dir`.
-pub fn run_delay_sweeps(
+pub(crate) fn run_delay_sweeps(
     config_dir: &Path,
     trials: usize,
     seed: u64,
@@ -83,7 +83,10 @@ pub fn run_delay_sweeps(
 }
 
 /// Writes `NAME.png`, `NAME.svg` and `NAME.json` into `dir`; returns their paths.
-pub fn write_delay_outputs(s: &DelaySweep, dir: &Path) -> Result<Vec<PathBuf>, DelaySweepError> {
+pub(crate) fn write_delay_outputs(
+    s: &DelaySweep,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, DelaySweepError> {
     let write_err = |path: &Path| {
         let path = path.to_path_buf();
         move |source| DelaySweepError::Write { path, source }
@@ -100,7 +103,7 @@ pub fn write_delay_outputs(s: &DelaySweep, dir: &Path) -> Result<Vec<PathBuf>, D
 
 /// Where one strategy stops being better than another as the latency grows.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Crossing {
+pub(crate) enum Crossing {
     /// The first strategy is better (lower) at every latency.
     AlwaysBetter,
     /// The first strategy is worse (or equal) at every latency.
@@ -116,7 +119,7 @@ pub enum Crossing {
 
 /// Where `a` stops being better than `b` by `metric` (lower is better; `None`, every trial
 /// diverged, is worse than any number).
-pub fn crossing(
+pub(crate) fn crossing(
     sweep: &Sweep,
     a: Strategy,
     b: Strategy,
@@ -174,7 +177,7 @@ fn crossing_text(c: Crossing) -> String {
 
 /// The section's markdown: per scenario the figure, the table and the crossing latencies, then the
 /// paragraph on what they show.
-pub fn delay_markdown(sweeps: &[DelaySweep], figure_dir: &str) -> String {
+pub(crate) fn delay_markdown(sweeps: &[DelaySweep], figure_dir: &str) -> String {
     let mut md = String::from("## Delay versus stiffness\n\n");
     md.push_str(&format!(
         "`vic sweep latency` (offline Monte Carlo, {} trials per point, seed {}, the same noise \

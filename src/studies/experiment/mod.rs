@@ -19,7 +19,7 @@ use vic_plan::unit::Unit;
 mod claims;
 pub use claims::*;
 mod delay;
-pub use delay::*;
+pub(crate) use delay::*;
 
 /// Which experiment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -133,47 +133,47 @@ fn columns(figure: Figure) -> Vec<ColumnSpec> {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ColumnResult {
     pub name: String,
-    pub description: String,
-    pub scenario: String,
+    pub(crate) description: String,
+    pub(crate) scenario: String,
     pub method: String,
-    pub policy: String,
+    pub(crate) policy: String,
     /// Spread of the final hand position [mm] (arm) — the largest principal standard deviation.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub final_std_mm: Option<f64>,
+    pub(crate) final_std_mm: Option<f64>,
     /// Spread of the final joint angle [deg] (single joint).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub final_std_deg: Option<f64>,
+    pub(crate) final_std_deg: Option<f64>,
     /// RMS distance to the reference over the movement (mm or deg, see `report.unit`), over the
     /// trials that did not diverge (`None` when all did).
-    pub rms_error: Option<f64>,
-    pub diverged_fraction: f64,
+    pub(crate) rms_error: Option<f64>,
+    pub(crate) diverged_fraction: f64,
     /// Monte Carlo expected cost over the trials that did not diverge (`None` when all did).
-    pub expected_cost_mc: Option<f64>,
-    pub expected_cost_predicted: f64,
+    pub(crate) expected_cost_mc: Option<f64>,
+    pub(crate) expected_cost_predicted: f64,
     pub plan_converged: bool,
     pub plan_iterations: usize,
-    pub plan_solve_ms: f64,
-    pub max_stiffness: f64,
-    pub mean_stiffness: f64,
-    pub report: Report,
+    pub(crate) plan_solve_ms: f64,
+    pub(crate) max_stiffness: f64,
+    pub(crate) mean_stiffness: f64,
+    pub(crate) report: Report,
 }
 
 /// A whole experiment: its columns' numbers, and what the plots need.
 pub struct ExperimentRun {
     pub figure: Figure,
-    pub trials: usize,
+    pub(crate) trials: usize,
     pub seed: u64,
     pub columns: Vec<ColumnResult>,
     /// Per column: the plan, the scenario it ran on, the execution and the trials.
-    pub data: Vec<ColumnData>,
+    pub(crate) data: Vec<ColumnData>,
 }
 
 /// What a column ran: enough to plot it or to run it again with another seed.
-pub struct ColumnData {
-    pub plan: PlanFile,
-    pub scenario: Scenario,
-    pub policy: Feedback,
-    pub trials: Vec<Trial>,
+pub(crate) struct ColumnData {
+    pub(crate) plan: PlanFile,
+    pub(crate) scenario: Scenario,
+    pub(crate) policy: Feedback,
+    pub(crate) trials: Vec<Trial>,
 }
 
 /// Errors of an experiment: a scenario that does not load, a plan that cannot be made.
@@ -352,7 +352,7 @@ pub fn resimulate(run: &ExperimentRun, seed: u64) -> Result<ExperimentRun, Exper
 }
 
 /// The JSON document of an experiment.
-pub fn to_json(run: &ExperimentRun) -> serde_json::Value {
+pub(crate) fn to_json(run: &ExperimentRun) -> serde_json::Value {
     let mut v = serde_json::json!({
         "figure": run.figure.name(),
         "trials": run.trials,
@@ -367,7 +367,7 @@ pub fn to_json(run: &ExperimentRun) -> serde_json::Value {
 }
 
 /// The plot data of one column (hand paths for the arm, joint angles and commands for all).
-pub fn column_plot(
+pub(crate) fn column_plot(
     title: &str,
     plan: &PlanFile,
     scenario: &Scenario,
@@ -432,7 +432,7 @@ pub fn column_plot(
 }
 
 /// The 95 % confidence ellipse of 2-D points: centre, semi-axes (major first), major-axis angle.
-pub fn confidence_ellipse(points: &[[f64; 2]]) -> Option<([f64; 2], [f64; 2], f64)> {
+pub(crate) fn confidence_ellipse(points: &[[f64; 2]]) -> Option<([f64; 2], [f64; 2], f64)> {
     let pts: Vec<&[f64; 2]> = points
         .iter()
         .filter(|p| p[0].is_finite() && p[1].is_finite())

@@ -168,7 +168,7 @@ pub struct PolyFit {
     /// The fitted polynomial.
     pub polynomial: Polynomial,
     /// Number of points fitted.
-    pub points: usize,
+    pub(crate) points: usize,
     /// Root mean square of the residuals.
     pub rms_residual: f64,
     /// Coefficient of determination (1 for an exact fit; 1 if `y` is constant and fitted exactly).

@@ -187,7 +187,7 @@ fn rows_of_recording(rec: &vic_rt::record::BoardRecording) -> Vec<LogRow> {
 }
 
 /// Writes the header line [`LOG_HEADER`].
-pub fn write_header<W: Write + ?Sized>(writer: &mut W) -> io::Result<()> {
+pub(crate) fn write_header<W: Write + ?Sized>(writer: &mut W) -> io::Result<()> {
     writer.write_all(LOG_HEADER.as_bytes())?;
     writer.write_all(b"\n")
 }
@@ -196,7 +196,7 @@ pub fn write_header<W: Write + ?Sized>(writer: &mut W) -> io::Result<()> {
 /// that reads back bit-identically. Does not allocate (the formatting goes straight to
 /// `writer`; wrap it in a `BufWriter` on a recording thread). Non-finite values are written as
 /// `NaN`/`inf` but [`read_log`] rejects them.
-pub fn write_row<W: Write + ?Sized>(writer: &mut W, row: &LogRow) -> io::Result<()> {
+pub(crate) fn write_row<W: Write + ?Sized>(writer: &mut W, row: &LogRow) -> io::Result<()> {
     writeln!(
         writer,
         "{},{},{},{},{},{},{},{},{}",

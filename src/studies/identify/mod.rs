@@ -210,15 +210,15 @@ pub struct IdentifyReport {
     /// Number of samples.
     pub n: usize,
     /// Joint parameters used for the torque error (`None` from [`identify_samples`]).
-    pub joint: Option<JointParams>,
+    pub(crate) joint: Option<JointParams>,
     /// Options used.
-    pub options: IdentifyOptions,
+    pub(crate) options: IdentifyOptions,
     /// Smallest and largest velocity (rad/s).
-    pub velocity_range: [f64; 2],
+    pub(crate) velocity_range: [f64; 2],
     /// Mean of the torque error over all samples.
-    pub error_mean: f64,
+    pub(crate) error_mean: f64,
     /// Standard deviation of the torque error over all samples.
-    pub error_std: f64,
+    pub(crate) error_std: f64,
     /// Per-bin statistics (bins with too few samples dropped).
     pub bins: Vec<VelocityBin>,
     /// Fit of the bin means `ē(q̇)`.
@@ -237,7 +237,7 @@ pub struct IdentifyReport {
     /// difference points at a noise floor or an unmodelled mean).
     pub noise_moments: MomentFit,
     /// Jarque–Bera test of `η_i = e_i / (a + b q̇_i)`.
-    pub jarque_bera: JarqueBera,
+    pub(crate) jarque_bera: JarqueBera,
     /// Whether the Jarque–Bera test accepts normality of `η` at the 5 % level (`p ≥ 0.05`).
     pub normal_at_5_percent: bool,
 }

@@ -16,11 +16,11 @@ pub struct NoiseFit {
     pub b_std_error: Option<f64>,
     /// Negative log-likelihood at the optimum,
     /// `Σ [ln|a + b q̇_i| + e_i²/(2(a + b q̇_i)²) + ½ ln 2π]`.
-    pub neg_log_likelihood: f64,
+    pub(crate) neg_log_likelihood: f64,
     /// Number of samples.
-    pub samples: usize,
+    pub(crate) samples: usize,
     /// Smallest modelled standard deviation, [`STD_FLOOR`]` · √(a² + (b q̇_max)²)`.
-    pub std_floor: f64,
+    pub(crate) std_floor: f64,
 }
 
 impl NoiseFit {
@@ -32,7 +32,7 @@ impl NoiseFit {
 
     /// The normalised residual `η = e / (a + b q̇)` (the denominator at least
     /// [`NoiseFit::std_floor`] in magnitude, with its sign).
-    pub fn eta(&self, qd: f64, e: f64) -> f64 {
+    pub(crate) fn eta(&self, qd: f64, e: f64) -> f64 {
         e / self.std_at(qd).copysign(self.a + self.b * qd)
     }
 }
@@ -54,7 +54,7 @@ pub struct MomentFit {
 /// every sample with a tiny `|e_i|` near the crossing is a narrow, deep well of the likelihood
 /// (its `ln|a + b q̇_i|` term tends to −∞ as the crossing moves onto it) that can capture the
 /// optimum and spoil the normalised residuals of its neighbours.
-pub const STD_FLOOR: f64 = 1e-3;
+pub(crate) const STD_FLOOR: f64 = 1e-3;
 
 /// Number of directions of the coarse grid of [`minimise_over_direction`].
 pub(super) const COARSE_DIRECTIONS: usize = 4096;
@@ -258,7 +258,7 @@ pub fn fit_noise_moments(qd: &[f64], e: &[f64]) -> Result<MomentFit, IdentifyErr
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct JarqueBera {
     /// Sample size.
-    pub n: usize,
+    pub(crate) n: usize,
     /// Sample skewness `S = m₃ / m₂^{3/2}` (biased central moments).
     pub skewness: f64,
     /// Sample kurtosis `K = m₄ / m₂²` (3 for a normal distribution; not the excess).

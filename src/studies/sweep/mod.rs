@@ -17,7 +17,8 @@
 pub use vic_plan::strategy::Strategy;
 
 mod output;
-pub use output::{pulse_from_flags, write_figure, write_outputs};
+pub use output::write_figure;
+pub(crate) use output::{pulse_from_flags, write_outputs};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use vic_plan::evaluation::summarize;
@@ -149,11 +150,11 @@ pub struct SweepPoint {
     /// Mean stiffness the trials commanded [N m/rad]: the plan's for `stiffness`, the re-solved
     /// plans' for `replan`, with the feedback's share for `stiffness+predictor`.
     pub mean_stiffness: f64,
-    pub unit: Unit,
+    pub(crate) unit: Unit,
     /// Live only: what the daemons' schedule did to the trials (`None` offline and in lockstep,
     /// where nothing can be late).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub live: Option<LiveTiming>,
+    pub(crate) live: Option<LiveTiming>,
 }
 
 /// What the live schedule did to a point's trials, over all of them. With every count zero, each
@@ -161,29 +162,29 @@ pub struct SweepPoint {
 /// the one lockstep computes on a simulated clock; a count above zero says where a loaded
 /// machine made the live run differ (the feedback strategies see it, the open-loop plan not).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct LiveTiming {
+pub(crate) struct LiveTiming {
     /// Knots whose feedback used a state older than the latency (its state was late).
-    pub stale_feedback: usize,
+    pub(crate) stale_feedback: usize,
     /// Knots with no state recorded.
-    pub missing_states: usize,
+    pub(crate) missing_states: usize,
     /// Knots whose state came from a later board tick than the knot's (a late board tick or a
     /// lost state): what was recorded and fed back there is a board period or more off.
-    pub off_knot_states: usize,
+    pub(crate) off_knot_states: usize,
     /// Knots no slice brought to the board before their time (a planner that woke late): the
     /// board may have acted on the knot before in their place. Even the open-loop plan sees it.
     #[serde(default)]
-    pub late_knots: usize,
+    pub(crate) late_knots: usize,
     /// Central periods whose work overran the period (the previous slice went out again).
-    pub central_overruns: u64,
+    pub(crate) central_overruns: u64,
     /// Trials in which the board fell back to safe hold (a slice came too late).
-    pub safe_hold_trials: usize,
+    pub(crate) safe_hold_trials: usize,
     /// Trials that ended before their final state arrived.
-    pub stalled_trials: usize,
+    pub(crate) stalled_trials: usize,
 }
 
 impl LiveTiming {
     /// Every state and slice came in its period.
-    pub fn on_schedule(&self) -> bool {
+    pub(crate) fn on_schedule(&self) -> bool {
         *self == Self::default()
     }
 }
@@ -204,15 +205,15 @@ struct Measured {
 /// The whole curve.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Sweep {
-    pub scenario: String,
-    pub trials: usize,
-    pub seed: u64,
+    pub(crate) scenario: String,
+    pub(crate) trials: usize,
+    pub(crate) seed: u64,
     /// Where the trials ran.
     #[serde(default)]
     pub execution: Engine,
     /// The pulse every trial received, if any.
     #[serde(default)]
-    pub pulse: Option<Pulse>,
+    pub(crate) pulse: Option<Pulse>,
     pub points: Vec<SweepPoint>,
 }
 

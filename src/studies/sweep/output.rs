@@ -7,7 +7,11 @@ use vic_plan::montecarlo::Pulse;
 
 /// The pulse of `--pulse T1[,T2] --pulse-at-ms MS --pulse-ms MS` (`None` without a torque; the
 /// second joint's torque is 0 when one is given).
-pub fn pulse_from_flags(torque: &[f64], at_ms: f64, ms: f64) -> Result<Option<Pulse>, SweepError> {
+pub(crate) fn pulse_from_flags(
+    torque: &[f64],
+    at_ms: f64,
+    ms: f64,
+) -> Result<Option<Pulse>, SweepError> {
     if torque.is_empty() {
         return Ok(None);
     }
@@ -27,7 +31,7 @@ pub fn pulse_from_flags(torque: &[f64], at_ms: f64, ms: f64) -> Result<Option<Pu
 }
 
 /// Writes `sweep.png`, `sweep.svg` and `sweep.json` into `dir` (created if missing).
-pub fn write_outputs(sweep: &Sweep, dir: &Path) -> Result<(), SweepError> {
+pub(crate) fn write_outputs(sweep: &Sweep, dir: &Path) -> Result<(), SweepError> {
     let failed = |path: &Path| {
         let path = path.to_path_buf();
         move |e: Box<dyn std::error::Error + Send + Sync>| SweepError::Write { path, source: e }
@@ -46,7 +50,7 @@ pub fn write_outputs(sweep: &Sweep, dir: &Path) -> Result<(), SweepError> {
 impl Sweep {
     /// The points as a table, one line per strategy and latency (`diverged` where every trial
     /// diverged: a diverged trial is never averaged in).
-    pub fn table(&self) -> String {
+    pub(crate) fn table(&self) -> String {
         let unit = self.points.first().map_or("", |p| p.unit.name());
         let show = |v: Option<f64>| v.map_or("diverged".to_string(), |v| format!("{v:.3}"));
         let mut out = format!(
@@ -77,7 +81,7 @@ impl Sweep {
 
     /// Live: one line for each point the schedule touched (a late state changes what the
     /// feedback saw, so that point is not the run lockstep computes).
-    pub fn schedule_notes(&self) -> Vec<String> {
+    pub(crate) fn schedule_notes(&self) -> Vec<String> {
         let off = |p: &&super::SweepPoint| p.live.is_some_and(|t| !t.on_schedule());
         self.points
             .iter()

@@ -16,7 +16,7 @@ use ratatui::widgets::{
 const JOINT_COLORS: [Color; 2] = [Color::Cyan, Color::Magenta];
 
 /// Renders the whole view into `frame`.
-pub fn draw(frame: &mut Frame, app: &App) {
+pub(crate) fn draw(frame: &mut Frame, app: &App) {
     let [banner, plots, panels, keys] = Layout::vertical([
         Constraint::Length(3),
         Constraint::Min(8),

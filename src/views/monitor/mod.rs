@@ -12,8 +12,8 @@
 mod draw;
 mod run;
 
-pub use draw::draw;
-pub use run::run;
+pub(crate) use draw::draw;
+pub(crate) use run::run;
 
 use crate::views::operator::{Ack, OperatorError, Request, Status};
 use std::collections::VecDeque;
@@ -21,15 +21,15 @@ use vic_rt::transport::{MAX_JOINTS, StateMsg, Telemetry};
 
 /// What the keys send and how much history the plots keep.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Settings {
+pub(crate) struct Settings {
     /// Torque of a pulse [N m] (`p`: +, `P`: −).
-    pub pulse_torque: f64,
+    pub(crate) pulse_torque: f64,
     /// Pulse duration [s].
-    pub pulse_duration: f64,
+    pub(crate) pulse_duration: f64,
     /// β of the field `f` switches on [N/m].
-    pub field_beta: f64,
+    pub(crate) field_beta: f64,
     /// Seconds of history in the plots.
-    pub window_s: f64,
+    pub(crate) window_s: f64,
 }
 
 impl Default for Settings {
@@ -45,7 +45,7 @@ impl Default for Settings {
 
 /// A key as the monitor sees it (the terminal loop translates the terminal's events).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Key {
+pub(crate) enum Key {
     Char(char),
     Esc,
     /// Ctrl-C (raw mode turns it into a key, not a signal).
@@ -54,7 +54,7 @@ pub enum Key {
 
 /// What a key asks the terminal loop to do.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Action {
+pub(crate) enum Action {
     /// Nothing (an unbound key, or one that only changed the view).
     None,
     /// Restore the terminal and exit 0.
@@ -73,7 +73,7 @@ const LOG_LINES: usize = 6;
 
 /// A rolling series of (time [s], value) points, oldest first.
 #[derive(Debug, Clone, Default)]
-pub struct Series {
+pub(crate) struct Series {
     points: VecDeque<(f64, f64)>,
 }
 
@@ -87,18 +87,18 @@ impl Series {
         }
     }
     /// The points, oldest first.
-    pub fn points(&self) -> Vec<(f64, f64)> {
+    pub(crate) fn points(&self) -> Vec<(f64, f64)> {
         self.points.iter().copied().collect()
     }
     /// Smallest and largest value, `None` when empty.
-    pub fn range(&self) -> Option<(f64, f64)> {
+    pub(crate) fn range(&self) -> Option<(f64, f64)> {
         self.points.iter().fold(None, |r, &(_, v)| match r {
             None => Some((v, v)),
             Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
         })
     }
     /// The series less its mean (itself when empty).
-    pub fn centred(&self) -> Series {
+    pub(crate) fn centred(&self) -> Series {
         let n = self.points.len().max(1) as f64;
         let mean = self.points.iter().map(|p| p.1).sum::<f64>() / n;
         Series {
@@ -111,11 +111,11 @@ impl Series {
 }
 
 /// Per-joint series of one quantity.
-pub type JointSeries = [Series; MAX_JOINTS];
+pub(crate) type JointSeries = [Series; MAX_JOINTS];
 
 /// The plot's y bounds for `series`: the data's range padded by 10 % of its span on each side,
 /// at least `min_span` wide (a flat line sits in the middle), `[-1, 1]·min_span/2` with no data.
-pub fn bounds(series: &[&Series], min_span: f64) -> [f64; 2] {
+pub(crate) fn bounds(series: &[&Series], min_span: f64) -> [f64; 2] {
     let range = series
         .iter()
         .filter_map(|s| s.range())
@@ -134,36 +134,36 @@ pub fn bounds(series: &[&Series], min_span: f64) -> [f64; 2] {
 /// The live view's state: the last telemetry, the plots' history, the operator's actions and
 /// what the board made of them. No terminal, no transport: the tests drive it directly.
 #[derive(Debug, Clone)]
-pub struct App {
-    pub namespace: String,
-    pub settings: Settings,
+pub(crate) struct App {
+    pub(crate) namespace: String,
+    pub(crate) settings: Settings,
     /// The last telemetry, `None` until a board answered.
-    pub status: Option<Status>,
+    pub(crate) status: Option<Status>,
     /// Whether the board has gone quiet (no telemetry for a while) after answering.
-    pub stale: bool,
+    pub(crate) stale: bool,
     /// Joints of the board (from its states and telemetry).
-    pub joints: usize,
+    pub(crate) joints: usize,
     /// The joint `p` pushes (0-based).
-    pub joint: usize,
+    pub(crate) joint: usize,
     /// Board time of the newest sample [s] (monotonic, from the board's time stamps).
-    pub now_s: f64,
-    pub q: JointSeries,
-    pub stiffness: JointSeries,
-    pub tau: JointSeries,
-    pub tau_ext: JointSeries,
+    pub(crate) now_s: f64,
+    pub(crate) q: JointSeries,
+    pub(crate) stiffness: JointSeries,
+    pub(crate) tau: JointSeries,
+    pub(crate) tau_ext: JointSeries,
     /// Distance to the commanded equilibrium [rad], from telemetry.
-    pub tracking_error: Series,
+    pub(crate) tracking_error: Series,
     /// Wake-up jitter p99 per telemetry interval [µs], newest last.
-    pub jitter_p99: VecDeque<u64>,
+    pub(crate) jitter_p99: VecDeque<u64>,
     /// Late ticks per telemetry interval, newest last.
-    pub late_per_interval: VecDeque<u64>,
+    pub(crate) late_per_interval: VecDeque<u64>,
     last_late: Option<u64>,
     last_sample_s: f64,
     /// Pulses sent and acknowledged by the board.
-    pub pulses_sent: u64,
-    pub pulses_acked: u64,
+    pub(crate) pulses_sent: u64,
+    pub(crate) pulses_acked: u64,
     /// What happened, newest last.
-    pub log: VecDeque<String>,
+    pub(crate) log: VecDeque<String>,
 }
 
 fn seconds(ns: u64) -> f64 {
@@ -171,7 +171,7 @@ fn seconds(ns: u64) -> f64 {
 }
 
 impl App {
-    pub fn new(namespace: &str, settings: Settings) -> App {
+    pub(crate) fn new(namespace: &str, settings: Settings) -> App {
         App {
             namespace: namespace.into(),
             settings,
@@ -202,7 +202,7 @@ impl App {
     }
 
     /// A state from the board's 1 kHz stream: kept every [`SAMPLE_S`] of board time.
-    pub fn on_state(&mut self, s: &StateMsg) {
+    pub(crate) fn on_state(&mut self, s: &StateMsg) {
         let t = seconds(s.header.time_ns);
         self.joints = (s.joints as usize).clamp(1, MAX_JOINTS);
         self.joint = self.joint.min(self.joints - 1);
@@ -222,7 +222,7 @@ impl App {
     }
 
     /// A telemetry message (every 100 ticks).
-    pub fn on_telemetry(&mut self, t: &Telemetry) {
+    pub(crate) fn on_telemetry(&mut self, t: &Telemetry) {
         let status = Status::from_telemetry(&self.namespace, t);
         let time = seconds(t.header.time_ns);
         self.now_s = self.now_s.max(time);
@@ -244,12 +244,12 @@ impl App {
     }
 
     /// No telemetry for a while: the board may have stopped (it may come back).
-    pub fn on_silence(&mut self) {
+    pub(crate) fn on_silence(&mut self) {
         self.stale = true;
     }
 
     /// The mode as the banner says it, e.g. "SAFE HOLD" or "FAULT: joint-limit".
-    pub fn banner(&self) -> String {
+    pub(crate) fn banner(&self) -> String {
         let Some(s) = &self.status else {
             return format!("NO BOARD in namespace \"{}\" (waiting)", self.namespace);
         };
@@ -272,7 +272,7 @@ impl App {
     }
 
     /// The action a key asks for.
-    pub fn on_key(&mut self, key: Key) -> Action {
+    pub(crate) fn on_key(&mut self, key: Key) -> Action {
         let set = self.settings;
         let joint = self.joint;
         let pulse = |sign: f64| {
@@ -346,7 +346,7 @@ impl App {
     }
 
     /// An action's requests were sent: counts pulses.
-    pub fn on_sent(&mut self, requests: &[Request]) {
+    pub(crate) fn on_sent(&mut self, requests: &[Request]) {
         let pulses = requests
             .iter()
             .filter(|r| matches!(r, Request::Pulse { .. }))
@@ -355,7 +355,7 @@ impl App {
     }
 
     /// The board's answer to a request the monitor sent (`Err`: why it was not applied).
-    pub fn on_answer(
+    pub(crate) fn on_answer(
         &mut self,
         label: &str,
         request: &Request,

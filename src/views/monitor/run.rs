@@ -14,7 +14,7 @@ use vic_rt::transport::MonitorPorts;
 
 /// Why the live view stopped with an error.
 #[derive(Debug, thiserror::Error)]
-pub enum MonitorError {
+pub(crate) enum MonitorError {
     #[error(transparent)]
     Operator(#[from] OperatorError),
     #[error("the terminal: {0}")]
@@ -37,7 +37,11 @@ type Answer = (
 );
 
 /// Runs the live view of the board in `namespace` until `q`, Esc, Ctrl-C or `stop` is set.
-pub fn run(namespace: &str, settings: Settings, stop: &AtomicBool) -> Result<(), MonitorError> {
+pub(crate) fn run(
+    namespace: &str,
+    settings: Settings,
+    stop: &AtomicBool,
+) -> Result<(), MonitorError> {
     let ports = MonitorPorts::open(namespace).map_err(OperatorError::from)?;
     // Raw mode and the alternate screen; ratatui's panic hook restores them before the message.
     let mut terminal = ratatui::try_init()?;

@@ -5,9 +5,9 @@ use super::*;
 /// One strategy's line: `(latency [ms], mean, max)` per latency; a missing value (every trial
 /// diverged) breaks the line and is marked at the top of the frame.
 #[derive(Debug, Clone)]
-pub struct Curve {
-    pub name: String,
-    pub points: Vec<(f64, Option<f64>, Option<f64>)>,
+pub(crate) struct Curve {
+    pub(crate) name: String,
+    pub(crate) points: Vec<(f64, Option<f64>, Option<f64>)>,
 }
 
 pub(super) struct CurveFigure<'a> {

@@ -30,7 +30,7 @@ mod ranges;
 
 use arm::*;
 use clip::*;
-pub use curves::Curve;
+pub(crate) use curves::Curve;
 use curves::CurveFigure;
 use joint::*;
 use panels::*;
@@ -102,7 +102,7 @@ pub fn arm_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), 
 /// Lines of an error (log scale) against the feedback latency, one per strategy, with the spread
 /// from the mean to the worst trial shaded; a latency where every trial diverged is a cross at
 /// the top. Writes PNG and SVG, 930 × 520 px (the legend in a strip on the right).
-pub fn curve_figure(
+pub(crate) fn curve_figure(
     curves: &[Curve],
     title: &str,
     y_label: &str,
