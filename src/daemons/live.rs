@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use vic_plan::plan::{PLAN_VERSION, PlanFile};
 use vic_plan::scenario::Scenario;
-use vic_plan::strategy::{PlanRequest, Strategy};
+use vic_plan::strategy::{Latency, PlanRequest, Strategy};
 use vic_rt::daemon::Children;
 
 /// The scenario every process of a run loads: the file and the user's overrides.
@@ -77,7 +77,8 @@ pub(crate) fn stop_board(board: &mut Child) -> anyhow::Result<Value> {
 pub(crate) struct PlannerRun<'a> {
     pub(crate) strategy: Strategy,
     pub(crate) plan: &'a Path,
-    pub(crate) latency_ms: f64,
+    /// The feedback latency, on the plan's grid (`--latency-ms` of the planner).
+    pub(crate) latency: Latency,
     pub(crate) rate_hz: u64,
     pub(crate) trials: u64,
     pub(crate) seed: u64,
@@ -107,7 +108,7 @@ pub(crate) fn run_planner(
         ])
         .args(["--trials", &run.trials.to_string()])
         .args(["--seed", &run.seed.to_string()])
-        .args(["--latency-ms", &run.latency_ms.to_string()])
+        .args(["--latency-ms", &run.latency.ms().to_string()])
         .args(["--rate-hz", &run.rate_hz.to_string()])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());

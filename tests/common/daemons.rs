@@ -52,7 +52,7 @@ pub fn ilqg_plan() -> PathBuf {
     plan_or_fixture(
         "two_link_divergent_sigma002_ilqg200_k0.json",
         "ilqg",
-        &["--delay-ms", "200", "--set", "actuator.stiffness_max=0"],
+        &["--latency-ms", "200", "--set", "actuator.stiffness_max=0"],
     )
 }
 

@@ -107,7 +107,7 @@ struct DemoPlans {
 struct StrategyRun<'a> {
     strategy: Strategy,
     plan: &'a Path,
-    latency_ms: f64,
+    latency: Latency,
     rate_hz: u64,
 }
 
@@ -126,7 +126,7 @@ pub(crate) fn run(o: Args) -> anyhow::Result<()> {
     let namespace = format!("demo{}", std::process::id());
     let store = PlanStore::new(o.plans_dir.as_deref(), &namespace)?;
     let plans = plan_strategies(o, &store, latency)?;
-    let mut runs = strategy_runs(o, &plans);
+    let mut runs = strategy_runs(&plans, latency);
     runs.retain(|r| o.only.is_none_or(|s| s == r.strategy));
     let mut children = Children::new(&namespace);
     let scenario_file = o.scenario_file();
@@ -146,7 +146,7 @@ pub(crate) fn run(o: Args) -> anyhow::Result<()> {
             let run = PlannerRun {
                 strategy: r.strategy,
                 plan: r.plan,
-                latency_ms: r.latency_ms,
+                latency: r.latency,
                 rate_hz: r.rate_hz,
                 trials: o.trials,
                 seed: o.seed.seed,
@@ -252,48 +252,43 @@ fn plan_strategies(o: &Args, store: &PlanStore, latency: Latency) -> anyhow::Res
 
 /// The rows: naive-delayed at 0 ms (the reference, planner at 250 Hz so that its own loop adds
 /// only a few ms), then the five strategies at the latency (50 Hz).
-fn strategy_runs<'a>(o: &Args, plans: &'a DemoPlans) -> Vec<StrategyRun<'a>> {
-    let at = |strategy, plan, latency_ms, rate_hz| StrategyRun {
+fn strategy_runs(plans: &DemoPlans, latency: Latency) -> Vec<StrategyRun<'_>> {
+    let at = |strategy, plan, latency, rate_hz| StrategyRun {
         strategy,
         plan,
-        latency_ms,
+        latency,
         rate_hz,
     };
     let mut runs = Vec::new();
     if let Some(p) = &plans.feedback_at_zero {
-        runs.push(at(Strategy::NaiveDelayed, p, 0.0, 250));
+        runs.push(at(Strategy::NaiveDelayed, p, Latency::ZERO, 250));
     }
     // The predictor runs the undelayed plan's gains on the predicted present (at 0 ms latency
     // the feedback plan is that plan).
     let undelayed = plans.feedback_at_zero.as_ref().unwrap_or(&plans.feedback);
-    runs.push(at(
-        Strategy::NaiveDelayed,
-        &plans.feedback,
-        o.latency_ms,
-        50,
-    ));
-    runs.push(at(Strategy::Predictor, undelayed, o.latency_ms, 50));
-    runs.push(at(Strategy::Stiffness, &plans.stiffness, o.latency_ms, 50));
+    runs.push(at(Strategy::NaiveDelayed, &plans.feedback, latency, 50));
+    runs.push(at(Strategy::Predictor, undelayed, latency, 50));
+    runs.push(at(Strategy::Stiffness, &plans.stiffness, latency, 50));
     runs.push(at(
         Strategy::StiffnessPredictor,
         &plans.stiffness_feedback,
-        o.latency_ms,
+        latency,
         50,
     ));
-    runs.push(at(Strategy::Replan, &plans.stiffness, o.latency_ms, 50));
+    runs.push(at(Strategy::Replan, &plans.stiffness, latency, 50));
     runs
 }
 
 impl StrategyRun<'_> {
     /// The column title and the file stem of this run.
     fn label(&self) -> String {
-        format!("{} {} ms", self.strategy.name(), self.latency_ms)
+        format!("{} {} ms", self.strategy.name(), self.latency.ms())
     }
     fn stem(&self) -> String {
         format!(
             "{}-{}ms",
             self.strategy.name().replace('+', "-"),
-            self.latency_ms
+            self.latency.ms()
         )
     }
 }
@@ -414,11 +409,12 @@ mod tests {
             feedback_at_zero: Some("f0.json".into()),
         };
         let rows = |o: &Args, plans: &DemoPlans| -> Vec<(&'static str, String, f64, u64)> {
-            strategy_runs(o, plans)
+            let latency = Latency::from_ms(o.latency_ms, 0.01).expect("on the grid");
+            strategy_runs(plans, latency)
                 .iter()
                 .map(|r| {
                     let plan = r.plan.display().to_string();
-                    (r.strategy.name(), plan, r.latency_ms, r.rate_hz)
+                    (r.strategy.name(), plan, r.latency.ms(), r.rate_hz)
                 })
                 .collect()
         };

@@ -266,12 +266,13 @@ pub fn sweep_latency(
                 Engine::Live => {
                     let rig = live.as_ref().expect("started above");
                     let (r, trials) =
-                        rig.point(i, p, strategy, latency_ms, opts)
-                            .map_err(|source| SweepError::Live {
+                        rig.point(i, p, strategy, latency, opts).map_err(|source| {
+                            SweepError::Live {
                                 strategy: strategy.name(),
                                 latency_ms,
                                 source,
-                            })?;
+                            }
+                        })?;
                     let fraction = r.diverged as f64 / r.trials.max(1) as f64;
                     Measured {
                         final_error: (r.final_error_mean, r.final_error_max),
@@ -384,13 +385,13 @@ impl<'a> LiveRig<'a> {
     }
 
     /// Runs the trials of one point: plan number `i` of the sweep (`plan`) with `strategy` at
-    /// `latency_ms`, the central controller at 50 Hz.
+    /// `latency`, the central controller at 50 Hz.
     fn point(
         &self,
         i: usize,
         plan: &PlanFile,
         strategy: Strategy,
-        latency_ms: f64,
+        latency: Latency,
         opts: &SweepOptions,
     ) -> anyhow::Result<(crate::views::report::StrategyResult, Vec<Trial>)> {
         use crate::daemons::live::{PlannerRun, run_planner};
@@ -402,7 +403,7 @@ impl<'a> LiveRig<'a> {
         let run = PlannerRun {
             strategy,
             plan: &file,
-            latency_ms,
+            latency,
             rate_hz: 1_000_000_000 / CENTRAL_PERIOD_NS,
             trials: opts.trials as u64,
             seed: opts.seed,
