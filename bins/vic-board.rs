@@ -2,14 +2,14 @@
 //! scenario's plant under the impedance law (Eq. 4), follows the command slices of `vic-planner`,
 //! applies injected disturbances, and publishes its state every tick and telemetry at 10 Hz.
 //! SIGINT/SIGTERM stop it at the end of the current tick; it prints its statistics and exits 0.
-//! Its flags and their help are [`vic::board_daemon::BoardOptions`];
-//! [`vic::board_daemon::run`] does the rest.
+//! Its flags and their help are [`vic::daemons::board::BoardOptions`];
+//! [`vic::daemons::board::run`] does the rest.
 
 use std::process::ExitCode;
-use vic::board_daemon::BoardOptions;
 use vic::cli::finish;
+use vic::daemons::board::BoardOptions;
 
 fn main() -> ExitCode {
     let options: BoardOptions = clap::Parser::parse();
-    finish("vic-board", vic::board_daemon::run(&options))
+    finish("vic-board", vic::daemons::board::run(&options))
 }

@@ -2,13 +2,13 @@
 //! command slices, with a strategy (`naive-delayed`, `predictor`, `stiffness`,
 //! `stiffness+predictor`) and delay lines on the
 //! state and command paths; runs N trials and prints their errors. The flags are parsed here;
-//! [`vic::central_daemon::run`] does the rest.
+//! [`vic::daemons::central::run`] does the rest.
 
 use std::process::ExitCode;
-use vic::central_daemon::CentralOptions;
 use vic::cli::finish;
+use vic::daemons::central::CentralOptions;
 
 fn main() -> ExitCode {
     let options: CentralOptions = clap::Parser::parse();
-    finish("vic-planner", vic::central_daemon::run(&options))
+    finish("vic-planner", vic::daemons::central::run(&options))
 }

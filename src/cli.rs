@@ -18,16 +18,16 @@ use vic_rt::transport::DEFAULT_NAMESPACE;
 /// why; [`exit_code`] turns it into exit code 2.
 #[derive(Debug, thiserror::Error)]
 #[error(transparent)]
-pub struct InputError(#[from] anyhow::Error);
+pub(crate) struct InputError(#[from] anyhow::Error);
 
 /// An [`InputError`] with this message.
-pub fn input_error(message: impl Display) -> anyhow::Error {
+pub(crate) fn input_error(message: impl Display) -> anyhow::Error {
     InputError(anyhow!("{message}")).into()
 }
 
 /// Classifies the error of a `Result` whose error only needs to be shown: the user's
 /// ([`Classify::input`], exit 2) or the run's ([`Classify::runtime`], exit 1).
-pub trait Classify<T> {
+pub(crate) trait Classify<T> {
     /// The error is the user's input (exit 2).
     fn input(self) -> anyhow::Result<T>;
     /// The error is a failure of the run (exit 1).
@@ -44,7 +44,7 @@ impl<T, E: Display> Classify<T> for Result<T, E> {
 }
 
 /// 2 when the error (or anything it wraps) is an [`InputError`], else 1.
-pub fn exit_code(error: &anyhow::Error) -> u8 {
+pub(crate) fn exit_code(error: &anyhow::Error) -> u8 {
     if error.chain().any(|e| e.is::<InputError>()) {
         2
     } else {
@@ -54,7 +54,7 @@ pub fn exit_code(error: &anyhow::Error) -> u8 {
 
 /// The error's message and the messages of its causes, joined by ": ", each cause left out when
 /// the text before already ends with it (errors that print their source themselves).
-pub fn message(error: &anyhow::Error) -> String {
+pub(crate) fn message(error: &anyhow::Error) -> String {
     let mut text = String::new();
     for cause in error.chain() {
         let part = cause.to_string();
@@ -82,15 +82,15 @@ pub fn finish(program: &str, result: anyhow::Result<()>) -> ExitCode {
 
 /// `--namespace`: which board the command talks to.
 #[derive(Debug, Clone, clap::Args)]
-pub struct NamespaceArgs {
+pub(crate) struct NamespaceArgs {
     /// Namespace of the services (instances in different namespaces never see each other).
     #[arg(long, default_value = DEFAULT_NAMESPACE)]
-    pub namespace: String,
+    pub(crate) namespace: String,
 }
 
 impl NamespaceArgs {
     /// The namespace, checked (it names files in /dev/shm).
-    pub fn validated(&self) -> anyhow::Result<&str> {
+    pub(crate) fn validated(&self) -> anyhow::Result<&str> {
         vic_rt::transport::validate_namespace(&self.namespace).input()?;
         Ok(&self.namespace)
     }
@@ -98,59 +98,59 @@ impl NamespaceArgs {
 
 /// `--set SECTION.KEY=VALUE`, repeatable: overrides of the scenario's keys.
 #[derive(Debug, Clone, clap::Args)]
-pub struct OverrideArgs {
+pub(crate) struct OverrideArgs {
     /// Override a configuration key (repeatable): --set noise.sigma=0.02
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
-    pub overrides: Vec<String>,
+    pub(crate) overrides: Vec<String>,
 }
 
 /// `--config FILE` (required) and its `--set` overrides.
 #[derive(Debug, Clone, clap::Args)]
-pub struct ScenarioArgs {
+pub(crate) struct ScenarioArgs {
     /// Scenario file (TOML).
     #[arg(long, short, value_name = "FILE")]
-    pub config: PathBuf,
+    pub(crate) config: PathBuf,
     #[command(flatten)]
-    pub set: OverrideArgs,
+    pub(crate) set: OverrideArgs,
 }
 
 /// The scenario every real-time command runs when none is given.
-pub const DEFAULT_SCENARIO: &str = "config/two_link_divergent.toml";
+pub(crate) const DEFAULT_SCENARIO: &str = "config/two_link_divergent.toml";
 
 /// `--config FILE` (default: the two-link arm in the divergent field) and its `--set` overrides.
 #[derive(Debug, Clone, clap::Args)]
-pub struct DefaultScenarioArgs {
+pub(crate) struct DefaultScenarioArgs {
     /// Scenario file (TOML).
     #[arg(long, short, value_name = "FILE", default_value = DEFAULT_SCENARIO)]
-    pub config: PathBuf,
+    pub(crate) config: PathBuf,
     #[command(flatten)]
-    pub set: OverrideArgs,
+    pub(crate) set: OverrideArgs,
 }
 
 /// `--seed`: the seed of the noise.
 #[derive(Debug, Clone, Copy, clap::Args)]
-pub struct SeedArgs {
+pub(crate) struct SeedArgs {
     /// Seed of the noise (each trial derives its own stream from it).
     #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    pub(crate) seed: u64,
 }
 
 /// `--json`: print one JSON object instead of the readable report.
 #[derive(Debug, Clone, Copy, clap::Args)]
-pub struct JsonArg {
+pub(crate) struct JsonArg {
     /// Print one JSON object instead of the readable report.
     #[arg(long)]
-    pub json: bool,
+    pub(crate) json: bool,
 }
 
 /// Prints `value` as one line of JSON on stdout.
-pub fn print_json(value: &impl serde::Serialize) -> anyhow::Result<()> {
+pub(crate) fn print_json(value: &impl serde::Serialize) -> anyhow::Result<()> {
     println!("{}", serde_json::to_string(value)?);
     Ok(())
 }
 
 /// A command's result: one line of JSON with `--json`, else the readable report `table` prints.
-pub fn print_report<T: serde::Serialize>(
+pub(crate) fn print_report<T: serde::Serialize>(
     value: &T,
     json: bool,
     table: impl FnOnce(&T),
@@ -165,7 +165,7 @@ pub fn print_report<T: serde::Serialize>(
 
 /// The latency of `ms` given with `flag` on a grid of `dt` s ([`Latency::from_ms`]), else an
 /// input error naming `flag`.
-pub fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latency> {
+pub(crate) fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latency> {
     Latency::from_ms(ms, dt).map_err(|e| {
         input_error(format!(
             "{flag} {}: not a whole number of {} ms plan steps",
@@ -175,7 +175,7 @@ pub fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latency> {
 }
 
 /// A positive, finite number of seconds given with `flag`.
-pub fn positive_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::Duration> {
+pub(crate) fn positive_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::Duration> {
     if !(seconds.is_finite() && seconds > 0.0) {
         return Err(input_error(format!(
             "{flag} {seconds}: must be a positive number of seconds"
@@ -185,7 +185,10 @@ pub fn positive_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::D
 }
 
 /// A finite number of seconds ≥ 0 given with `flag`.
-pub fn non_negative_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::Duration> {
+pub(crate) fn non_negative_seconds(
+    flag: &str,
+    seconds: f64,
+) -> anyhow::Result<std::time::Duration> {
     if !(seconds.is_finite() && seconds >= 0.0) {
         return Err(input_error(format!(
             "{flag} {seconds}: must be a number of seconds ≥ 0"
@@ -196,12 +199,12 @@ pub fn non_negative_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::tim
 
 /// The distance beyond which a trial counts as diverged: the user's, else the default of the
 /// model's unit (10° for a single joint, 50 mm for the arm).
-pub fn divergence_or_default(chosen: Option<f64>, model: &vic_core::model::ArmModel) -> f64 {
+pub(crate) fn divergence_or_default(chosen: Option<f64>, model: &vic_core::model::ArmModel) -> f64 {
     chosen.unwrap_or_else(|| vic_plan::unit::Unit::for_model(model).default_divergence())
 }
 
 /// A stop flag set by SIGINT or SIGTERM.
-pub fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+pub(crate) fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
     use std::sync::atomic::{AtomicBool, Ordering};
     let stop = std::sync::Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
@@ -212,7 +215,7 @@ pub fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::Atom
 
 /// The binary `name` next to the running one (the demo and the benchmarks start the board and the
 /// planner as separate processes).
-pub fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
+pub(crate) fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
     let exe = std::env::current_exe()?;
     let path = exe.with_file_name(name);
     if path.is_file() {

@@ -12,49 +12,29 @@
 //!
 //! `docs/ARCHITECTURE.md` draws the data flow and says where each equation of the paper lives.
 //!
-//! What the binaries call. The binaries only parse their flags; each command is one call here:
+//! The application by concern; the binaries only parse their flags and call one function here:
 //!
+//! - [`commands`]: the `vic` command line, one module per subcommand with its flags and its
+//!   `run`.
+//! - [`daemons`]: the two processes, `vic-board` ([`daemons::board`]) and `vic-planner`
+//!   ([`daemons::central`]) with their flags, what turns a scenario into their configuration
+//!   ([`daemons::launch`]), and the daemons run as child processes ([`daemons::live`]).
+//! - [`studies`]: the paper's figures ([`studies::experiment`]), delay versus stiffness over
+//!   latencies ([`studies::sweep`]) and the noise identification ([`studies::identify`]).
+//! - [`views`]: plots, a live run's report, the operator's snapshot of a running board and the
+//!   terminal view of `vic monitor` (feature `tui`).
+//! - [`bench`]: the benchmarks against the machine's own limits (`vic bench`).
 //! - [`cli`]: what the three binaries share: the error convention (exit 2 for the user's input,
 //!   1 for a failure) and the argument groups (`--namespace`, `--config` with `--set`, `--seed`,
-//!   `--json`).
-//! - One module per command: [`plan_command`] (`vic plan`), [`simulate`], [`reproduce`]
-//!   (`vic experiment`, `vic results`), [`identify_command`], [`demo`], [`operator_command`]
-//!   (`vic inject`, `status`, `monitor`), [`bench_command`], [`board_daemon`] (`vic-board`) and
-//!   [`central_daemon`] (`vic-planner`).
-//! - The work they share: [`operator`] (inject, status, monitor), `monitor` (the live view of
-//!   `vic monitor` on a terminal, with the `tui` feature), [`experiment`] (the paper's
-//!   figures), [`sweep`] (delay versus stiffness over latencies), [`identify`] (noise
-//!   identification), [`plot`], [`bench`], [`report`] (a live run's results) and [`launch`]
-//!   (turning a scenario into the board's and the central controller's configuration), [`logging`]
-//!   (the daemons' `tracing` output).
+//!   `--json`); [`progress`]: the progress bars on a terminal.
 
 // Index loops read like the equations they implement; iterator chains over several arrays do not.
 #![allow(clippy::needless_range_loop)]
 
 pub mod bench;
-pub mod bench_command;
-pub mod board_daemon;
-#[cfg(feature = "zenoh")]
-pub mod bridge_command;
-pub mod central_daemon;
 pub mod cli;
-pub mod demo;
-pub mod demo_distributed;
-pub mod experiment;
-pub mod identify;
-pub mod identify_command;
-pub mod launch;
-pub mod live;
-pub mod logging;
-#[cfg(feature = "tui")]
-pub mod monitor;
-pub mod operator;
-pub mod operator_command;
-pub mod plan_command;
-pub mod plot;
-pub mod progress;
-pub mod record_command;
-pub mod report;
-pub mod reproduce;
-pub mod simulate;
-pub mod sweep;
+pub mod commands;
+pub mod daemons;
+pub(crate) mod progress;
+pub mod studies;
+pub mod views;

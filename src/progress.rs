@@ -9,13 +9,13 @@ use vic_core::solver::ilqg::Progress as SolverProgress;
 use vic_plan::plan::ProgressFn;
 
 /// One progress line: a spinner with the solver's state, or a bar over known steps.
-pub struct Progress {
+pub(crate) struct Progress {
     bar: ProgressBar,
 }
 
 impl Progress {
     /// A spinner for work of unknown length (a solve).
-    pub fn spinner() -> Self {
+    pub(crate) fn spinner() -> Self {
         let bar = ProgressBar::new_spinner();
         bar.set_style(
             ProgressStyle::with_template("{spinner} [{elapsed}] {wide_msg}")
@@ -26,7 +26,7 @@ impl Progress {
     }
 
     /// A bar over `steps` steps named `what` (e.g. "fig1").
-    pub fn steps(what: &str, steps: u64) -> Self {
+    pub(crate) fn steps(what: &str, steps: u64) -> Self {
         let bar = ProgressBar::new(steps);
         bar.set_style(
             ProgressStyle::with_template("{prefix} [{elapsed}] {bar:24} {pos}/{len} {wide_msg}")
@@ -38,25 +38,25 @@ impl Progress {
     }
 
     /// Whether anything is drawn (stderr is a terminal).
-    pub fn is_drawn(&self) -> bool {
+    pub(crate) fn is_drawn(&self) -> bool {
         !self.bar.is_hidden()
     }
 
     /// Starts step `index` (0-based) of `steps`, named `name`.
-    pub fn step(&self, index: usize, steps: usize, name: &str) {
+    pub(crate) fn step(&self, index: usize, steps: usize, name: &str) {
         self.bar.set_length(steps as u64);
         self.bar.set_position(index as u64);
         self.bar.set_message(name.to_string());
     }
 
     /// Replaces the message.
-    pub fn message(&self, text: &str) {
+    pub(crate) fn message(&self, text: &str) {
         self.bar.set_message(text.to_string());
     }
 
     /// The planner's per-iteration callback writing into this line (`None` when nothing is
     /// drawn, so the planner does not format messages for nobody).
-    pub fn solver_callback(&self) -> Option<ProgressFn> {
+    pub(crate) fn solver_callback(&self) -> Option<ProgressFn> {
         if !self.is_drawn() {
             return None;
         }

@@ -23,7 +23,7 @@ fn board() -> (Board, [f64; 2]) {
     let q0 = [setup.x0[0], setup.x0[1]];
     let b = Board::new(
         s.model.clone(),
-        vic::launch::board_config(&s, 1_000_000),
+        vic::daemons::launch::board_config(&s, 1_000_000),
         &q0,
     )
     .unwrap();
@@ -157,7 +157,7 @@ fn the_plant_guard_latches_until_a_reset() {
     let q0 = [setup.x0[0], setup.x0[1]];
     let cfg = BoardConfig {
         velocity_max: 0.5,
-        ..vic::launch::board_config(&s, 1_000_000)
+        ..vic::daemons::launch::board_config(&s, 1_000_000)
     };
     let mut b = Board::new(s.model.clone(), cfg, &q0).unwrap();
     let mut inp = Inputs::default();
@@ -302,7 +302,7 @@ fn rejects_invalid_commands() {
             offset: -0.0015,
         },
     };
-    let cfg = vic::launch::board_config(&scenario(), 1_000_000);
+    let cfg = vic::daemons::launch::board_config(&scenario(), 1_000_000);
     let mut c = Board::new(icub, cfg, &q0).unwrap();
     let mut ci = Inputs::default();
     ci.push_control(&reset(q0, 0));

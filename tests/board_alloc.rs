@@ -24,7 +24,7 @@ fn a_board_step_does_not_allocate() {
     let q0 = [setup.x0[0], setup.x0[1]];
     let mut board = Board::new(
         scenario.model.clone(),
-        vic::launch::board_config(&scenario, 1_000_000),
+        vic::daemons::launch::board_config(&scenario, 1_000_000),
         &q0,
     )
     .unwrap();

@@ -62,7 +62,7 @@ fn a_killed_board_stops_the_planner_with_board_lost_and_keeps_earlier_trials() {
         noticed < Duration::from_secs(1),
         "noticed after {noticed:?}"
     );
-    let result: vic::report::StrategyResult =
+    let result: vic::views::report::StrategyResult =
         serde_json::from_str(stdout.trim()).expect("the finished trials as JSON");
     assert!(
         (1..5).contains(&result.trials),

@@ -138,7 +138,7 @@ fn overruns_leave_the_noiseless_trajectory_unchanged() {
             use_fake_clock(slow);
             c.set_clock(fake_clock);
         }
-        let cfg = vic::launch::board_config(&s, 1_000_000);
+        let cfg = vic::daemons::launch::board_config(&s, 1_000_000);
         let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
         let recs = lockstep(&mut board, &mut c, 1_000_000, PERIOD_NS, 1, 3);
         (recs, c.compute_timing())
@@ -167,7 +167,7 @@ fn lockstep_on_the_real_clock_decides_no_overrun() {
     let run = |budget_ns: u64| {
         let mut c = central(&set, &p, 200.0, &x0);
         c.set_compute_budget_ns(budget_ns);
-        let cfg = vic::launch::board_config(&s, 1_000_000);
+        let cfg = vic::daemons::launch::board_config(&s, 1_000_000);
         let mut board = Board::new(s.model.clone(), cfg, &x0).expect("board");
         let recs = lockstep(&mut board, &mut c, 1_000_000, PERIOD_NS, 1, 3);
         (recs, c.compute_timing())

@@ -55,7 +55,7 @@ fn run_lockstep(
     let latency = Latency::from_ms(latency_ms, s.task.dt).expect("whole steps");
     let timing = Timing::split(latency, PLANNER_PERIOD_NS);
     let mut central = Central::new(track, strategy, timing);
-    let cfg = vic::launch::board_config(s, 1_000_000);
+    let cfg = vic::daemons::launch::board_config(s, 1_000_000);
     let mut board = Board::new(s.model.clone(), cfg, x0).expect("board");
     lockstep(
         &mut board,
@@ -209,7 +209,7 @@ fn lockstep_missing_a_tick(
     let period = 1_000_000;
     let mut board = Board::new(
         s.model.clone(),
-        vic::launch::board_config(s, period),
+        vic::daemons::launch::board_config(s, period),
         set.x0.as_slice(),
     )
     .expect("board");

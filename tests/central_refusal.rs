@@ -7,7 +7,7 @@ use crate::common;
 use common::daemons::{Daemons, planner_command, sooc_plan, unique_namespace};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
-use vic::report::StrategyResult;
+use vic::views::report::StrategyResult;
 
 const TRIALS: usize = 3;
 

@@ -1,9 +1,9 @@
 //! The paper's qualitative claims, with 20 trials, for more than one seed (issue: "What must hold,
 //! for any seed"). Each experiment is planned once and simulated again with other seeds; the checks
-//! are the ones docs/RESULTS.md reports ([`vic::experiment::check_claims`]).
+//! are the ones docs/RESULTS.md reports ([`vic::studies::experiment::check_claims`]).
 
 use std::path::Path;
-use vic::experiment::{ExperimentRun, Figure, check_claims, resimulate, run};
+use vic::studies::experiment::{ExperimentRun, Figure, check_claims, resimulate, run};
 
 fn config_dir() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("config")
@@ -73,7 +73,7 @@ fn icub_monte_carlo_cost_is_close_to_the_prediction() {
 fn experiment_outputs_are_valid_png_svg_and_json() {
     let r = run(Figure::Icub, &config_dir(), 5, 1, None, |_, _, _| {}).expect("experiment runs");
     let dir = std::env::temp_dir().join(format!("vic-experiment-{}", std::process::id()));
-    let files = vic::experiment::write_outputs(&r, &dir).expect("outputs written");
+    let files = vic::studies::experiment::write_outputs(&r, &dir).expect("outputs written");
     for f in &files {
         let bytes = std::fs::read(f).expect("file exists");
         match f.extension().and_then(|e| e.to_str()) {

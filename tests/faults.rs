@@ -288,7 +288,7 @@ fn the_plant_guard_latches_a_fault_that_status_reports() {
         .output()
         .unwrap();
     assert!(out.status.success());
-    let r: vic::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
+    let r: vic::views::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r.fault_trials, 1, "{r:?}");
     // Past the 100 ms ramp into the hold.
     std::thread::sleep(Duration::from_millis(300));

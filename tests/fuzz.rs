@@ -22,7 +22,7 @@ const MS: u64 = 1_000_000;
 fn board() -> (Board, [f64; 2], BoardConfig) {
     let scenario = Scenario::load(Path::new(CONFIG), &[]).unwrap();
     let setup = vic_plan::plan::setup(&scenario).unwrap();
-    let cfg = vic::launch::board_config(&scenario, MS);
+    let cfg = vic::daemons::launch::board_config(&scenario, MS);
     let q0 = [setup.x0[0], setup.x0[1]];
     let b = Board::new(scenario.model.clone(), cfg.clone(), &q0).unwrap();
     (b, q0, cfg)

@@ -1,7 +1,7 @@
 //! Noise identification (paper §III-B, Fig. 3a): the CSV log format, the polynomial fits, the
 //! maximum-likelihood `(a, b)` of `e = (a + b q̇) η` and the Jarque–Bera test.
 
-use vic::identify;
+use vic::studies::identify;
 
 use identify::*;
 use rand::rngs::StdRng;

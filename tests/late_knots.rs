@@ -30,7 +30,7 @@ fn trial(polls: &dyn Fn(u64, u64) -> bool) -> TrialRecord {
     .expect("track");
     let timing = Timing::split(Latency::from_ms(100.0, s.task.dt).unwrap(), PLANNER);
     let mut central = Central::new(track, Strategy::Stiffness, timing);
-    let cfg = vic::launch::board_config(&s, BOARD);
+    let cfg = vic::daemons::launch::board_config(&s, BOARD);
     let mut board = Board::new(s.model.clone(), cfg, set.x0.as_slice()).expect("board");
     let mut records = lockstep_polled(&mut board, &mut central, (BOARD, PLANNER), 1, 1, polls);
     records.pop().expect("one trial")

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
-use vic::plot::{ColumnPlot, arm_figure, joint_figure};
+use vic::views::plot::{ColumnPlot, arm_figure, joint_figure};
 
 const KNOTS: usize = 61;
 const TRIALS: usize = 20;

@@ -21,7 +21,7 @@ fn board() -> (Board, [f64; 2]) {
     .unwrap();
     let setup = vic_plan::plan::setup(&s).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
-    let cfg = vic::launch::board_config(&s, MS);
+    let cfg = vic::daemons::launch::board_config(&s, MS);
     assert_eq!(cfg.watchdog_ns, 50 * MS, "the scenario's watchdog changed");
     (Board::new(s.model.clone(), cfg, &q0).unwrap(), q0)
 }

@@ -28,7 +28,7 @@ fn stiffness_beats_delayed_feedback_in_the_divergent_field() {
         .output()
         .unwrap();
     assert!(out.status.success());
-    let fb0: vic::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
+    let fb0: vic::views::report::StrategyResult = serde_json::from_slice(&out.stdout).unwrap();
 
     // SIGTERM: the board stops at the end of the tick, prints its statistics, exits 0.
     let out = d.signal_and_wait(board, libc::SIGTERM);

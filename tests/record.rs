@@ -22,7 +22,7 @@ fn building_and_pushing_a_sample_does_not_allocate_even_when_the_queue_is_full()
     let scenario = Scenario::load(Path::new(CONFIG), &[]).unwrap();
     let setup = vic_plan::plan::setup(&scenario).unwrap();
     let q0 = [setup.x0[0], setup.x0[1]];
-    let cfg = vic::launch::board_config(&scenario, 1_000_000);
+    let cfg = vic::daemons::launch::board_config(&scenario, 1_000_000);
     let mut board = Board::new(scenario.model.clone(), cfg, &q0).unwrap();
     let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("record_alloc.csv");
     let mut rec = Recorder::start(
@@ -278,7 +278,7 @@ fn the_board_records_every_tick_it_runs_exactly_once() {
     }
 
     // The log reader of `vic identify` reads the whole recording.
-    let log = vic::identify::read_log_file(&file).unwrap();
+    let log = vic::studies::identify::read_log_file(&file).unwrap();
     assert_eq!(log.len() as u64, ticks);
     assert_eq!(log[5].q, num(&rows[5], "q"));
     std::fs::remove_file(&file).unwrap();

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 use std::time::Duration;
-use vic::identify::read_log;
+use vic::studies::identify::read_log;
 use vic_rt::record::*;
 
 fn sample(tick: u64) -> Sample {

@@ -265,7 +265,7 @@ fn a_live_run_recorded_by_the_board_and_by_vic_record_reads_back_whole() {
     assert!(compared > 1000, "{compared} states in both files");
     assert_eq!(
         ext_meta["vic"]["plan_fnv1a64"],
-        vic::record_command::fnv1a64(&std::fs::read(&plan).unwrap())
+        vic::commands::record::fnv1a64(&std::fs::read(&plan).unwrap())
     );
     assert_eq!(ext_meta["vic.summary"]["states_lost"], lost.to_string());
 
@@ -291,8 +291,8 @@ fn a_live_run_recorded_by_the_board_and_by_vic_record_reads_back_whole() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let from_csv = vic::identify::read_log_file(&csv_file).unwrap();
-    let from_mcap = vic::identify::read_log_file(&board_file).unwrap();
+    let from_csv = vic::studies::identify::read_log_file(&csv_file).unwrap();
+    let from_mcap = vic::studies::identify::read_log_file(&board_file).unwrap();
     assert_eq!(from_csv.len() as u64, ticks);
     assert_eq!(from_csv, from_mcap);
     assert_eq!(

@@ -70,7 +70,7 @@ fn replan_in_lockstep(
     if background {
         central.replan_in_background(true);
     }
-    let cfg = vic::launch::board_config(s, 1_000_000);
+    let cfg = vic::daemons::launch::board_config(s, 1_000_000);
     let mut board = Board::new(s.model.clone(), cfg, &set.x0).expect("board");
     let rec = lockstep(&mut board, &mut central, 1_000_000, PLANNER_PERIOD_NS, 1, 5).remove(0);
     assert!(!rec.safe_hold && !rec.fault && rec.missing_states == 0);

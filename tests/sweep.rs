@@ -2,7 +2,7 @@
 //! ordering the paper's argument rests on.
 
 use std::path::Path;
-use vic::sweep::{Engine, Strategy, SweepOptions, sweep_latency, write_figure};
+use vic::studies::sweep::{Engine, Strategy, SweepOptions, sweep_latency, write_figure};
 use vic_plan::plan::{Method, plan};
 use vic_plan::scenario::Scenario;
 
@@ -144,7 +144,7 @@ fn the_lockstep_sweep_runs_the_real_time_code_and_matches_the_monte_carlo_withou
     );
     assert_eq!(noisy.points[1].diverged, 0, "{:?}", noisy.points[1]);
     // The pulse is the offline plant's: refused in lockstep as bad input.
-    opts.pulse = Some(vic::sweep::Pulse {
+    opts.pulse = Some(vic::studies::sweep::Pulse {
         torque: [1.0, 0.0],
         start: 0.4,
         duration: 0.05,

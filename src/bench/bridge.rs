@@ -23,57 +23,57 @@ use zenoh::Wait;
 
 /// What to measure.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub(crate) struct Options {
     /// Round trips per channel (after 10 % more for warm-up).
-    pub iterations: u64,
+    pub(crate) iterations: u64,
     /// Loopback TCP port of the link (the bare Zenoh pair uses the next one).
-    pub port: u16,
+    pub(crate) port: u16,
     /// The endpoints spin on their subscribers instead of sleeping until notified.
-    pub spin: bool,
+    pub(crate) spin: bool,
     /// Also time each hop through the bridges ([`super::bridge_hops`]).
-    pub trace: bool,
+    pub(crate) trace: bool,
 }
 
 /// One channel's one-way latency [µs].
 #[derive(Debug, Clone, Serialize)]
-pub struct Latency {
-    pub p50_us: f64,
-    pub p99_us: f64,
-    pub max_us: f64,
-    pub n: u64,
+pub(crate) struct Latency {
+    pub(crate) p50_us: f64,
+    pub(crate) p99_us: f64,
+    pub(crate) max_us: f64,
+    pub(crate) n: u64,
 }
 
 /// The report; `bridge` is the object the issue's scripts read.
 #[derive(Debug, Clone, Serialize)]
-pub struct Report {
-    pub iterations: u64,
+pub(crate) struct Report {
+    pub(crate) iterations: u64,
     /// Whether the endpoints spun (else they slept until notified).
-    pub spin: bool,
+    pub(crate) spin: bool,
     /// The bridges' safety interval (they are woken by events; this only bounds a missed one).
-    pub safety_interval_ms: f64,
-    pub payload_bytes: usize,
-    pub shared_memory: Latency,
-    pub zenoh: Latency,
-    pub through_bridge: Latency,
-    pub bridge: Ratios,
+    pub(crate) safety_interval_ms: f64,
+    pub(crate) payload_bytes: usize,
+    pub(crate) shared_memory: Latency,
+    pub(crate) zenoh: Latency,
+    pub(crate) through_bridge: Latency,
+    pub(crate) bridge: Ratios,
     /// With `trace`: the time from each one-way's start to each point on the way.
-    pub hops: Option<Vec<HopPoint>>,
+    pub(crate) hops: Option<Vec<HopPoint>>,
 }
 
 /// The bridge against bare Zenoh.
 #[derive(Debug, Clone, Serialize)]
-pub struct Ratios {
-    pub p50_us: f64,
-    pub p99_us: f64,
-    pub zenoh_p50_us: f64,
-    pub zenoh_p99_us: f64,
-    pub ratio_p50: f64,
-    pub ratio_p99: f64,
+pub(crate) struct Ratios {
+    pub(crate) p50_us: f64,
+    pub(crate) p99_us: f64,
+    pub(crate) zenoh_p50_us: f64,
+    pub(crate) zenoh_p99_us: f64,
+    pub(crate) ratio_p50: f64,
+    pub(crate) ratio_p99: f64,
 }
 
 /// Why the benchmark could not run.
 #[derive(Debug, thiserror::Error)]
-pub enum BenchError {
+pub(crate) enum BenchError {
     #[error(transparent)]
     Bridge(#[from] bridge::BridgeError),
     #[error(transparent)]
@@ -319,7 +319,7 @@ fn through_bridges(o: &Options) -> Result<(Histogram<u64>, Option<Vec<HopPoint>>
 }
 
 /// Runs the three channels in turn.
-pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchError> {
+pub(crate) fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchError> {
     progress("shared memory (one namespace, no bridge)");
     let direct_ns = unique("bbd");
     let direct = with_echo(&direct_ns, o.spin, || {
@@ -353,7 +353,7 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchE
 }
 
 /// The report as a table.
-pub fn print(r: &Report) {
+pub(crate) fn print(r: &Report) {
     println!(
         "one-way latency, {} round trips each, payload {} B, bridges woken by events \
          (safety interval {:.0} ms)",

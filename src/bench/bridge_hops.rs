@@ -56,18 +56,18 @@ const STATE: [(&str, At); 5] = [
 
 /// One point of a one-way, over the measured round trips.
 #[derive(Debug, Clone, Serialize)]
-pub struct HopPoint {
+pub(crate) struct HopPoint {
     /// `command` (central → board) or `state` (board → central).
-    pub way: &'static str,
-    pub point: &'static str,
+    pub(crate) way: &'static str,
+    pub(crate) point: &'static str,
     /// Time from the one-way's start to this point [µs].
-    pub since_start_p50_us: f64,
-    pub since_start_p99_us: f64,
+    pub(crate) since_start_p50_us: f64,
+    pub(crate) since_start_p99_us: f64,
     /// This point's median minus the previous point's (the hop's share of the median one-way).
-    pub hop_p50_us: f64,
+    pub(crate) hop_p50_us: f64,
     /// Round trips in which the point was passed within its one-way (a mark after the reading
     /// end's is left out: the end may read before the publisher's mark, just after its send).
-    pub n: u64,
+    pub(crate) n: u64,
 }
 
 /// The marks of the round trips so far.

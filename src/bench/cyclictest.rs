@@ -6,11 +6,11 @@ use super::error::{BenchError, HistogramError};
 use std::path::{Path, PathBuf};
 
 /// How to install the baseline, for messages.
-pub const INSTALL_HINT: &str = "install it with `apt-get install rt-tests` (Debian/Ubuntu) or run scripts/bench.sh, \
+pub(crate) const INSTALL_HINT: &str = "install it with `apt-get install rt-tests` (Debian/Ubuntu) or run scripts/bench.sh, \
      which installs it when missing";
 
 /// Where `cyclictest` is on `PATH` (and in `/usr/sbin`, `/usr/bin`), if anywhere.
-pub fn find() -> Option<PathBuf> {
+pub(crate) fn find() -> Option<PathBuf> {
     let path = std::env::var_os("PATH").unwrap_or_default();
     std::env::split_paths(&path)
         .chain(["/usr/sbin".into(), "/usr/bin".into(), "/sbin".into()])
@@ -20,18 +20,18 @@ pub fn find() -> Option<PathBuf> {
 
 /// One cyclictest run.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub(crate) struct Options {
     /// Wake-up interval [µs] (`-i`).
-    pub interval_us: u64,
+    pub(crate) interval_us: u64,
     /// Duration [s] (`-D`).
-    pub seconds: u64,
+    pub(crate) seconds: u64,
     /// `SCHED_FIFO` priority (`-p`), or the default scheduler.
-    pub fifo_priority: Option<i32>,
+    pub(crate) fifo_priority: Option<i32>,
     /// Pin the measuring thread to this CPU (`-a`).
-    pub cpu: Option<usize>,
+    pub(crate) cpu: Option<usize>,
     /// Largest latency the histogram resolves [µs] (`-h`); later wake-ups count as overflows and
     /// only the maximum keeps their value.
-    pub histogram_us: u64,
+    pub(crate) histogram_us: u64,
 }
 
 impl Default for Options {
@@ -48,7 +48,7 @@ impl Default for Options {
 
 impl Options {
     /// The command-line arguments (memory locked, quiet, histogram to `histfile`).
-    pub fn args(&self, histfile: &Path) -> Vec<String> {
+    pub(crate) fn args(&self, histfile: &Path) -> Vec<String> {
         let mut a = vec![
             "-m".to_string(),
             "-q".to_string(),
@@ -77,7 +77,7 @@ pub struct Histogram {
     /// `# Total:` as printed (the samples in the buckets).
     pub total: u64,
     pub min_us: f64,
-    pub avg_us: f64,
+    pub(crate) avg_us: f64,
     pub max_us: f64,
 }
 
@@ -165,15 +165,15 @@ pub fn parse(text: &str) -> Result<Histogram, HistogramError> {
 
 /// A finished cyclictest run.
 #[derive(Debug, Clone)]
-pub struct Run {
-    pub histogram: Histogram,
+pub(crate) struct Run {
+    pub(crate) histogram: Histogram,
     /// CPU time over wall time [%].
-    pub cpu_percent: f64,
-    pub command: String,
+    pub(crate) cpu_percent: f64,
+    pub(crate) command: String,
 }
 
 /// Runs cyclictest with `opts` and parses its histogram.
-pub fn run(binary: &Path, opts: &Options) -> Result<Run, BenchError> {
+pub(crate) fn run(binary: &Path, opts: &Options) -> Result<Run, BenchError> {
     let histfile = std::env::temp_dir().join(format!(
         "vic-cyclictest-{}-{}.hist",
         std::process::id(),

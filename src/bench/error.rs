@@ -29,7 +29,7 @@ pub enum HistogramError {
 
 /// Why a benchmark could not run to its end.
 #[derive(Debug, thiserror::Error)]
-pub enum BenchError {
+pub(crate) enum BenchError {
     #[error(transparent)]
     Scenario(#[from] ConfigError),
     #[error(transparent)]
@@ -85,7 +85,7 @@ pub enum BenchError {
 
 impl BenchError {
     /// An I/O failure of `what` (a process or a file).
-    pub fn io(what: impl Into<String>, source: std::io::Error) -> Self {
+    pub(crate) fn io(what: impl Into<String>, source: std::io::Error) -> Self {
         BenchError::Io {
             what: what.into(),
             source,
@@ -93,7 +93,7 @@ impl BenchError {
     }
 
     /// The iceoryx2 baseline failed at `what` (its errors are only `Debug`).
-    pub fn iceoryx(what: impl Into<String>, error: impl std::fmt::Debug) -> Self {
+    pub(crate) fn iceoryx(what: impl Into<String>, error: impl std::fmt::Debug) -> Self {
         BenchError::Iceoryx {
             what: what.into(),
             message: format!("{error:?}"),

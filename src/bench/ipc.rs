@@ -8,7 +8,7 @@
 //! One-way latency = receive time − publish time stamp (one clock, two threads); round trip =
 //! answer received − state published.
 
-pub use super::pair::{Pair, PairOptions, run_pair};
+pub(crate) use super::pair::{Pair, PairOptions, run_pair};
 
 use super::{BenchError, Dist, ratio};
 use iceoryx2::prelude::*;
@@ -20,9 +20,9 @@ use vic_rt::transport::{
 };
 
 /// Bytes of the state message (the ping payload).
-pub const STATE_BYTES: usize = std::mem::size_of::<StateMsg>();
+pub(crate) const STATE_BYTES: usize = std::mem::size_of::<StateMsg>();
 /// Bytes of a command slice (the pong payload).
-pub const COMMAND_BYTES: usize = std::mem::size_of::<CommandSlice>();
+pub(crate) const COMMAND_BYTES: usize = std::mem::size_of::<CommandSlice>();
 
 /// Ping-pongs not recorded at the start.
 const WARM_UP: u64 = 1000;
@@ -33,13 +33,13 @@ const MAX_RESENDS: u64 = 100;
 
 /// The three figures of a ping-pong.
 #[derive(Debug, Clone, Copy, Serialize, Default)]
-pub struct Channels {
+pub(crate) struct Channels {
     /// Board → planner, `StateMsg`-sized.
-    pub state_one_way: Dist,
+    pub(crate) state_one_way: Dist,
     /// Planner → board, `CommandSlice`-sized.
-    pub command_one_way: Dist,
-    pub round_trip: Dist,
-    pub resends: u64,
+    pub(crate) command_one_way: Dist,
+    pub(crate) round_trip: Dist,
+    pub(crate) resends: u64,
 }
 
 /// One side of a ping-pong, whatever carries it.
@@ -250,7 +250,7 @@ fn ping_pong<P: Side, Q: Side>(
 type Result<T, E = BenchError> = std::result::Result<T, E>;
 
 /// vic's channels: [`BoardPorts`] and [`CentralPorts`], the real message types.
-pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
+pub(crate) fn vic_ping_pong(iterations: u64) -> Result<Channels> {
     let ns = super::unique_namespace("bi");
     let (a, b) = (ns.clone(), ns.clone());
     let r = ping_pong(
@@ -264,7 +264,7 @@ pub fn vic_ping_pong(iterations: u64) -> Result<Channels> {
 
 /// The baseline: bare iceoryx2 with `[u8; size_of::<StateMsg>()]` one way and
 /// `[u8; size_of::<CommandSlice>()]` back, default QoS, its own `global.prefix`.
-pub fn bare_ping_pong(iterations: u64) -> Result<Channels> {
+pub(crate) fn bare_ping_pong(iterations: u64) -> Result<Channels> {
     let ns = super::unique_namespace("bb");
     let (a, b) = (ns.clone(), ns.clone());
     let r = ping_pong(
@@ -278,35 +278,35 @@ pub fn bare_ping_pong(iterations: u64) -> Result<Channels> {
 
 /// Options of `vic bench ipc`.
 #[derive(Debug, Clone)]
-pub struct Options {
-    pub iterations: u64,
+pub(crate) struct Options {
+    pub(crate) iterations: u64,
     /// The running pair, or `None` to skip it.
-    pub pair: Option<PairOptions>,
+    pub(crate) pair: Option<PairOptions>,
 }
 
 /// The whole report of `vic bench ipc`.
 #[derive(Debug, Clone, Serialize)]
-pub struct Report {
-    pub iterations: u64,
-    pub state_bytes: usize,
-    pub command_bytes: usize,
-    pub method: String,
+pub(crate) struct Report {
+    pub(crate) iterations: u64,
+    pub(crate) state_bytes: usize,
+    pub(crate) command_bytes: usize,
+    pub(crate) method: String,
     /// State channel one way (the documented summary).
-    pub vic: Dist,
-    pub baseline: Dist,
-    pub ratio_p50: Option<f64>,
-    pub ratio_p99: Option<f64>,
-    pub vic_channels: Channels,
-    pub baseline_channels: Channels,
-    pub ratio_command_p50: Option<f64>,
-    pub ratio_round_trip_p50: Option<f64>,
-    pub pair: Option<Pair>,
-    pub pair_note: Option<String>,
-    pub machine: super::Machine,
+    pub(crate) vic: Dist,
+    pub(crate) baseline: Dist,
+    pub(crate) ratio_p50: Option<f64>,
+    pub(crate) ratio_p99: Option<f64>,
+    pub(crate) vic_channels: Channels,
+    pub(crate) baseline_channels: Channels,
+    pub(crate) ratio_command_p50: Option<f64>,
+    pub(crate) ratio_round_trip_p50: Option<f64>,
+    pub(crate) pair: Option<Pair>,
+    pub(crate) pair_note: Option<String>,
+    pub(crate) machine: super::Machine,
 }
 
 /// Runs the baseline, vic, then the pair.
-pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report> {
+pub(crate) fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report> {
     let machine = super::Machine::detect();
     progress(&format!(
         "bare iceoryx2 ping-pong, {} + {} bytes, {} iterations",
@@ -353,7 +353,7 @@ pub fn run(o: &Options, mut progress: impl FnMut(&str)) -> Result<Report> {
 }
 
 /// The report as a table.
-pub fn print(r: &Report) {
+pub(crate) fn print(r: &Report) {
     println!(
         "transport, {} iterations; state {} B, command {} B; {}",
         r.iterations, r.state_bytes, r.command_bytes, r.method

@@ -5,16 +5,17 @@
 //! ratio.
 
 #[cfg(feature = "zenoh")]
-pub mod bridge;
+pub(crate) mod bridge;
 #[cfg(feature = "zenoh")]
-pub mod bridge_hops;
+pub(crate) mod bridge_hops;
 pub mod cyclictest;
-pub mod error;
-pub mod ipc;
+pub(crate) mod error;
+pub(crate) mod ipc;
 pub mod loop_bench;
-pub mod pair;
+pub(crate) mod pair;
 
-pub use error::{BenchError, HistogramError};
+pub(crate) use error::BenchError;
+pub use error::HistogramError;
 
 use serde::{Deserialize, Serialize};
 use vic_rt::realtime::LatencyHistogram;
@@ -31,7 +32,7 @@ pub struct Dist {
 
 impl Dist {
     /// The distribution recorded in a [`LatencyHistogram`] (ns values).
-    pub fn from_histogram(h: &LatencyHistogram) -> Dist {
+    pub(crate) fn from_histogram(h: &LatencyHistogram) -> Dist {
         let p = h.percentiles();
         Dist {
             p50_us: p.p50,
@@ -58,7 +59,7 @@ impl Dist {
     }
 
     /// One line: `p50 … p99 … p99.9 … max …`.
-    pub fn line(&self) -> String {
+    pub(crate) fn line(&self) -> String {
         format!(
             "p50 {:>8.2}  p99 {:>8.2}  p99.9 {:>8.2}  max {:>9.1} µs  (n = {})",
             self.p50_us, self.p99_us, self.p999_us, self.max_us, self.count
@@ -92,7 +93,7 @@ pub fn ratio(vic: f64, baseline: Option<f64>) -> Option<f64> {
 }
 
 /// A ratio for tables: `1.23×` or `–`.
-pub fn ratio_text(r: Option<f64>) -> String {
+pub(crate) fn ratio_text(r: Option<f64>) -> String {
     r.map_or("–".into(), |r| format!("{r:.2}×"))
 }
 
@@ -133,15 +134,15 @@ mod tests {
 /// The machine a bench ran on.
 #[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct Machine {
-    pub cpus: usize,
-    pub cpu_model: String,
-    pub kernel: String,
+    pub(crate) cpus: usize,
+    pub(crate) cpu_model: String,
+    pub(crate) kernel: String,
     /// `hypervisor` when `/proc/cpuinfo` lists the flag (a virtual machine), else `bare metal?`.
-    pub virtualization: String,
+    pub(crate) virtualization: String,
     /// `PREEMPT_RT` when the kernel says so in its version string.
-    pub preempt: String,
+    pub(crate) preempt: String,
     /// `/proc/loadavg`'s 1-minute figure when the bench started: other work competes for the CPUs.
-    pub load_average_1min: f64,
+    pub(crate) load_average_1min: f64,
 }
 
 impl Machine {

@@ -15,42 +15,42 @@ type Result<T, E = BenchError> = std::result::Result<T, E>;
 
 /// Options of the end-to-end run of the pair.
 #[derive(Debug, Clone)]
-pub struct PairOptions {
-    pub board_bin: PathBuf,
-    pub planner_bin: PathBuf,
-    pub config: PathBuf,
-    pub overrides: Vec<String>,
+pub(crate) struct PairOptions {
+    pub(crate) board_bin: PathBuf,
+    pub(crate) planner_bin: PathBuf,
+    pub(crate) config: PathBuf,
+    pub(crate) overrides: Vec<String>,
     /// A plan for the `stiffness` strategy (`vic plan --method sooc --out`).
-    pub plan: PathBuf,
+    pub(crate) plan: PathBuf,
     /// Trials the planner runs (about 1.5 s each).
-    pub trials: u64,
+    pub(crate) trials: u64,
 }
 
 /// The end-to-end figures of the running pair.
 #[derive(Debug, Clone, Serialize)]
-pub struct Pair {
+pub(crate) struct Pair {
     /// Age of the newest state at a reader polling at 1 kHz on the whole-millisecond deadlines
     /// the planner's loop uses, with the planner's subscription (now − the state's publish
     /// stamp): what the planner sees at each of its ticks.
-    pub state_age_us: Dist,
+    pub(crate) state_age_us: Dist,
     /// Age of the command slice the board used at each tick, from its own statistics (slices are
     /// sent at 50 Hz and cover 320 ms: up to 20 ms by design).
-    pub command_age_us: Dist,
+    pub(crate) command_age_us: Dist,
     /// Pulse published (at a phase spread over the period) → first board state carrying it (its
     /// publish stamp): the pulse has been applied to the plant by then.
-    pub pulse_to_effect_us: Dist,
+    pub(crate) pulse_to_effect_us: Dist,
     /// Pulse published → that state received by the injecting tool.
-    pub pulse_to_observed_us: Dist,
-    pub pulses: u64,
+    pub(crate) pulse_to_observed_us: Dist,
+    pub(crate) pulses: u64,
     /// The board's own statistics over the run (jitter, work, command age, ticks …).
-    pub board: serde_json::Value,
-    pub trials: u64,
+    pub(crate) board: serde_json::Value,
+    pub(crate) trials: u64,
 }
 
 /// Runs `vic-board` and `vic-planner --strategy stiffness` in a fresh namespace, injects a small
 /// torque pulse every 100 ms and records the state age, the pulse-to-effect delay and the board's
 /// statistics.
-pub fn run_pair(o: &PairOptions) -> Result<Pair> {
+pub(crate) fn run_pair(o: &PairOptions) -> Result<Pair> {
     let ns = super::unique_namespace("bp");
     let mut guard = vic_rt::daemon::Children::new(&ns);
     guard

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use vic::report::StrategyResult;
+use vic::views::report::StrategyResult;
 
 pub const CONFIG: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
@@ -52,7 +52,7 @@ pub fn ilqg_plan() -> PathBuf {
     plan_or_fixture(
         "two_link_divergent_sigma002_ilqg200_k0.json",
         "ilqg",
-        &["--delay-ms", "200", "--set", "actuator.stiffness_max=0"],
+        &["--latency-ms", "200", "--set", "actuator.stiffness_max=0"],
     )
 }
 

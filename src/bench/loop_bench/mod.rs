@@ -7,9 +7,9 @@
 mod measure;
 mod variants;
 
-pub use crate::launch::board_config;
+pub use crate::daemons::launch::board_config;
 pub use measure::hold_slice;
-pub use variants::{HEADLINE, Variant, variants};
+pub(crate) use variants::{HEADLINE, Variant, variants};
 
 use super::{BenchError, Dist, cyclictest, ratio};
 use serde::Serialize;
@@ -19,88 +19,88 @@ use vic_rt::sched;
 /// The loop's period [ns]: 1 kHz, cyclictest's `-i1000`.
 pub const PERIOD_NS: u64 = 1_000_000;
 /// `SCHED_FIFO` priority of the real-time variants (cyclictest's `-p80`).
-pub const FIFO_PRIORITY: i32 = 80;
+pub(crate) const FIFO_PRIORITY: i32 = 80;
 /// Spin before each deadline in the spin variants [µs].
-pub const SPIN_US: u64 = 100;
+pub(crate) const SPIN_US: u64 = 100;
 
 /// Options of `vic bench loop`.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub(crate) struct Options {
     /// Duration of each variant and of each cyclictest run [s].
-    pub seconds: u64,
+    pub(crate) seconds: u64,
     /// Scenario whose plant the board integrates (impedance actuator).
-    pub config: PathBuf,
-    pub overrides: Vec<String>,
+    pub(crate) config: PathBuf,
+    pub(crate) overrides: Vec<String>,
     /// Names of the variants to run (empty: all).
-    pub variants: Vec<String>,
+    pub(crate) variants: Vec<String>,
     /// Run cyclictest (when found).
-    pub baseline: bool,
+    pub(crate) baseline: bool,
 }
 
 /// The figures of one variant.
 #[derive(Debug, Clone, Serialize)]
-pub struct VariantResult {
+pub(crate) struct VariantResult {
     #[serde(flatten)]
-    pub variant: Variant,
+    pub(crate) variant: Variant,
     /// Wake-up lateness (woke − deadline).
-    pub jitter: Dist,
+    pub(crate) jitter: Dist,
     /// Tick work: drain the transport, step the board, publish the state.
-    pub work: Dist,
+    pub(crate) work: Dist,
     /// CPU time of the loop thread over wall time [%].
-    pub cpu_percent: f64,
-    pub late_ticks: u64,
-    pub missed_periods: u64,
+    pub(crate) cpu_percent: f64,
+    pub(crate) late_ticks: u64,
+    pub(crate) missed_periods: u64,
     /// Options asked for that the system refused (the loop ran without them).
-    pub refused: Vec<String>,
+    pub(crate) refused: Vec<String>,
     /// The cyclictest run it is compared with (`cyclictest` or `cyclictest_fifo`).
-    pub baseline: &'static str,
-    pub ratio_p99: Option<f64>,
-    pub ratio_p50: Option<f64>,
+    pub(crate) baseline: &'static str,
+    pub(crate) ratio_p99: Option<f64>,
+    pub(crate) ratio_p50: Option<f64>,
 }
 
 /// A cyclictest run's figures.
 #[derive(Debug, Clone, Serialize)]
-pub struct BaselineResult {
+pub(crate) struct BaselineResult {
     #[serde(flatten)]
-    pub dist: Dist,
-    pub cpu_percent: f64,
-    pub command: String,
+    pub(crate) dist: Dist,
+    pub(crate) cpu_percent: f64,
+    pub(crate) command: String,
 }
 
 /// The summary in the documented shape: `{p50_us, p99_us, p999_us, max_us, cpu_percent}`.
 #[derive(Debug, Clone, Serialize)]
-pub struct Headline {
+pub(crate) struct Headline {
     #[serde(flatten)]
-    pub dist: Dist,
-    pub cpu_percent: f64,
-    pub variant: String,
+    pub(crate) dist: Dist,
+    pub(crate) cpu_percent: f64,
+    pub(crate) variant: String,
     /// Tick work of the same run.
-    pub work: Dist,
+    pub(crate) work: Dist,
 }
 
 /// The whole report of `vic bench loop`.
 #[derive(Debug, Clone, Serialize)]
-pub struct Report {
-    pub interval_us: u64,
-    pub seconds: u64,
-    pub order: String,
-    pub scenario: String,
-    pub vic: Headline,
-    pub baseline: Option<BaselineResult>,
-    pub ratio_p99: Option<f64>,
-    pub variants: Vec<VariantResult>,
-    pub baselines: Baselines,
+pub(crate) struct Report {
+    pub(crate) interval_us: u64,
+    pub(crate) seconds: u64,
+    pub(crate) order: String,
+    pub(crate) scenario: String,
+    pub(crate) vic: Headline,
+    pub(crate) baseline: Option<BaselineResult>,
+    pub(crate) ratio_p99: Option<f64>,
+    pub(crate) variants: Vec<VariantResult>,
+    pub(crate) baselines: Baselines,
     /// Why there is no baseline, when there is none.
-    pub baseline_note: Option<String>,
-    pub fifo_permitted: bool,
-    pub machine: super::Machine,
+    pub(crate) baseline_note: Option<String>,
+    pub(crate) fifo_permitted: bool,
+    pub(crate) machine: super::Machine,
 }
 
 /// Both cyclictest runs.
 #[derive(Debug, Clone, Serialize, Default)]
-pub struct Baselines {
-    pub cyclictest: Option<BaselineResult>,
-    pub cyclictest_fifo: Option<BaselineResult>,
+pub(crate) struct Baselines {
+    pub(crate) cyclictest: Option<BaselineResult>,
+    pub(crate) cyclictest_fifo: Option<BaselineResult>,
 }
 
 impl Baselines {
@@ -116,7 +116,7 @@ impl Baselines {
 
 /// Runs the chosen variants then cyclictest (default scheduler, and `SCHED_FIFO` 80 when a FIFO
 /// variant ran and FIFO is permitted), each for `opts.seconds`.
-pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchError> {
+pub(crate) fn run(opts: &Options, mut progress: impl FnMut(&str)) -> Result<Report, BenchError> {
     let all = variants();
     for name in &opts.variants {
         if !all.iter().any(|v| v.name == name) {
@@ -221,7 +221,7 @@ fn run_baselines(
 }
 
 /// The report as a table.
-pub fn print(r: &Report) {
+pub(crate) fn print(r: &Report) {
     println!(
         "board loop at {} µs, {} s per run ({}); scenario {}",
         r.interval_us, r.seconds, r.order, r.scenario

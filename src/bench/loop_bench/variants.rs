@@ -6,23 +6,23 @@ use serde::Serialize;
 
 /// One way to run the loop.
 #[derive(Debug, Clone, Serialize)]
-pub struct Variant {
-    pub name: &'static str,
-    pub description: &'static str,
+pub(crate) struct Variant {
+    pub(crate) name: &'static str,
+    pub(crate) description: &'static str,
     /// `prctl(PR_SET_TIMERSLACK, 1)` (else the default 50 µs).
-    pub timer_slack_1ns: bool,
+    pub(crate) timer_slack_1ns: bool,
     /// Spin this long before each deadline [µs] (0: sleep only).
-    pub spin_us: u64,
+    pub(crate) spin_us: u64,
     /// `mlockall(MCL_CURRENT | MCL_FUTURE)`.
-    pub mlock: bool,
+    pub(crate) mlock: bool,
     /// Pin the loop thread to the machine's last CPU.
-    pub pin: bool,
+    pub(crate) pin: bool,
     /// `SCHED_FIFO` priority.
-    pub fifo: Option<i32>,
+    pub(crate) fifo: Option<i32>,
 }
 
 /// Every variant, from the plainest loop to everything at once.
-pub fn variants() -> Vec<Variant> {
+pub(crate) fn variants() -> Vec<Variant> {
     let v = |name, description, slack, spin_us, mlock, pin, fifo| Variant {
         name,
         description,
@@ -101,4 +101,4 @@ pub fn variants() -> Vec<Variant> {
 }
 
 /// The variant compared with cyclictest in the headline (the target names "the spin option").
-pub const HEADLINE: &str = "spin-mlock";
+pub(crate) const HEADLINE: &str = "spin-mlock";

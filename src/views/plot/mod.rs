@@ -1,0 +1,342 @@
+//! Figures of the paper from Monte Carlo trials: Fig. 1 (two-link arm in a divergent field) and
+//! Fig. 2 (single joint with feedback delays), written as PNG and SVG with `plotters`.
+//!
+//! Text is set in DejaVu Sans, embedded through the `dejavu` crate and registered with plotters'
+//! `ab_glyph` renderer on first use, so rendering needs no system fonts.
+//!
+//! Conventions:
+//! - Columns are conditions (actuator types, delays), side by side, each with its title on top.
+//! - Rows that are compared across columns share their axes. Their ranges are robust: a column
+//!   whose trials diverge far beyond the others does not widen the shared range, and its curves
+//!   simply leave the frame (everything is clipped to the plotting area).
+//! - Non-finite values are skipped: a curve breaks where a value is NaN or infinite.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use plotters::chart::MeshStyle;
+use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+mod arm;
+mod clip;
+mod curves;
+mod joint;
+mod panels;
+mod ranges;
+
+use arm::*;
+use clip::*;
+pub(crate) use curves::Curve;
+use curves::CurveFigure;
+use joint::*;
+use panels::*;
+use ranges::*;
+
+/// One column of a figure: Monte Carlo trials of one condition.
+#[derive(Debug, Clone, Default)]
+pub struct ColumnPlot {
+    pub title: String,
+    /// Knot times [s], N+1 values.
+    pub time: Vec<f64>,
+    /// Number of joints (1 or 2).
+    pub dof: usize,
+    /// Per trial, per knot: hand position (x, y) [m]; empty for a single joint.
+    pub hand: Vec<Vec<[f64; 2]>>,
+    /// Per trial, per knot: joint angles [rad] (dof values).
+    pub q: Vec<Vec<Vec<f64>>>,
+    /// Per trial, per knot: joint velocities [rad/s].
+    pub qd: Vec<Vec<Vec<f64>>>,
+    /// Per trial, per step (N values): executed commands, torques first then stiffnesses
+    /// (`control_names` says which).
+    pub u: Vec<Vec<Vec<f64>>>,
+    pub control_names: Vec<String>,
+    /// Reference hand path (per knot) for the arm, reference joint angles for a joint.
+    pub reference_hand: Vec<[f64; 2]>,
+    pub reference_q: Vec<Vec<f64>>,
+    /// 95 % confidence ellipse of the final hand position: centre [m], semi-axes [m] (major first),
+    /// major-axis angle [rad]; None for a joint. A second optional "dashed" ellipse (paper Fig. 1
+    /// column 4 shows B/10 dashed) may be given.
+    pub ellipse: Option<([f64; 2], [f64; 2], f64)>,
+    pub dashed_ellipse: Option<([f64; 2], [f64; 2], f64)>,
+}
+
+/// Why a figure could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// There is nothing to draw (no columns, or no knot times).
+    #[error("cannot plot {path}: {reason}")]
+    NoData { path: PathBuf, reason: String },
+    /// Drawing failed (this includes encoding and writing the PNG).
+    #[error("cannot draw {path}: {message}")]
+    Draw { path: PathBuf, message: String },
+    /// Writing the SVG failed.
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Fig. 1 layout: columns side by side; row A: hand paths in the (x, y) plane (every trial light
+/// grey, the mean thick, ±1 std shaded band across the path, the 95 % ellipse at the end, equal
+/// axis scale, metres), row B: joint angles and velocities vs time (mean ± std shaded, both
+/// joints, with the reference angles dashed), row C: the commands (torques, then stiffnesses
+/// when any column has them; every trial, held over each step). Writes both PNG and SVG, each
+/// `28 + 400 × columns` px wide and 1078 px tall (913 without stiffness commands).
+///
+/// `dashed_ellipse`, when given, is drawn dashed next to the solid 95 % ellipse. The legends sit
+/// in the first column, in the panel corner with the fewest data.
+///
+/// The hand-path view is the same for all columns: the reference paths, plus the spread of the
+/// trials of every column that does not diverge, plus a margin. Time rows share their y ranges.
+pub fn arm_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {
+    check_columns(columns, png)?;
+    render(&ArmFigure::new(columns), png, svg)
+}
+
+/// Lines of an error (log scale) against the feedback latency, one per strategy, with the spread
+/// from the mean to the worst trial shaded; a latency where every trial diverged is a cross at
+/// the top. Writes PNG and SVG, 930 × 520 px (the legend in a strip on the right).
+pub(crate) fn curve_figure(
+    curves: &[Curve],
+    title: &str,
+    y_label: &str,
+    png: &Path,
+    svg: &Path,
+) -> Result<(), PlotError> {
+    if curves.iter().all(|c| c.points.is_empty()) {
+        return Err(PlotError::NoData {
+            path: png.to_path_buf(),
+            reason: "no points".into(),
+        });
+    }
+    render(
+        &CurveFigure {
+            curves,
+            title,
+            y_label,
+        },
+        png,
+        svg,
+    )
+}
+
+/// Fig. 2 layout for a single joint: columns side by side; rows: angle [deg] of every trial with
+/// the reference, velocity [deg/s] of every trial, commands (torque, stiffness) of every trial.
+/// Rows share their y ranges across columns; a second stiffness panel is added to row C when any
+/// column has stiffness commands. Writes both PNG and SVG, `28 + 400 × columns` px wide and 1003
+/// px tall (768 without stiffness commands).
+pub fn joint_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {
+    check_columns(columns, png)?;
+    render(&JointFigure::new(columns), png, svg)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rendering to files
+
+pub(super) const FONT: &str = "sans-serif";
+pub(super) const COLUMN_WIDTH: u32 = 400;
+/// Left strip holding the row letters A, B, C.
+pub(super) const GUTTER: u32 = 28;
+pub(super) const TITLE_SIZE: f64 = 17.0;
+pub(super) const TICK_SIZE: f64 = 12.0;
+pub(super) const DESC_SIZE: f64 = 13.0;
+pub(super) const Y_LABEL_AREA: u32 = 62;
+pub(super) const X_LABEL_AREA: u32 = 24;
+pub(super) const X_LABEL_AREA_DESC: u32 = 42;
+/// More points than this per curve are thinned (a panel is < 400 px wide).
+pub(super) const MAX_POINTS: usize = 1500;
+/// A column's spread larger than this many times the median column's is an outlier.
+pub(super) const OUTLIER_FACTOR: f64 = 4.0;
+/// Tail fraction left out on each side when measuring a column's range of a time series (none:
+/// a column's own trials all fit unless the column is an outlier).
+pub(super) const TAIL: f64 = 0.0;
+/// Tail fraction left out on each side when measuring a column's spread of hand positions.
+pub(super) const HAND_TAIL: f64 = 0.025;
+pub(super) const RAD_TO_DEG: f64 = 180.0 / std::f64::consts::PI;
+
+pub(super) const TRIAL_GREY: RGBColor = RGBColor(190, 190, 190);
+pub(super) const MEAN_GREY: RGBColor = RGBColor(40, 40, 40);
+pub(super) const BAND_BLUE: RGBColor = RGBColor(70, 130, 200);
+pub(super) const ELLIPSE_RED: RGBColor = RGBColor(200, 30, 45);
+pub(super) const GRID: RGBColor = RGBColor(228, 228, 228);
+/// Per joint (torque and stiffness of joint i share joint i's colour).
+pub(super) const JOINT_COLOURS: [RGBColor; 4] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+];
+
+pub(super) type DrawResult<T, DB> =
+    Result<T, DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
+pub(super) type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A figure that can be drawn on any backend.
+pub(super) trait Figure {
+    /// Width and height [px].
+    fn size(&self) -> (u32, u32);
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB>;
+}
+
+pub(super) fn check_columns(columns: &[ColumnPlot], path: &Path) -> Result<(), PlotError> {
+    let reason = if columns.is_empty() {
+        "no columns".to_string()
+    } else if let Some(c) = columns.iter().find(|c| c.time.is_empty()) {
+        format!("column \"{}\" has no knot times", c.title)
+    } else {
+        return Ok(());
+    };
+    Err(PlotError::NoData {
+        path: path.to_path_buf(),
+        reason,
+    })
+}
+
+/// The embedded DejaVu Sans font could not be registered with plotters.
+#[derive(Debug, Clone, Copy, thiserror::Error)]
+#[error("the embedded DejaVu Sans font could not be registered")]
+pub(super) struct FontError;
+
+/// Registers DejaVu Sans (regular and bold) as plotters' "sans-serif", once per process.
+pub(super) fn register_fonts() -> Result<(), FontError> {
+    static REGISTERED: OnceLock<Result<(), FontError>> = OnceLock::new();
+    *REGISTERED.get_or_init(|| {
+        let fonts = [
+            (FontStyle::Normal, dejavu::sans::regular()),
+            (FontStyle::Bold, dejavu::sans::bold()),
+        ];
+        for (style, bytes) in fonts {
+            plotters::style::register_font(FONT, style, bytes).map_err(|_| FontError)?;
+        }
+        Ok(())
+    })
+}
+
+pub(super) fn draw_error<E: std::error::Error + Send + Sync>(
+    path: &Path,
+    error: DrawingAreaErrorKind<E>,
+) -> PlotError {
+    PlotError::Draw {
+        path: path.to_path_buf(),
+        message: error.to_string(),
+    }
+}
+
+pub(super) fn render(figure: &impl Figure, png: &Path, svg: &Path) -> Result<(), PlotError> {
+    register_fonts().map_err(|e| PlotError::Draw {
+        path: png.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let size = figure.size();
+    {
+        let root = BitMapBackend::new(png, size).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_error(png, e))?;
+        figure.draw(&root).map_err(|e| draw_error(png, e))?;
+        root.present().map_err(|e| draw_error(png, e))?;
+    }
+    let mut text = String::new();
+    {
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_error(svg, e))?;
+        figure.draw(&root).map_err(|e| draw_error(svg, e))?;
+        root.present().map_err(|e| draw_error(svg, e))?;
+    }
+    std::fs::write(svg, text).map_err(|source| PlotError::Write {
+        path: svg.to_path_buf(),
+        source,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const UNIT: View = View {
+        x0: 0.0,
+        x1: 1.0,
+        y0: 0.0,
+        y1: 1.0,
+    };
+
+    #[test]
+    fn segments_are_clipped_to_the_view() {
+        assert_eq!(
+            clip_segment((-1.0, 0.5), (2.0, 0.5), &UNIT),
+            Some(((0.0, 0.5), (1.0, 0.5)))
+        );
+        assert_eq!(clip_segment((-1.0, 2.0), (2.0, 2.0), &UNIT), None);
+        assert_eq!(
+            clip_segment((0.2, 0.2), (0.4, 0.6), &UNIT),
+            Some(((0.2, 0.2), (0.4, 0.6)))
+        );
+    }
+
+    #[test]
+    fn polylines_break_at_non_finite_points_and_at_the_border() {
+        let runs = clip_polyline(
+            vec![
+                (0.1, 0.1),
+                (0.2, 0.2),
+                (f64::NAN, 0.3),
+                (0.3, 0.3),
+                (0.4, 0.4),
+                (0.5, 5.0),
+                (0.6, 0.5),
+                (0.7, f64::INFINITY),
+            ],
+            &UNIT,
+        );
+        assert_eq!(runs.len(), 3);
+        assert_eq!(runs[0], vec![(0.1, 0.1), (0.2, 0.2)]);
+        assert_eq!(runs[1][..2], [(0.3, 0.3), (0.4, 0.4)]);
+        assert!(runs.iter().flatten().all(|p| UNIT.contains(*p)));
+    }
+
+    #[test]
+    fn polygons_are_clipped_to_the_view() {
+        let square = [(-1.0, -1.0), (2.0, -1.0), (2.0, 2.0), (-1.0, 2.0)];
+        let clipped = clip_polygon(&square, &UNIT);
+        assert_eq!(clipped.len(), 4);
+        assert!(clipped.iter().all(|p| UNIT.contains(*p)));
+        assert!(clip_polygon(&[(5.0, 5.0), (6.0, 5.0), (6.0, 6.0)], &UNIT).is_empty());
+    }
+
+    #[test]
+    fn a_diverging_column_does_not_set_the_shared_range() {
+        let calm = vec![0.0, 1.0];
+        let wild = vec![-100.0, 100.0];
+        let (lo, hi) = shared_range(vec![calm.clone(), wild, calm], &[], false);
+        assert!(lo > -1.0 && hi < 2.0, "{lo}..{hi}");
+    }
+
+    #[test]
+    fn ticks_show_the_decimals_they_need() {
+        assert_eq!(tick(&0.30000000000000004), "0.3");
+        assert_eq!(tick(&0.35), "0.35");
+        assert_eq!(tick(&100.0), "100");
+        assert_eq!(tick(&-0.0), "0");
+        assert_eq!(tick(&-2.5), "-2.5");
+    }
+
+    #[test]
+    fn the_legend_goes_where_the_data_is_not() {
+        let rising: Vec<(f64, f64)> = (0..=10).map(|i| (0.1 * i as f64, 0.1 * i as f64)).collect();
+        assert!(matches!(
+            quiet_corner(&UNIT, &rising),
+            SeriesLabelPosition::UpperLeft
+        ));
+    }
+
+    #[test]
+    fn equal_aspect_gives_both_axes_the_same_scale() {
+        let v = equal_aspect(UNIT, 300, 150);
+        assert!(((v.x1 - v.x0) / 300.0 - (v.y1 - v.y0) / 150.0).abs() < 1e-12);
+        assert!(v.x0 <= 0.0 && v.x1 >= 1.0 && v.y0 <= 0.0 && v.y1 >= 1.0);
+    }
+}
