@@ -54,7 +54,7 @@ fn check_criterion(stem: &str, method: Method, s: &PlanSummary) {
                 "{stem}: SOOC figures on an ILQG plan"
             );
         }
-        Method::Sooc => {
+        Method::Sooc | Method::SoocFast => {
             let o = s
                 .optimality
                 .unwrap_or_else(|| panic!("{stem}: no SOOC optimality"));

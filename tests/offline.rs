@@ -37,6 +37,7 @@ mod protocol;
 mod record_format;
 mod replan;
 mod sooc;
+mod sooc_fast;
 mod sooc_newton;
 mod sooc_workspace;
 mod strategy_plan;

@@ -13,6 +13,9 @@ enum MethodArg {
     /// Stochastic optimal open-loop control: torque and stiffness for execution without any
     /// feedback, optimal for the open-loop plant's mean and covariance (Berret & Jean 2020).
     Sooc,
+    /// The same open-loop problem by a method that scales: the exact gradient by the covariance
+    /// adjoint and a model on the mean alone (zero-order robust optimisation in spirit).
+    SoocFast,
 }
 
 #[derive(clap::Args)]
@@ -43,6 +46,7 @@ impl PlanArgs {
             method: self.method.map(|m| match m {
                 MethodArg::Ilqg => Method::Ilqg,
                 MethodArg::Sooc => Method::Sooc,
+                MethodArg::SoocFast => Method::SoocFast,
             }),
             latency_ms: self.latency_ms,
             out: self.out,

@@ -14,6 +14,10 @@ pub enum Method {
     /// optimal for the open-loop plant's mean and covariance (the Eq. 14 cost in expectation).
     /// Delay-free by nature: nothing is fed back.
     Sooc,
+    /// The same open-loop problem solved by [`vic_core::solver::sooc_fast`]: an exact gradient
+    /// by the covariance adjoint and a model on the mean alone, `O(n³)` per knot instead of the
+    /// exact Newton step's `O(n⁶)`; its optimum is a stationary point of the same cost.
+    SoocFast,
 }
 
 impl Method {
@@ -22,6 +26,7 @@ impl Method {
         match self {
             Method::Ilqg => "ilqg",
             Method::Sooc => "sooc",
+            Method::SoocFast => "sooc_fast",
         }
     }
 }

@@ -17,6 +17,7 @@ use vic_core::model::Noise;
 use vic_core::policy::Feedback;
 use vic_core::solver::ilqg::{OnIteration, Progress};
 use vic_core::solver::sooc::{MomentCost, MomentDynamics, unpack};
+use vic_core::solver::sooc_fast::{SoocFastOptions, SoocFastSolver};
 use vic_core::solver::sooc_newton::{Optimality, SoocProblem, SoocSolver, SoocStop};
 use vic_core::solver::{Ilqg, IlqgOptions, Problem, Solution, StopReason};
 
@@ -142,6 +143,88 @@ pub fn solve_sooc(
     })
 }
 
+/// [`solve_sooc`] by the fast solver ([`SoocFastSolver`]): the same noise continuation, the
+/// same problem, its iteration limit the larger of the scenario's and the solver's own default
+/// (its model is not the exact Hessian: it converges linearly near the optimum).
+pub fn solve_sooc_fast(
+    setup: &Setup,
+    solver: &crate::scenario::SolverSection,
+    warm: &[DVector<f64>],
+    progress: &Option<ProgressFn>,
+) -> Result<SoocResult, PlanError> {
+    let start = std::time::Instant::now();
+    let mut u = warm.to_vec();
+    let mut iterations = 0;
+    let mut history = Vec::new();
+    let horizon = u.len();
+    let defaults = SoocFastOptions::default();
+    let options = SoocFastOptions {
+        max_iterations: solver
+            .sooc_options()
+            .max_iterations
+            .max(defaults.max_iterations),
+        ..defaults
+    };
+    let sizing = MomentDynamics::new(&setup.dynamics);
+    let mut workspace = SoocFastSolver::new(&sizing, horizon, options);
+    let mut last = None;
+    for &fraction in &solver.noise_continuation {
+        let mut dynamics = setup.dynamics.clone();
+        dynamics.model.noise = dynamics.model.noise.scaled(fraction);
+        let moments = MomentDynamics::new(&dynamics);
+        let cost = MomentCost::new(&setup.cost, horizon);
+        let problem = SoocProblem {
+            dynamics: &moments,
+            cost: &cost,
+            x0: &setup.x0,
+            bounds: &setup.bounds,
+            horizon,
+        };
+        let sol = workspace
+            .solve(&problem, &u)
+            .map_err(|source| PlanError::Sooc { fraction, source })?;
+        iterations += sol.iterations;
+        history.extend_from_slice(&sol.history);
+        if let Some(p) = progress {
+            p(
+                "open-loop moments (fast)",
+                &Progress {
+                    iteration: iterations,
+                    merit: sol.expected_cost,
+                    mu: 0.0,
+                    alpha: 1.0,
+                },
+            );
+        }
+        u = sol.u.clone();
+        last = Some(sol);
+    }
+    let sol = last.ok_or(PlanError::NoContinuationStage)?;
+    let n = setup.x0.len();
+    let (nx, nu) = (setup.dynamics.nx(), setup.dynamics.nu());
+    let solution = Solution {
+        x: sol.z.iter().map(|z| z.rows(0, n).into_owned()).collect(),
+        u: sol.u.clone(),
+        gains: vec![DMatrix::zeros(nu, nx); horizon],
+        cost: f64::NAN,
+        expected_cost: sol.expected_cost,
+        iterations,
+        stop: match sol.stop {
+            SoocStop::Converged => StopReason::SmallGradient,
+            SoocStop::MaxIterations => StopReason::MaxIterations,
+            SoocStop::RegularizationLimit => StopReason::RegularizationLimit,
+        },
+        solve_time: start.elapsed(),
+        history,
+        convergence: None,
+    };
+    Ok(SoocResult {
+        solution,
+        stop: sol.stop,
+        optimality: sol.optimality,
+    })
+}
+
 /// A progress report: the phase of the solve and the solver's state after an iteration.
 pub type ProgressFn = Arc<dyn Fn(&str, &Progress) + Send + Sync>;
 
@@ -177,6 +260,11 @@ pub fn plan(
     let (solution, d) = match method {
         Method::Sooc => {
             let (sol, stop) = plan_sooc(s, &setup, &plain, &progress)?;
+            verdict = Some(stop);
+            (sol, 0)
+        }
+        Method::SoocFast => {
+            let (sol, stop) = plan_sooc_fast(s, &setup, &plain, &progress)?;
             verdict = Some(stop);
             (sol, 0)
         }
@@ -227,6 +315,41 @@ pub fn plan_sooc(
     plain: &Problem,
     progress: &Option<ProgressFn>,
 ) -> Result<(Solution, (SoocStop, Optimality)), PlanError> {
+    let (warm, first) = sooc_warm_start(s, setup, plain, progress)?;
+    let result = solve_sooc(setup, &s.solver, &warm, progress)?;
+    let mut sol = result.solution;
+    sol.iterations += first.iterations;
+    sol.solve_time += first.solve_time;
+    // `cost` is the noise-free cost of the plan; `expected_cost` the moment problem's.
+    sol.cost = plain.rollout(&sol.u).1;
+    Ok((sol, (result.stop, result.optimality)))
+}
+
+/// The scenario's SOOC plan by the fast solver (`Method::SoocFast`, [`solve_sooc_fast`]) from
+/// the same start as [`plan_sooc`]'s.
+pub fn plan_sooc_fast(
+    s: &Scenario,
+    setup: &Setup,
+    plain: &Problem,
+    progress: &Option<ProgressFn>,
+) -> Result<(Solution, (SoocStop, Optimality)), PlanError> {
+    let (warm, first) = sooc_warm_start(s, setup, plain, progress)?;
+    let result = solve_sooc_fast(setup, &s.solver, &warm, progress)?;
+    let mut sol = result.solution;
+    sol.iterations += first.iterations;
+    sol.solve_time += first.solve_time;
+    sol.cost = plain.rollout(&sol.u).1;
+    Ok((sol, (result.stop, result.optimality)))
+}
+
+/// Where a SOOC solve starts: the deterministic ILQG optimum (returned too), its stiffness reset
+/// to the configured start when there is noise.
+fn sooc_warm_start(
+    s: &Scenario,
+    setup: &Setup,
+    plain: &Problem,
+    progress: &Option<ProgressFn>,
+) -> Result<(Vec<DVector<f64>>, Solution), PlanError> {
     // Warm start from the deterministic optimum, then optimise the open-loop moments.
     let mut det = solver_for(plain, &s.solver.options, "deterministic", progress);
     det.options.stochastic = false;
@@ -256,13 +379,7 @@ pub fn plan_sooc(
             setup.bounds.clamp(u.as_mut_slice());
         }
     }
-    let result = solve_sooc(setup, &s.solver, &warm, progress)?;
-    let mut sol = result.solution;
-    sol.iterations += first.iterations;
-    sol.solve_time += first.solve_time;
-    // `cost` is the noise-free cost of the plan; `expected_cost` the moment problem's.
-    sol.cost = plain.rollout(&sol.u).1;
-    Ok((sol, (result.stop, result.optimality)))
+    Ok((warm, first))
 }
 
 /// ILQG on the delay-augmented plant (paper Eq. 13): a command issued at k acts at k + d. The

@@ -6,6 +6,7 @@ pub mod boxqp;
 pub mod ilqg;
 pub mod moments;
 pub mod sooc;
+pub mod sooc_fast;
 pub mod sooc_newton;
 pub mod sparse;
 

@@ -108,7 +108,38 @@ impl FlowPoint {
     }
 }
 
+/// The first derivatives of the plant's step at one knot, as n×n matrices: what a solver that
+/// keeps the covariance as a matrix (never as `vech` blocks) needs of
+/// [`MomentDynamics::expand`]. `v = (m, u)` stacks the mean and the controls.
+pub struct FlowSensitivity<'a> {
+    /// The plant's linearisation: `A`, `B`, the noise columns `c_i`, their state Jacobians `Cx_i`.
+    pub lin: &'a Linearization,
+    /// `P` at the knot.
+    pub p: &'a DMatrix<f64>,
+    /// `dA_j = ∂A/∂v_j` (n×n each, `n + m` of them).
+    pub da: &'a [DMatrix<f64>],
+    /// `∂c_i/∂v_j` (n×p each).
+    pub dc: &'a [DMatrix<f64>],
+    /// `∂Cx_i/∂v_j`, `[j][i]`; zero unless `curved_noise`.
+    pub dcx: &'a [Vec<DMatrix<f64>>],
+    /// Whether some `∂Cx_i/∂v_j` is nonzero (a noise gain nonlinear in the state).
+    pub curved_noise: bool,
+}
+
 impl MomentExpansion {
+    /// The step's first derivatives as n×n matrices ([`FlowSensitivity`]), valid after
+    /// [`MomentDynamics::expand`] at the knot.
+    pub fn flow_sensitivity(&self) -> FlowSensitivity<'_> {
+        FlowSensitivity {
+            lin: &self.base,
+            p: &self.p,
+            da: &self.da,
+            dc: &self.dc,
+            dcx: &self.dcx,
+            curved_noise: self.curved_noise,
+        }
+    }
+
     /// Drops third derivatives kept from an earlier point: the next
     /// [`MomentDynamics::second_order`](super::MomentDynamics::second_order) takes them anew.
     pub fn forget_third(&mut self) {

