@@ -5,10 +5,11 @@
 use nalgebra::DVector;
 use std::path::Path;
 use vic_core::dynamics::Dynamics;
+use vic_core::solver::Solution;
 use vic_core::solver::sooc::{MomentCost, MomentDynamics};
 use vic_core::solver::sooc_fast::{SoocFastOptions, SoocFastSolver};
-use vic_core::solver::sooc_newton::SoocProblem;
-use vic_plan::plan::{Setup, predict_open_loop, setup};
+use vic_core::solver::sooc_newton::{Optimality, SoocProblem, SoocStop};
+use vic_plan::plan::{Setup, plan_sooc, plan_sooc_fast, predict_open_loop, setup};
 use vic_plan::scenario::Scenario;
 
 fn scenario(stem: &str) -> (Scenario, Setup) {
@@ -94,4 +95,78 @@ fn sooc_fast_gradient_matches_finite_differences_on_the_divergent_arm() {
 #[test]
 fn sooc_fast_gradient_matches_finite_differences_on_the_vsa_arm() {
     gradient_matches_finite_differences("two_link_vsa_divergent");
+}
+
+/// The exact Newton solver's plan and the fast one's, from the same start (what `vic plan
+/// --method sooc` and `--method sooc-fast` make).
+fn both(stem: &str) -> (Setup, Solution, Verdict, Solution, Verdict) {
+    let (s, setup) = scenario(stem);
+    let plain = setup.problem(s.task.steps);
+    let (exact, ve) = plan_sooc(&s, &setup, &plain, &None).expect("exact plan");
+    let (fast, vf) = plan_sooc_fast(&s, &setup, &plain, &None).expect("fast plan");
+    eprintln!(
+        "{stem}: exact J = {:.9e} ({:?}, {} iterations, {:.1} ms); fast J = {:.9e} ({:?}, {} \
+         iterations, {:.1} ms, {:?}); fast − exact = {:+.2e} of J",
+        exact.expected_cost,
+        ve.0,
+        exact.iterations,
+        exact.solve_time.as_secs_f64() * 1e3,
+        fast.expected_cost,
+        vf.0,
+        fast.iterations,
+        fast.solve_time.as_secs_f64() * 1e3,
+        vf.1,
+        (fast.expected_cost - exact.expected_cost) / exact.expected_cost
+    );
+    (setup, exact, ve, fast, vf)
+}
+
+type Verdict = (SoocStop, Optimality);
+
+/// The fast plan is as good as the exact optimum (within 0.05 % of its expected cost, or lower),
+/// its cost is its controls' open-loop expected cost, its controls lie in the box, and it says
+/// `Converged` exactly when its stated criterion passed.
+fn as_good_as_the_exact_optimum(stem: &str) {
+    let (setup, exact, _, fast, (stop, optimality)) = both(stem);
+    let j = predict_open_loop(&setup, &fast.u).expected_cost;
+    assert!(
+        (j - fast.expected_cost).abs() <= 1e-12 * j,
+        "{stem}: {j} vs {}",
+        fast.expected_cost
+    );
+    assert!(
+        fast.expected_cost <= exact.expected_cost * (1.0 + 5e-4),
+        "{stem}: fast J = {} against the exact optimum's {}",
+        fast.expected_cost,
+        exact.expected_cost
+    );
+    let (lo, hi) = (&setup.bounds.lower, &setup.bounds.upper);
+    for (k, u) in fast.u.iter().enumerate() {
+        for i in 0..u.len() {
+            assert!(
+                lo[i] <= u[i] && u[i] <= hi[i],
+                "{stem}: u[{k}][{i}] outside the box"
+            );
+        }
+    }
+    assert_eq!(
+        stop == SoocStop::Converged,
+        optimality.met(),
+        "{stem}: {stop:?} with {optimality:?}"
+    );
+}
+
+#[test]
+fn sooc_fast_reaches_the_exact_optimum_on_the_divergent_arm() {
+    as_good_as_the_exact_optimum("two_link_divergent");
+}
+
+#[test]
+fn sooc_fast_reaches_the_exact_optimum_on_the_vsa_arm() {
+    as_good_as_the_exact_optimum("two_link_vsa_divergent");
+}
+
+#[test]
+fn sooc_fast_reaches_the_exact_optimum_on_the_torque_only_arm() {
+    as_good_as_the_exact_optimum("two_link_torque_divergent");
 }

@@ -124,14 +124,11 @@ impl SoocFastSolver {
     pub(super) fn model(&mut self, problem: &SoocProblem) {
         let (n, h) = (self.n, self.horizon);
         let (z, u) = (&self.z, &self.u);
-        self.knots
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(k, kn)| {
-                let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
-                problem.dynamics.expand(k, zk, uk, &mut kn.e);
-                problem.cost.running_derivatives(k, zk, uk, &mut kn.d);
-            });
+        self.knots.par_iter_mut().enumerate().for_each(|(k, kn)| {
+            let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
+            problem.dynamics.expand(k, zk, uk, &mut kn.e);
+            problem.cost.running_derivatives(k, zk, uk, &mut kn.d);
+        });
         problem
             .cost
             .terminal_derivatives(self.z[h].as_slice(), &mut self.terminal);
