@@ -15,8 +15,10 @@ pub enum Method {
     /// Delay-free by nature: nothing is fed back.
     Sooc,
     /// The same open-loop problem solved by [`vic_core::solver::sooc_fast`]: an exact gradient
-    /// by the covariance adjoint and a model on the mean alone, `O(n³)` per knot instead of the
-    /// exact Newton step's `O(n⁶)`; its optimum is a stationary point of the same cost.
+    /// by the covariance adjoint, `O(n³)` per knot instead of the exact Newton step's `O(n⁶)`,
+    /// and projected Newton–CG steps (Hessian-vector products by differences of that gradient,
+    /// preconditioned by a Riccati solve of a mean-only model); its optimum is a stationary
+    /// point of the same cost.
     SoocFast,
 }
 

@@ -74,6 +74,42 @@ impl MomentDynamics<'_> {
         same_third
     }
 
+    /// The plant's step at knot `k` and its derivatives as n×n matrices only
+    /// ([`MomentExpansion::flow_sensitivity`]: `A`, `B`, `c_i`, `Cx_i`, `P`, `dA_j`, `dc_j`,
+    /// `dCx_j`), for a solver that keeps the covariance as a matrix: the `vech` Jacobians `e.a`,
+    /// `e.b` of [`MomentDynamics::expand`] (the Kronecker blocks of `P⁺ = A P Aᵀ + W`) are left
+    /// untouched.
+    pub fn expand_matrices(&self, k: usize, z: &[f64], u: &[f64], e: &mut MomentExpansion) {
+        let base = self.base();
+        let (n, m) = (base.nx(), base.nu());
+        let at = At::new(base, k, z, u);
+        base.linearize(k, &z[..n], u, &mut e.base);
+        unpack(n, &z[n..], &mut e.p);
+        flow_second_derivatives(at, e);
+        e.flow_at = at.point();
+        e.curved_noise = false;
+        if e.base.noise == NoiseKind::None {
+            return;
+        }
+        let (mut xd, mut ud) = lift::<Dual64>(&z[..n], u);
+        let d0 = Dual64::from(0.0);
+        let mut g = [d0; MAX_NX * MAX_NW];
+        let mut dgx = [d0; MAX_NX * MAX_NX * MAX_NW];
+        let mut dgu = [d0; MAX_NU * MAX_NX * MAX_NW];
+        for j in 0..n + m {
+            let v = if j < n { &mut xd[j] } else { &mut ud[j - n] };
+            v.eps = 1.0;
+            base.noise_jacobian(&xd[..n], &ud[..m], &mut g, &mut dgx, &mut dgu);
+            let v = if j < n { &mut xd[j] } else { &mut ud[j - n] };
+            v.eps = 0.0;
+            // `next` and `t1` are the scratch `noise_sensitivity` adds the vech rows' parts to.
+            zero(&mut e.next);
+            for i in 0..base.nw() {
+                noise_sensitivity(e, j, i, &g, &dgx);
+            }
+        }
+    }
+
     fn expand_at(&self, k: usize, z: &[f64], u: &[f64], third: bool, e: &mut MomentExpansion) {
         self.expand_with(k, z, u, Some(third), e);
     }

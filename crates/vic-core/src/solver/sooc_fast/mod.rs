@@ -12,29 +12,31 @@
 //! 2. the covariance adjoint `Π_N = ½ g_xx`, `Π_k = ½ ℓ_xx + A_kᵀ Π_{k+1} A_k +
 //!    Σ_i Cx_iᵀ Π_{k+1} Cx_i`: `tr(Π_k δP_k)` is the first-order change of the expected
 //!    cost-to-go (`J` is linear in each `P_k`, `P⁺` linear in `P`);
-//! 3. iLQR on the mean alone (dimension n) for the surrogate stage cost
-//!    `ℓ̃_k(m, u) = ℓ(m, u) + tr(Π_{k+1} (A P_k Aᵀ + W)(m, u))`, `P_k` and `Π_{k+1}` frozen.
-//!    Its first derivatives at the current point are the true ones (`Π_{k+1}` carries the effect
-//!    of `P_{k+1}` on every later cost), so the mean's costates and `∇_u J` are exact and a fixed
-//!    point of the iteration is a stationary point of `J`. Its curvature keeps
-//!    `2 tr(Π dA_a P dA_bᵀ)` (and the noise's like terms) over `v = (m, u)`: positive
-//!    semidefinite, and the term through which stiffness (in `A`, linearly) buys a smaller
-//!    covariance — what a Gauss–Newton model of the moment state `(m, vech P)` loses, because `J`
-//!    is linear in `P` (DESIGN §5). It drops the third derivatives of the flow
-//!    (`2 tr(Π ∂²A P Aᵀ)`), the mean's costate-weighted second derivatives and the coupling of a
-//!    stage's `δP` with later steps;
-//! 4. box-limited stage QPs ([`crate::solver::boxqp`]), relative Levenberg–Marquardt
-//!    regularisation, and a backtracking line search on the true `J` with the step's feedback on
-//!    the mean.
+//! 3. the surrogate stage cost `ℓ̃_k(m, u) = ℓ(m, u) + tr(Π_{k+1} (A P_k Aᵀ + W)(m, u))`, `P_k`
+//!    and `Π_{k+1}` frozen: its first derivatives at the current point are the true ones
+//!    (`Π_{k+1}` carries the effect of `P_{k+1}` on every later cost), so the mean's costates
+//!    and `∇_u J` are exact. Its curvature keeps `2 tr(Π dA_a P dA_bᵀ)` (and the noise's like
+//!    terms) over `v = (m, u)`: positive semidefinite, and the term through which stiffness (in
+//!    `A`, linearly) buys a smaller covariance — what a Gauss–Newton model of the moment state
+//!    `(m, vech P)` loses, because `J` is linear in `P` (DESIGN §5). With the mean's dynamics
+//!    linearised this is an LQ problem whose condensed Hessian `M` (symmetric positive definite)
+//!    a Riccati recursion inverts ([`precond`]);
+//! 4. the step: projected Newton–CG ([`newton`]) on the exact Hessian of `J`, applied to a
+//!    direction by differences of the exact gradient, preconditioned by `M⁻¹` (the surrogate
+//!    misses the third derivatives of the flow, the mean's costate-weighted second derivatives
+//!    and the coupling of one knot's `δP` with every later one: CG restores them), the controls
+//!    held at a bound by their gradient fixed for the step (Bertsekas 1982); a backtracking line
+//!    search on the true `J` along the projected step with the surrogate's feedback on the mean
+//!    (optionally a trust region in the `M`-norm instead, [`SoocFastOptions::trust_region`]).
 //!
 //! Everything is n×n products (`O(n³)` per knot, plus the step's first derivatives), never the
 //! `vech` Jacobian of the covariance step.
 //!
 //! Convergence ([`Optimality`]) is stated as for the Newton solver: the scaled projected gradient
 //! of the exact `∇J`, relative to `J`, with each control's scale capped at `√(2|J| / h)`, and the
-//! model's predicted decrease for its full step, relative to `J`. Here `h` is this model's own
-//! curvature of the control (the diagonal of the stage `Q_uu`), and the predicted decrease is this
-//! model's, counted only from an unregularised pass (μ = 0).
+//! predicted decrease `−(gᵀd + ½ dᵀ H d)` of the Newton–CG step, relative to `J`. Here `h` is the
+//! surrogate's curvature of the control (the diagonal of its stage `Q_uu`), and the quadratic
+//! model's `H` is the exact Hessian on the Krylov space CG explored.
 
 use super::Bounds;
 use super::boxqp::MAX_QP;
@@ -46,18 +48,17 @@ use crate::dynamics::Dynamics;
 use nalgebra::{DMatrix, DVector};
 use std::time::{Duration, Instant};
 
-mod backward;
 mod forward;
 mod model;
+mod newton;
 mod options;
+mod precond;
 
-use backward::Back;
 use forward::rollout;
 use model::Knot;
+use newton::Cg;
 pub use options::SoocFastOptions;
-
-/// Relative predicted decrease at the level of floating-point round-off of `J`.
-const ROUND_OFF: f64 = 1e-13;
+use precond::Precond;
 
 /// A solution of the open-loop moment problem by [`SoocFastSolver`].
 #[derive(Debug, Clone)]
@@ -70,6 +71,9 @@ pub struct SoocFastSolution {
     pub expected_cost: f64,
     /// Number of accepted steps.
     pub iterations: usize,
+    /// Conjugate-gradient iterations over all steps (each one Hessian-vector product, two
+    /// gradients).
+    pub cg_iterations: usize,
     pub stop: SoocStop,
     /// The optimality measures at the returned controls.
     pub optimality: Optimality,
@@ -99,34 +103,10 @@ pub struct SoocFastSolver {
     grad: Vec<DVector<f64>>,
     /// Each control's curvature in the model (the stage `Q_uu` diagonal), the criterion's cap.
     curvature: Vec<DVector<f64>>,
-    ff: Vec<DVector<f64>>,
-    gains: Vec<DMatrix<f64>>,
-    back: Back,
+    precond: Precond,
+    /// The step's vectors; taken out of the solver while a step is computed.
+    cg: Option<Cg>,
     tmp: DMatrix<f64>,
-    dm: DVector<f64>,
-}
-
-/// Levenberg–Marquardt state: `mu` and its rate of change (Tassa, Erez & Todorov 2012).
-struct Damping {
-    mu: f64,
-    step: f64,
-}
-
-impl Damping {
-    /// Raises μ; false once past `mu_max`.
-    fn increase(&mut self, options: &SoocFastOptions) -> bool {
-        self.step = (self.step * 2.0).max(2.0);
-        self.mu = (self.mu * self.step).max(options.mu_min);
-        self.mu <= options.mu_max
-    }
-
-    fn decrease(&mut self, options: &SoocFastOptions) {
-        self.step = (self.step / 2.0).min(0.5);
-        self.mu *= self.step;
-        if self.mu < options.mu_min {
-            self.mu = 0.0;
-        }
-    }
 }
 
 impl SoocFastSolver {
@@ -158,11 +138,9 @@ impl SoocFastSolver {
             lam: vectors(horizon + 1, n),
             grad: vectors(horizon, m),
             curvature: vectors(horizon, m),
-            ff: vectors(horizon, m),
-            gains: (0..horizon).map(|_| DMatrix::zeros(m, n)).collect(),
-            back: Back::new(n, m),
+            precond: Precond::new(n, m, horizon),
+            cg: Some(Cg::new(horizon * m)),
             tmp: DMatrix::zeros(n, n),
-            dm: DVector::zeros(n),
         }
     }
 
@@ -203,9 +181,6 @@ impl SoocFastSolver {
             dst.copy_from(src);
             problem.bounds.clamp(dst.as_mut_slice());
         }
-        for f in &mut self.ff {
-            zero(f);
-        }
         zero(&mut self.z[0]);
         self.z[0]
             .rows_mut(0, problem.x0.len())
@@ -226,7 +201,7 @@ impl SoocFastSolver {
         u: &[DVector<f64>],
     ) -> Result<&[DVector<f64>], SoocError> {
         self.start(problem, u)?;
-        self.model(problem);
+        self.model(problem, false);
         Ok(&self.grad)
     }
 
@@ -239,37 +214,45 @@ impl SoocFastSolver {
         let start = Instant::now();
         let mut cost = self.start(problem, u_init)?;
         let scale = control_scales(problem.bounds);
-        let mut damping = Damping { mu: 0.0, step: 1.0 };
-        let mut iterations = 0;
+        let mut cg = self.cg.take().expect("the step's vectors");
+        let (mut iterations, mut cg_iterations) = (0, 0);
         let mut history = Vec::with_capacity(self.options.max_iterations);
-        let mut needs_model = true;
+        // The trust region's radius in the surrogate's norm `‖d‖_M` (∞ without one); the first
+        // one the surrogate's own step (`‖M⁻¹g‖_M`).
+        let mut radius = f64::NAN;
         let (stop, optimality) = loop {
-            if needs_model {
-                self.model(problem);
-                needs_model = false;
+            self.model(problem, true);
+            self.active_set(problem.bounds, &scale, &mut cg);
+            let mut mu = 0.0;
+            while !self.factor(&cg.free, mu) {
+                mu = (mu * 10.0).max(self.options.mu_min);
+                if mu > self.options.mu_max {
+                    break;
+                }
             }
-            let prediction = loop {
-                if let Some(p) = self.backward(problem.bounds, damping.mu) {
-                    break Some(p);
-                }
-                if !damping.increase(&self.options) {
-                    break None;
-                }
-            };
-            let pg = self.projected_gradient(problem.bounds, &scale, cost);
-            let Some(p) = prediction else {
+            let pg = self.projected_gradient(problem.bounds, &scale, cost, &cg.g0);
+            if mu > self.options.mu_max {
                 break (
                     SoocStop::RegularizationLimit,
                     self.optimality(pg, f64::INFINITY),
                 );
-            };
-            let predicted = -(p.dv1 + p.dv2) / cost.abs().max(1e-300);
+            }
+            if radius.is_nan() && !self.options.trust_region {
+                radius = f64::INFINITY;
+            }
+            if radius.is_nan() {
+                self.surrogate_step(&mut cg);
+                radius = (-newton::dot(&cg.d, &cg.g0)).max(1e-300).sqrt();
+            }
+            let step = self.newton_cg(problem, &scale, cost, radius, &mut cg);
+            cg_iterations += step.cg_iterations;
+            let predicted = step.predicted / cost.abs().max(1e-300);
             let optimality = self.optimality(
                 pg,
-                if damping.mu == 0.0 {
-                    predicted
-                } else {
+                if step.boundary {
                     f64::INFINITY
+                } else {
+                    predicted
                 },
             );
             if optimality.met() {
@@ -278,34 +261,84 @@ impl SoocFastSolver {
             if iterations >= self.options.max_iterations {
                 break (SoocStop::MaxIterations, optimality);
             }
-            match self.line_search(problem, cost, p.dv1, p.dv2) {
-                Some((c, alpha)) => {
-                    std::mem::swap(&mut self.z, &mut self.cand_z);
-                    std::mem::swap(&mut self.u, &mut self.cand_u);
-                    cost = c;
-                    iterations += 1;
-                    history.push(c);
-                    needs_model = true;
-                    if alpha >= 0.5 {
-                        damping.decrease(&self.options);
-                    }
-                }
-                None if predicted < ROUND_OFF || !damping.increase(&self.options) => {
-                    break (SoocStop::RegularizationLimit, optimality);
-                }
-                None => {}
+            let step_d = newton::dot(&cg.g0, &cg.d);
+            let mut accepted = self.projected_search(problem, cost, &cg);
+            if accepted.is_none() {
+                // The scaled projected gradient path, a descent path whatever `H` is.
+                self.gradient_step(&scale, &mut cg);
+                accepted = self
+                    .projected_search(problem, cost, &cg)
+                    .map(|(c, _, slope)| (c, 0.0, slope));
             }
+            let Some((c, alpha, slope)) = accepted else {
+                break (SoocStop::RegularizationLimit, optimality);
+            };
+            // ρ = actual / predicted decrease of the full step; the radius follows it
+            // (Nocedal & Wright Alg. 4.1): a quarter after a poor or backtracked step, doubled
+            // after a good one on the boundary. The prediction is the unprojected step's,
+            // scaled by the share of its first-order decrease that the box lets through, so
+            // that a step cut by the bounds is not taken for a poor model.
+            let full = -step_d;
+            let through = if full > 0.0 {
+                (-slope / full).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
+            let rho = (cost - c) / (step.predicted * through).max(1e-300);
+            if radius.is_finite() {
+                if alpha < 1.0 || rho < 0.25 {
+                    radius = (0.25 * radius).max(1e-300);
+                } else if rho > 0.75 && step.boundary {
+                    radius = (2.0 * radius).max(2.0 * step.norm);
+                }
+            }
+            std::mem::swap(&mut self.z, &mut self.cand_z);
+            std::mem::swap(&mut self.u, &mut self.cand_u);
+            cost = c;
+            iterations += 1;
+            history.push(c);
         };
+        self.cg = Some(cg);
         Ok(SoocFastSolution {
             u: self.u.clone(),
             z: self.z.clone(),
             expected_cost: cost,
             iterations,
+            cg_iterations,
             stop,
             optimality,
             solve_time: start.elapsed(),
             history,
         })
+    }
+
+    /// The gradient of the current point into `cg.g0` and the free controls into `cg.free`
+    /// (Bertsekas' ε-active set): a control is held at a bound for the step when its gradient
+    /// pushes it out and it is nearer to the bound than both a thousandth of its scale and the
+    /// scaled gradient step `|g| / h` (`h` its model curvature, [`Self::factor`] having run
+    /// before with every control free, or the previous step's).
+    fn active_set(&self, bounds: &Bounds, scale: &[f64], cg: &mut Cg) {
+        let m = self.nu;
+        for (k, ((u, g), h)) in self
+            .u
+            .iter()
+            .zip(&self.grad)
+            .zip(&self.curvature)
+            .enumerate()
+        {
+            for j in 0..m {
+                let reach = if h[j] > 0.0 {
+                    g[j].abs() / h[j]
+                } else {
+                    f64::INFINITY
+                };
+                let eps = (1e-3 * scale[j]).min(reach);
+                let held = (u[j] <= bounds.lower[j] + eps && g[j] > 0.0)
+                    || (u[j] >= bounds.upper[j] - eps && g[j] < 0.0);
+                cg.g0[k * m + j] = g[j];
+                cg.free[k * m + j] = !held;
+            }
+        }
     }
 
     fn optimality(&self, pg: f64, predicted: f64) -> Optimality {
@@ -320,11 +353,12 @@ impl SoocFastSolver {
     /// `max_{k,j} s_{k,j} |Π(∇J)_{k,j}| / |J|`, `Π` zeroing the components that push out of the
     /// box at a bound, each scale capped at `√(2|J| / h)` with `h` the model's curvature of the
     /// control (see [`Optimality::projected_gradient`]).
-    fn projected_gradient(&self, bounds: &Bounds, scale: &[f64], cost: f64) -> f64 {
+    fn projected_gradient(&self, bounds: &Bounds, scale: &[f64], cost: f64, g0: &[f64]) -> f64 {
+        let m = self.nu;
         let mut worst = 0.0_f64;
-        for ((u, g), h) in self.u.iter().zip(&self.grad).zip(&self.curvature) {
-            for j in 0..self.nu {
-                let gj = g[j];
+        for (k, (u, h)) in self.u.iter().zip(&self.curvature).enumerate() {
+            for j in 0..m {
+                let gj = g0[k * m + j];
                 let blocked =
                     (u[j] <= bounds.lower[j] && gj > 0.0) || (u[j] >= bounds.upper[j] && gj < 0.0);
                 if !blocked {

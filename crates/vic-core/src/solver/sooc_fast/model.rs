@@ -49,8 +49,9 @@ impl Knot {
         }
     }
 
-    /// The surrogate's gradient `s` and curvature `g` with the next knot's adjoint `pi`.
-    fn stage_terms(&mut self, pi: &DMatrix<f64>) {
+    /// The surrogate's gradient `s` and (with `curvature`) curvature `g` with the next knot's
+    /// adjoint `pi`.
+    fn stage_terms(&mut self, pi: &DMatrix<f64>, curvature: bool) {
         let fs = self.e.flow_sensitivity();
         let (lin, p) = (fs.lin, fs.p);
         let nv = fs.da.len();
@@ -59,6 +60,9 @@ impl Knot {
         multiply(&mut self.t2, &self.t1, p, false);
         for j in 0..nv {
             self.s[j] = 2.0 * fs.da[j].dot(&self.t2);
+        }
+        if !curvature {
+            return self.noise_gradient(pi);
         }
         for b in 0..nv {
             multiply(&mut self.t1, pi, &fs.da[b], false);
@@ -118,15 +122,44 @@ impl Knot {
     }
 }
 
+impl Knot {
+    /// The noise's part of the surrogate's gradient `s` alone (what [`Knot::stage_terms`] adds
+    /// to it besides the curvature).
+    fn noise_gradient(&mut self, pi: &DMatrix<f64>) {
+        let fs = self.e.flow_sensitivity();
+        let (lin, p) = (fs.lin, fs.p);
+        let nv = fs.da.len();
+        if lin.noise == NoiseKind::None {
+            return;
+        }
+        multiply(&mut self.pc, pi, &lin.c, false);
+        for j in 0..nv {
+            self.s[j] += 2.0 * fs.dc[j].dot(&self.pc);
+        }
+        if !fs.curved_noise {
+            return;
+        }
+        for (i, cx) in lin.cx.iter().enumerate() {
+            multiply(&mut self.t1, pi, cx, false);
+            multiply(&mut self.t2, &self.t1, p, false);
+            for j in 0..nv {
+                self.s[j] += 2.0 * fs.dcx[j][i].dot(&self.t2);
+            }
+        }
+    }
+}
+
 impl SoocFastSolver {
     /// The model at the current controls and their rollout `z`: expansions (in parallel), the
     /// adjoint `Π`, the stage terms (in parallel), the mean's costates and the exact gradient.
-    pub(super) fn model(&mut self, problem: &SoocProblem) {
+    /// Without `curvature` only the gradient (the surrogate's stage curvature `g` is left as it
+    /// was).
+    pub(super) fn model(&mut self, problem: &SoocProblem, curvature: bool) {
         let (n, h) = (self.n, self.horizon);
         let (z, u) = (&self.z, &self.u);
         self.knots.par_iter_mut().enumerate().for_each(|(k, kn)| {
             let (zk, uk) = (z[k].as_slice(), u[k].as_slice());
-            problem.dynamics.expand(k, zk, uk, &mut kn.e);
+            problem.dynamics.expand_matrices(k, zk, uk, &mut kn.e);
             problem.cost.running_derivatives(k, zk, uk, &mut kn.d);
         });
         problem
@@ -153,7 +186,7 @@ impl SoocFastSolver {
         self.knots
             .par_iter_mut()
             .zip(self.pi[1..].par_iter())
-            .for_each(|(kn, pi)| kn.stage_terms(pi));
+            .for_each(|(kn, pi)| kn.stage_terms(pi, curvature));
         // The mean's costates of the surrogate problem, λ_N = g_m, λ_k = ℓ̃_m + Aᵀ λ_{k+1},
         // equal the true ones (the stage terms carry P⁺'s dependence on m), so
         // `∇_{u_k} J = ℓ̃_u + Bᵀ λ_{k+1}` is the exact gradient.
