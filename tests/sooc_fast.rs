@@ -177,3 +177,55 @@ fn sooc_fast_reaches_the_exact_optimum_on_the_torque_only_arm() {
 fn sooc_fast_reaches_the_exact_optimum_on_the_curl_field_arm() {
     as_good_as_the_exact_optimum("two_link_curl");
 }
+
+/// Time of one exact gradient (the covariance adjoint's pass: `O(n³)` per knot) against the
+/// moment dimension `n + n(n+1)/2` of the single joint, the two-link arm and the VSA arm, median
+/// of 5, with the log–log slope printed. A measurement, not a check: run with `--ignored`.
+#[test]
+#[ignore = "a timing measurement (issue 61): cargo test --release --test offline -- --ignored \
+            sooc_fast_gradient_time"]
+fn sooc_fast_gradient_time_against_the_moment_dimension() {
+    let mut points = Vec::new();
+    for stem in ["icub_elbow", "two_link_divergent", "two_link_vsa_divergent"] {
+        let (s, setup) = scenario(stem);
+        let u = start(&s, &setup, s.initial_stiffness);
+        let moments = MomentDynamics::new(&setup.dynamics);
+        let cost = MomentCost::new(&setup.cost, u.len());
+        let problem = SoocProblem {
+            dynamics: &moments,
+            cost: &cost,
+            x0: &setup.x0,
+            bounds: &setup.bounds,
+            horizon: u.len(),
+        };
+        let mut solver = SoocFastSolver::new(&moments, u.len(), SoocFastOptions::default());
+        let mut times: Vec<f64> = (0..5)
+            .map(|_| {
+                let t = std::time::Instant::now();
+                let g = solver.gradient(&problem, &u).expect("gradient");
+                assert!(g.iter().all(|v| v.iter().all(|x| x.is_finite())));
+                t.elapsed().as_secs_f64()
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        let n = setup.dynamics.nx();
+        let nz = n + n * (n + 1) / 2;
+        let per_knot = times[2] / u.len() as f64;
+        eprintln!(
+            "{stem}: n = {n}, moment dimension {nz}, gradient {:.3} ms, {:.2} µs per knot",
+            times[2] * 1e3,
+            per_knot * 1e6
+        );
+        points.push((n as f64, nz as f64, per_knot));
+    }
+    let slope = |x: fn(&(f64, f64, f64)) -> f64| {
+        let (a, b) = (&points[0], &points[points.len() - 1]);
+        (b.2 / a.2).ln() / (x(b) / x(a)).ln()
+    };
+    eprintln!(
+        "log-log slope of the gradient's time per knot: {:.2} against the moment dimension, {:.2} \
+         against n",
+        slope(|p| p.1),
+        slope(|p| p.0)
+    );
+}
