@@ -144,8 +144,8 @@ pub fn solve_sooc(
 }
 
 /// [`solve_sooc`] by the fast solver ([`SoocFastSolver`]): the same noise continuation, the
-/// same problem, its iteration limit the larger of the scenario's and the solver's own default
-/// (its model is not the exact Hessian: it converges linearly near the optimum).
+/// same problem, its limit of Newton–CG steps the larger of the scenario's iteration limit and
+/// the solver's own default.
 pub fn solve_sooc_fast(
     setup: &Setup,
     solver: &crate::scenario::SolverSection,
