@@ -7,8 +7,8 @@
 //! derivatives are also written out ([`ArmModel::f_jacobian`], checked against the dual numbers
 //! by the tests) because ILQG needs them at every knot of every iteration.
 
-pub mod actuator;
-pub mod field;
+pub(crate) mod actuator;
+pub(crate) mod field;
 mod jacobian;
 pub mod noise;
 pub mod plant;

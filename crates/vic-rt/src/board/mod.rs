@@ -20,8 +20,8 @@ mod commands;
 pub mod gaps;
 pub mod live;
 mod plant;
-pub mod supervisor;
-pub mod validation;
+pub(crate) mod supervisor;
+pub(crate) mod validation;
 
 use crate::transport::{
     CommandSlice, Control, ControlKind, Disturbance, Header, Knot, MAX_JOINTS, Mode, StateMsg,

@@ -39,7 +39,7 @@
 mod csv;
 mod error;
 mod external;
-pub mod mcap_file;
+pub(crate) mod mcap_file;
 mod read;
 mod schema;
 

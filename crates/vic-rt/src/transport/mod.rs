@@ -30,7 +30,7 @@ pub mod protocol;
 pub mod recycled;
 pub mod relay;
 pub mod service;
-pub mod session;
+pub(crate) mod session;
 pub mod wire_enum;
 
 pub use clock::{monotonic_ns, process_session, session_seq};
