@@ -23,6 +23,7 @@
 pub mod clock;
 pub mod error;
 pub mod limits;
+#[cfg(feature = "zenoh")]
 pub mod link_ports;
 pub mod namespace;
 pub mod ports;

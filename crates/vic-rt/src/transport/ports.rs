@@ -155,6 +155,7 @@ impl BoardWatch {
 
     /// Whether the board signalled an event since the last call, without blocking (the bridge
     /// checks it on every wake-up).
+    #[cfg(feature = "zenoh")]
     pub(crate) fn take_event(&self) -> bool {
         let mut got = false;
         let _ = self.events.try_wait(|_| got = true);
