@@ -165,6 +165,23 @@ pub(crate) fn print_report<T: serde::Serialize>(
 
 /// The latency of `ms` given with `flag` on a grid of `dt` s ([`Latency::from_ms`]), else an
 /// input error naming `flag`.
+/// Parses a `--trials` count of at least `min`; the error says why fewer will not do (clap's
+/// range parser would print `not in 3..18446744073709551615`).
+pub(crate) fn trials_at_least(
+    min: u64,
+    why: &'static str,
+) -> impl Fn(&str) -> Result<u64, String> + Clone + Send + Sync + 'static {
+    move |s: &str| {
+        let n: u64 = s
+            .parse()
+            .map_err(|_| format!("'{s}' is not a whole number of trials"))?;
+        if n < min {
+            return Err(format!("at least {min} trials are needed: {why}"));
+        }
+        Ok(n)
+    }
+}
+
 pub(crate) fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latency> {
     Latency::from_ms(ms, dt).map_err(|e| {
         input_error(format!(

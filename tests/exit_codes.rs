@@ -148,3 +148,26 @@ fn no_board_to_talk_to_is_a_failure_not_bad_input() {
     );
     assert_error(&out, 1, "vic", "no board in namespace \"exitcodes_nobody\"");
 }
+
+#[test]
+fn too_few_trials_say_how_many_and_why() {
+    // clap's range parser printed `not in 3..18446744073709551615`; the message says the minimum
+    // and the reason.
+    for (args, minimum) in [
+        (
+            &["experiment", "fig1", "--trials", "2"][..],
+            "at least 3 trials",
+        ),
+        (&["simulate", "--trials", "1"], "at least 2 trials"),
+        (&["sweep", "latency", "--trials", "1"], "at least 2 trials"),
+    ] {
+        let out = run(VIC, args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(minimum), "{args:?}: {stderr}");
+        assert!(!stderr.contains("18446744073709551615"), "{stderr}");
+    }
+    let out = run(VIC, &["experiment", "fig1", "--trials", "many"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a whole number of trials"));
+}

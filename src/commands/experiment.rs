@@ -26,7 +26,7 @@ enum FigureArg {
 #[command(mut_arg("seed", |a| a.help("Seed of the noise")))]
 pub(crate) struct FigureRunArgs {
     /// Monte Carlo trials per column.
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(3..))]
+    #[arg(long, default_value_t = 20, value_parser = crate::cli::trials_at_least(3, "the 95 % ellipse of the final positions needs three"))]
     pub(crate) trials: u64,
     #[command(flatten)]
     pub(crate) seed: SeedArgs,
@@ -109,12 +109,12 @@ fn print_table(run: &ExperimentRun) {
     for c in &run.columns {
         let unit = &c.report.unit;
         println!(
-            "{:<18} {:>8} {:>9.2} {unit:<3}{:>8} {unit:<3} {:>8.0} % {:>13} {:>13.4e} {:>9.1}",
+            "{:<18} {:>8} {:>12} {:>12} {:>7.0} % {:>13} {:>13.4e} {:>9.1}",
             c.name,
             c.method,
-            c.report.final_std,
+            format!("{:.2} {unit}", c.report.final_std),
             c.rms_error
-                .map_or_else(|| "diverged".into(), |v| format!("{v:.2}")),
+                .map_or_else(|| "diverged".into(), |v| format!("{v:.2} {unit}")),
             c.diverged_fraction * 100.0,
             c.expected_cost_mc
                 .map_or_else(|| "–".into(), |v| format!("{v:.4e}")),

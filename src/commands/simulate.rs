@@ -4,6 +4,7 @@
 //! to the plan's prediction, optionally every trial as CSV and a plot.
 
 use crate::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs, divergence_or_default, latency_arg};
+use clap::ValueEnum;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use vic_plan::evaluation::{Report, summarize};
@@ -52,7 +53,7 @@ pub(crate) struct Args {
     #[arg(long, value_enum, default_value = "open-loop")]
     pub(crate) policy: PolicyArg,
     /// Number of trials.
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
+    #[arg(long, default_value_t = 20, value_parser = crate::cli::trials_at_least(2, "a spread needs two"))]
     pub(crate) trials: u64,
     #[command(flatten)]
     pub(crate) seed: SeedArgs,
@@ -170,22 +171,32 @@ fn print_report(
     predicted: f64,
 ) {
     let u = &report.unit;
+    let policy = o
+        .policy
+        .to_possible_value()
+        .map_or_else(String::new, |v| v.get_name().to_string());
+    let latency = match feedback {
+        Feedback::OpenLoop | Feedback::Full => String::new(),
+        Feedback::Delayed { latency_steps }
+        | Feedback::Predicted { latency_steps }
+        | Feedback::Replan { latency_steps } => format!(", latency {latency_steps} knots"),
+    };
     println!(
-        "simulate   {} with {} ({:?}), {} trials, seed {}",
+        "simulate   the plan of {} on {}, policy {policy}{latency}, {} trials, seed {}",
         plan.scenario,
         o.scenario.config.display(),
-        feedback,
         report.trials,
         o.seed.seed
     );
+    let axes: Vec<String> = report
+        .ellipse_95
+        .iter()
+        .map(|v| format!("{v:.3}"))
+        .collect();
     println!(
-        "final      std {:.3} {u}, 95 % ellipse semi-axes {:?} {u}",
+        "final      std {:.3} {u}, 95 % ellipse semi-axes {} {u}",
         report.final_std,
-        report
-            .ellipse_95
-            .iter()
-            .map(|v| format!("{v:.3}"))
-            .collect::<Vec<_>>()
+        axes.join(" × ")
     );
     let f = |v: Option<f64>| v.map_or_else(|| "diverged".to_string(), |v| format!("{v:.3}"));
     println!(

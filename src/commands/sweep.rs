@@ -39,7 +39,7 @@ struct LatencyArgs {
           default_value = "naive-delayed,predictor,stiffness")]
     strategies: Vec<Strategy>,
     /// Monte Carlo trials per point.
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
+    #[arg(long, default_value_t = 20, value_parser = crate::cli::trials_at_least(2, "a spread needs two"))]
     trials: u64,
     #[command(flatten)]
     seed: SeedArgs,
