@@ -15,15 +15,58 @@ pub enum ConfigError {
     },
     #[error("{path}: {message}")]
     Syntax { path: PathBuf, message: String },
-    #[error("{path}: [{section}] {key}: {message}")]
+    #[error("{path}{}: [{section}] {key}: {message}", set_by(set))]
     Invalid {
         path: PathBuf,
         section: String,
         key: String,
         message: String,
+        /// The `--set` assignment that wrote this key, when one did: the file is then not at
+        /// fault, and the message says so.
+        set: Option<String>,
     },
     #[error("--set {assignment}: {message}")]
     Override { assignment: String, message: String },
+}
+
+/// ` (--set section.key=value)` after the file's name when an override wrote the faulty key.
+fn set_by(set: &Option<String>) -> String {
+    set.as_ref()
+        .map_or_else(String::new, |a| format!(" (--set {a})"))
+}
+
+impl ConfigError {
+    /// Names the `--set` assignment among `overrides` that wrote the faulty key, if any (the
+    /// last one that did: it is the value that was read).
+    pub(super) fn blame_override(self, overrides: &[String]) -> ConfigError {
+        match self {
+            ConfigError::Invalid {
+                path,
+                section,
+                key,
+                message,
+                set: None,
+            } => {
+                let set = overrides
+                    .iter()
+                    .rev()
+                    .find(|a| {
+                        a.split_once('=')
+                            .and_then(|(k, _)| k.trim().split_once('.'))
+                            .is_some_and(|(s, k)| s == section && k == key)
+                    })
+                    .cloned();
+                ConfigError::Invalid {
+                    path,
+                    section,
+                    key,
+                    message,
+                    set,
+                }
+            }
+            other => other,
+        }
+    }
 }
 
 /// Builds the errors of one file and holds the range checks every section shares.
@@ -39,6 +82,7 @@ impl FileCheck<'_> {
             section: section.into(),
             key: key.into(),
             message: message.into(),
+            set: None,
         }
     }
 

@@ -117,12 +117,15 @@ impl Scenario {
         for assignment in overrides {
             overrides::apply_override(&mut resolved, assignment)?;
         }
-        let mut tagged = resolved.clone();
-        raw::retag(&mut tagged)
-            .map_err(|(section, key, message)| check.invalid(section, key, message))?;
-        let raw: raw::RawConfig = serde_path_to_error::deserialize(toml::Value::Table(tagged))
-            .map_err(|e| check.serde_error(e, sections::tag_of))?;
-        validate::validate(raw, path, resolved)
+        let checked = move || {
+            let mut tagged = resolved.clone();
+            raw::retag(&mut tagged)
+                .map_err(|(section, key, message)| check.invalid(section, key, message))?;
+            let raw: raw::RawConfig = serde_path_to_error::deserialize(toml::Value::Table(tagged))
+                .map_err(|e| check.serde_error(e, sections::tag_of))?;
+            validate::validate(raw, path, resolved)
+        };
+        checked().map_err(|e| e.blame_override(overrides))
     }
 }
 

@@ -59,8 +59,26 @@ fn overrides_change_values_and_errors_name_the_key() {
     assert_eq!(s.task.delay_steps(), 20);
     let e = load(&["cost.w_p=abc"]).unwrap_err().to_string();
     assert!(e.contains("elbow.toml") && e.contains("[cost] w_p"), "{e}");
+    // A key an override wrote is blamed on the override, not on the file.
+    assert!(e.contains("(--set cost.w_p=abc)"), "{e}");
     let e = load(&["cost.bogus=1"]).unwrap_err().to_string();
-    assert!(e.contains("bogus"), "{e}");
+    assert!(
+        e.contains("bogus") && e.contains("(--set cost.bogus=1)"),
+        "{e}"
+    );
+    let e = load(&["noise.sigma=0.1", "cost.w_p=abc"])
+        .unwrap_err()
+        .to_string();
+    assert!(!e.contains("noise.sigma"), "{e}");
+    // A fault in the file itself names no override.
+    let bad = Scenario::from_str(
+        "[plant]\nkind = \"bogus\"\n",
+        Path::new("bad.toml"),
+        &["cost.w_p=1".to_string()],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(!bad.contains("--set"), "{bad}");
     let e = load(&["actuator.type=spring"]).unwrap_err().to_string();
     assert!(e.contains("[actuator] type") && e.contains("spring"), "{e}");
     let e = load(&["task.dt=0.007"]).unwrap_err().to_string();
