@@ -1,6 +1,7 @@
 //! The bench machinery can fail: the cyclictest parser on fixed text (and on broken text), the
 //! percentile and ratio arithmetic on hand-computed cases, and short real runs of `vic bench
-//! loop` and `vic bench ipc` whose JSON must have the documented keys and consistent numbers.
+//! loop`, `vic bench ipc` and `vic bench sooc` whose JSON must have the documented keys and
+//! consistent numbers.
 //! No timing thresholds: these machines are noisy.
 
 use std::process::Command;
@@ -226,4 +227,70 @@ fn shm_files() -> Vec<String> {
                 .collect()
         })
         .unwrap_or_default()
+}
+
+/// `vic bench sooc --json` on the single joint and the two-link arm: each point's dimensions are
+/// the plant's (2 and 4 states, moment dimension `n + n(n+1)/2`), the slopes are the least-squares
+/// slopes of the points' own times (recomputed here), and the cold solve is `vic plan --method
+/// sooc`'s (same iteration count and verdict); a missing scenario is the user's error (exit 2).
+#[test]
+fn the_sooc_scaling_bench_reports_the_plants_dimensions_slopes_and_plan() {
+    let vic = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_vic"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let out = vic(&[
+        "bench",
+        "sooc",
+        "--config",
+        "config/icub_elbow.toml,config/two_link_divergent.toml",
+        "--passes",
+        "3",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let points = v["points"].as_array().unwrap();
+    let dims: Vec<(u64, u64)> = points
+        .iter()
+        .map(|p| (p["n"].as_u64().unwrap(), p["moment_dim"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(dims, [(2, 5), (4, 14)], "{v}");
+    for key in ["nominal", "first", "newton"] {
+        let y: Vec<f64> = points
+            .iter()
+            .map(|p| p[format!("{key}_us")].as_f64().unwrap())
+            .collect();
+        assert!(y.iter().all(|&t| t > 0.0), "{key}: {y:?}");
+        // Two points: the slope is the ratio of the logs.
+        let expect = (y[1] / y[0]).ln() / (14.0f64 / 5.0).ln();
+        let got = v["slopes"][key].as_f64().unwrap();
+        assert!((got - expect).abs() < 1e-9, "{key}: {got} vs {expect}");
+    }
+    let solve = &points[0]["solve"];
+    let plan = vic(&[
+        "plan",
+        "--config",
+        "config/icub_elbow.toml",
+        "--method",
+        "sooc",
+        "--json",
+    ]);
+    assert!(plan.status.success());
+    let p: serde_json::Value = serde_json::from_slice(&plan.stdout).unwrap();
+    assert_eq!(solve["iterations"], p["iterations"], "{solve} vs {p}");
+    assert_eq!(solve["converged"], p["converged"], "{solve} vs {p}");
+    let per = solve["ms"].as_f64().unwrap() / solve["iterations"].as_f64().unwrap();
+    assert!((solve["ms_per_iteration"].as_f64().unwrap() - per).abs() < 1e-9 * per);
+
+    let out = vic(&["bench", "sooc", "--config", "config/no_such.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no_such.toml"));
 }

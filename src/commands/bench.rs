@@ -1,7 +1,7 @@
 //! `vic bench loop`, `vic bench ipc` and `vic bench bridge`: check what the user asked for, run
 //! the benchmark, print its report (JSON or a table). The measuring is [`crate::bench`]'s.
 
-use crate::bench::{cyclictest, ipc, loop_bench};
+use crate::bench::{cyclictest, ipc, loop_bench, sooc_scaling};
 use crate::cli::{
     Classify, DefaultScenarioArgs, JsonArg, input_error, print_report, sibling_binary,
 };
@@ -44,6 +44,37 @@ enum BenchCommand {
     /// Example: vic bench bridge --iterations 20000 --json
     #[cfg(feature = "zenoh")]
     Bridge(BenchBridgeArgs),
+    /// How the exact SOOC iteration's cost grows with the state: per knot, the plant's
+    /// linearisation (what an ILQG iteration differentiates), the moment step's first
+    /// derivatives (every SOOC iteration) and the exact Newton model (with the flow's third
+    /// derivatives), timed along each scenario's first guess; then each scenario's cold plan as
+    /// `vic plan --method sooc` solves it. Prints the log–log slope of each time against the
+    /// moment dimension n + n(n+1)/2 (least squares over the scenarios).
+    ///
+    /// Example: vic bench sooc --json
+    Sooc(BenchSoocArgs),
+}
+
+#[derive(clap::Args)]
+#[command(mut_arg("json", |a| a.help(
+    "Print one JSON object: {points: [{scenario, n, m, moment_dim, horizon, nominal_us, first_us, \
+     newton_us, newton_over_nominal, solve: {iterations, ms, ms_per_iteration, converged} or null}], \
+     slopes: {nominal, first, newton, ms_per_iteration}, passes}"
+)))]
+struct BenchSoocArgs {
+    /// Scenario files, one point of the curve each (repeatable or comma-separated; at least two
+    /// with different state dimensions give a slope). Default: the single joint, the two-link
+    /// arm and the VSA arm in the divergent field.
+    #[arg(long = "config", short, value_name = "FILE", value_delimiter = ',')]
+    configs: Vec<PathBuf>,
+    /// Timed passes over the horizon per model; the median pass is reported.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+    passes: u64,
+    /// Skip the cold solves (the VSA arm's takes seconds).
+    #[arg(long)]
+    no_solve: bool,
+    #[command(flatten)]
+    json: JsonArg,
 }
 
 #[cfg(feature = "zenoh")]
@@ -162,7 +193,30 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             },
             a.json.json,
         ),
+        BenchCommand::Sooc(a) => run_sooc(a),
     }
+}
+
+/// The SOOC iteration's cost against the moment dimension (`vic bench sooc`).
+fn run_sooc(a: BenchSoocArgs) -> anyhow::Result<()> {
+    let configs = if a.configs.is_empty() {
+        sooc_scaling::DEFAULT_CONFIGS
+            .iter()
+            .map(PathBuf::from)
+            .collect()
+    } else {
+        a.configs
+    };
+    for c in &configs {
+        vic_plan::scenario::Scenario::load(c, &[]).input()?;
+    }
+    let opts = sooc_scaling::Options {
+        configs,
+        passes: a.passes as usize,
+        solve: !a.no_solve,
+    };
+    let report = sooc_scaling::run(&opts, progress(a.json.json)).runtime()?;
+    print_report(&report, a.json.json, sooc_scaling::print)
 }
 
 /// Progress lines on stderr, unless the output is JSON.
