@@ -150,7 +150,14 @@ impl FileCheck<'_> {
                 Segment::Unknown => {}
             }
         }
-        let message = error.into_inner().to_string();
+        // toml appends "in `section.key`" on a line of its own: the key is named already.
+        let message = error
+            .into_inner()
+            .to_string()
+            .lines()
+            .filter(|l| !l.trim().is_empty() && !l.starts_with("in `"))
+            .collect::<Vec<_>>()
+            .join(" ");
         let Some(section) = keys
             .first()
             .cloned()

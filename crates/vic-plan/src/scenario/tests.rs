@@ -61,6 +61,7 @@ fn overrides_change_values_and_errors_name_the_key() {
     assert!(e.contains("elbow.toml") && e.contains("[cost] w_p"), "{e}");
     // A key an override wrote is blamed on the override, not on the file.
     assert!(e.contains("(--set cost.w_p=abc)"), "{e}");
+    assert!(!e.contains('\n') && !e.contains("in `"), "{e}");
     let e = load(&["cost.bogus=1"]).unwrap_err().to_string();
     assert!(
         e.contains("bogus") && e.contains("(--set cost.bogus=1)"),
