@@ -235,6 +235,16 @@ fn linear_step(
             Matrix2::new(1.0 + h * h * aq, h * (1.0 + h * av), h * aq, 1.0 + h * av),
             Vector2::new(h * h * c0, h * c0),
         ),
+        // RK4 on x' = L x + c is the Taylor series of exp(hL) to fourth order:
+        // x⁺ = (I + hL + (hL)²/2 + (hL)³/6 + (hL)⁴/24) x + h (I + hL/2 + (hL)²/6 + (hL)³/24) c.
+        Integrator::Rk4 => {
+            let l = Matrix2::new(0.0, 1.0, aq, av) * h;
+            let i = Matrix2::identity();
+            let (l2, l3) = (l * l, l * l * l);
+            let m = i + l + l2 / 2.0 + l3 / 6.0 + l3 * l / 24.0;
+            let g = (i + l / 2.0 + l2 / 6.0 + l3 / 24.0) * h;
+            (m, g * Vector2::new(0.0, c0))
+        }
     };
     let (mut a, mut off) = (Matrix2::identity(), Vector2::zeros());
     for _ in 0..substeps {
@@ -294,6 +304,15 @@ fn linear_cases() -> Vec<LinearCase> {
             },
             integrator: Integrator::Euler,
             substeps: 4,
+        },
+        // One fourth-order step per knot.
+        LinearCase {
+            name: "impedance (K_D = 0.2 K), RK4 ×1",
+            actuator: Actuator::Impedance {
+                damping: Damping::Proportional { alpha: 0.2 },
+            },
+            integrator: Integrator::Rk4,
+            substeps: 1,
         },
     ]
 }

@@ -8,7 +8,11 @@ use nalgebra::DMatrix;
 use num_dual::{Dual, DualNum};
 use std::ops::Range;
 
+mod integrator;
 mod noise;
+
+use integrator::flow_body;
+pub use integrator::{Integrator, flow};
 
 /// What kind of noise a linearisation carries; the backward pass skips what is absent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -220,17 +224,6 @@ pub trait Dynamics: Send + Sync {
     }
 }
 
-/// How the drift is integrated over one control step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Integrator {
-    /// Explicit Euler (the paper's): `x += h f(x, u)`.
-    Euler,
-    /// Semi-implicit (symplectic) Euler: velocities first, then positions with the new
-    /// velocities. Stable for undamped springs (the VSA) where explicit Euler gains energy.
-    SemiImplicit,
-}
-
 /// A continuous model discretised on a fixed grid (paper Eq. 10):
 /// `x[k+1] = Φ_Δ(x[k], u[k]) + √Δ F(x[k], u[k]) ε[k]`, where `Φ_Δ` integrates the drift over Δ in
 /// `substeps` steps of the chosen [`Integrator`] with the control and reference of knot `k` held.
@@ -299,63 +292,6 @@ impl DiscreteDynamics {
             next,
         );
     }
-}
-
-/// Integrates the drift of `model` over `dt` in `substeps` steps, control and exogenous input
-/// held. The one integrator of the project: the planner, the Monte Carlo and the board use it.
-#[allow(clippy::too_many_arguments)]
-pub fn flow<S: Scalar>(
-    model: &ArmModel,
-    ex: &Exogenous,
-    dt: f64,
-    substeps: usize,
-    integrator: Integrator,
-    x: &[S],
-    u: &[S],
-    next: &mut [S],
-) {
-    flow_body(model, ex, dt, substeps, integrator, x, u, next);
-}
-
-/// [`flow`]'s body, inlined where it is compiled for a particular instruction set.
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn flow_body<S: Scalar>(
-    model: &ArmModel,
-    ex: &Exogenous,
-    dt: f64,
-    substeps: usize,
-    integrator: Integrator,
-    x: &[S],
-    u: &[S],
-    next: &mut [S],
-) {
-    let nx = model.nx();
-    let h = dt / substeps as f64;
-    let mut cur = [<S as Scalar>::zero(); MAX_NX];
-    cur[..nx].copy_from_slice(&x[..nx]);
-    let mut xdot = [<S as Scalar>::zero(); MAX_NX];
-    for _ in 0..substeps {
-        model.f(&cur[..nx], u, ex, &mut xdot[..nx]);
-        match integrator {
-            Integrator::Euler => {
-                for i in 0..nx {
-                    cur[i] += xdot[i] * h;
-                }
-            }
-            Integrator::SemiImplicit => {
-                let dof = model.dof();
-                // Velocities are the second half of each (position, velocity) block.
-                for block in (0..nx).step_by(2 * dof) {
-                    for i in 0..dof {
-                        cur[block + dof + i] += xdot[block + dof + i] * h;
-                        cur[block + i] += cur[block + dof + i] * h;
-                    }
-                }
-            }
-        }
-    }
-    next[..nx].copy_from_slice(&cur[..nx]);
 }
 
 impl Dynamics for DiscreteDynamics {
@@ -489,6 +425,11 @@ impl DiscreteDynamics {
                 }
             };
         }
+        // The written-out chain rule covers the two Euler steps; a Runge–Kutta step is
+        // differentiated by dual numbers.
+        if self.integrator == Integrator::Rk4 {
+            return false;
+        }
         by_size!((2, 3)(2, 4)(4, 6)(4, 8)(8, 12));
         true
     }
@@ -597,6 +538,7 @@ impl DiscreteDynamics {
                         }
                     }
                 }
+                Integrator::Rk4 => unreachable!("flow_jacobian_by_size leaves RK4 to dual numbers"),
             }
         }
         for (col, column) in jac.iter().enumerate() {

@@ -3,12 +3,13 @@
 
 use super::error::{ConfigError, FileCheck};
 use super::{Task, TaskPath};
+use vic_core::dynamics::Integrator;
 use vic_core::model::{Actuator, ArmModel};
 use vic_core::solver::Bounds;
 
 /// Refuses integration sub-steps too long for the stiffest configured impedance: explicit and
 /// semi-implicit Euler both diverge once `h · K_D / I > 2` (a damping rate) or `h · ω > 2` (a VSA
-/// spring). A plan made on a numerically unstable plant says nothing about the robot.
+/// spring), RK4 once either passes about 2.78. A plan made on a numerically unstable plant says nothing about the robot.
 pub(super) fn check_substep(
     model: &ArmModel,
     task: &Task,
@@ -35,18 +36,27 @@ pub(super) fn check_substep(
         }
         Actuator::Torque => return Ok(()),
     };
+    // Where the step's stability region meets the real axis (a damping rate) and, for the
+    // Euler steps, the imaginary axis (a spring): 2 for both Euler steps; RK4's region reaches
+    // -2.785 on the real axis and ±2.828 on the imaginary one.
+    let limit = match task.integrator {
+        Integrator::Euler | Integrator::SemiImplicit => 2.0,
+        Integrator::Rk4 => 2.78,
+    };
     let h = task.dt / task.substeps as f64;
-    if h * rate >= 2.0 {
-        let needed = (task.dt * rate / 2.0).floor() as usize + 1;
+    if h * rate >= limit {
+        let needed = (task.dt * rate / limit).floor() as usize + 1;
         return Err(check.invalid(
             "task",
             "substeps",
             format!(
                 "{} sub-step(s) of {:.2} ms are numerically unstable at stiffness_max = {k_max} N m/rad \
-                 (rate {rate:.0}/s needs h < {:.2} ms): use substeps ≥ {needed} or a lower stiffness_max",
+                 (rate {rate:.0}/s needs h < {:.2} ms with {}): use substeps ≥ {needed} or a lower \
+                 stiffness_max",
                 task.substeps,
                 h * 1000.0,
-                2000.0 / rate
+                1000.0 * limit / rate,
+                integrator_name(task.integrator)
             ),
         ));
     }
@@ -137,4 +147,13 @@ pub(super) fn check_hold_stiffness(
         ));
     }
     Ok(())
+}
+
+/// The integrator as the scenario file names it.
+fn integrator_name(i: Integrator) -> &'static str {
+    match i {
+        Integrator::Euler => "euler",
+        Integrator::SemiImplicit => "semi_implicit",
+        Integrator::Rk4 => "rk4",
+    }
 }

@@ -111,3 +111,48 @@ fn setting_a_sections_kind_starts_it_afresh() {
     let same = Scenario::load(&path, &["noise.kind=state".to_string()]).expect("same kind");
     assert!(same.model.nw() > 0);
 }
+
+/// The sub-step check for each integrator: at a stiff impedance (K_D = 0.2 · 200 N m s/rad on
+/// the forearm's inertia) the number of sub-steps the refusal asks for is accepted and one fewer is refused, and RK4's larger stability interval
+/// (2.78 against 2 for both Euler steps) asks for fewer.
+#[test]
+fn sub_steps_are_refused_below_each_integrators_stability_limit() {
+    let needed = |integrator: &str| -> usize {
+        let e = load(&[
+            "actuator.stiffness_max=200",
+            &format!("task.integrator={integrator}"),
+            "task.substeps=1",
+        ])
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("[task] substeps") && e.contains(integrator),
+            "{e}"
+        );
+        let n: usize = e
+            .split("use substeps ≥ ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("no count in {e}"));
+        let at = |substeps: usize| {
+            load(&[
+                "actuator.stiffness_max=200",
+                &format!("task.integrator={integrator}"),
+                &format!("task.substeps={substeps}"),
+            ])
+        };
+        assert!(at(n).is_ok(), "{integrator}: {n} sub-steps refused");
+        assert!(
+            at(n - 1).is_err(),
+            "{integrator}: {} sub-steps accepted",
+            n - 1
+        );
+        n
+    };
+    let (euler, semi, rk4) = (needed("euler"), needed("semi_implicit"), needed("rk4"));
+    assert_eq!(euler, semi);
+    // The counts scale as 1 / limit: 2 / 2.78 of the Euler count, to within one.
+    let expect = euler as f64 * 2.0 / 2.78;
+    assert!((rk4 as f64 - expect).abs() <= 1.0, "{rk4} vs {expect:.1}");
+}
