@@ -3,6 +3,7 @@
 # sections names its own command) and keeps the outputs in bench-results/ (or $1):
 #   vic bench loop  (board loop variants + cyclictest, 30 s each)
 #   vic bench ipc   (transport vs bare iceoryx2, then the running pair)
+#   vic bench sooc  (the SOOC iteration's cost against the state dimension)
 #   cargo bench     (solver, scenarios, board)
 # Installs cyclictest (Debian package rt-tests) with apt-get when it is missing.
 # Environment: SECONDS_PER_RUN (default 30), ITERATIONS (default 100000), SKIP_CARGO_BENCH=1.
@@ -30,7 +31,8 @@ if [ -n "${CARGO_TARGET_DIR:-}" ]; then vic="$CARGO_TARGET_DIR/release/vic"; fi
 
 "$vic" bench loop --seconds "$secs" --json > "$out/loop.json"
 "$vic" bench ipc --iterations "$iters" --json > "$out/ipc.json"
-echo "loop and ipc results in $out/loop.json, $out/ipc.json" >&2
+"$vic" bench sooc --json > "$out/sooc_scaling.json"
+echo "loop, ipc and sooc results in $out/loop.json, $out/ipc.json, $out/sooc_scaling.json" >&2
 
 if [ "${SKIP_CARGO_BENCH:-0}" != 1 ]; then
     cargo bench --bench board 2>&1 | tee "$out/cargo-bench-board.txt"
