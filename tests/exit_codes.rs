@@ -171,3 +171,36 @@ fn too_few_trials_say_how_many_and_why() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a whole number of trials"));
 }
+
+/// From a folder without `config/` (an installed `vic`), `config/NAME.toml` is the built-in copy
+/// of the repository's scenario: the same plan as from the repository; a name that is not one of
+/// them is still the user's error.
+#[test]
+fn from_any_folder_the_scenarios_of_config_are_built_in() {
+    let elsewhere = std::env::temp_dir().join(format!("vic-elsewhere-{}", std::process::id()));
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    let plan = |dir: &std::path::Path, config: &str| {
+        Command::new(VIC)
+            .current_dir(dir)
+            .args(["plan", "--config", config, "--method", "ilqg", "--json"])
+            .output()
+            .unwrap()
+    };
+    let summary = |out: &Output| {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        v.as_object_mut().unwrap().remove("solve_ms");
+        v
+    };
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let there = plan(&elsewhere, "config/icub_elbow.toml");
+    let here = plan(repo, "config/icub_elbow.toml");
+    assert_eq!(summary(&there), summary(&here));
+    let missing = plan(&elsewhere, "config/no_such_scenario.toml");
+    std::fs::remove_dir_all(&elsewhere).unwrap();
+    assert_error(&missing, 2, "vic", "config/no_such_scenario.toml");
+}

@@ -230,7 +230,7 @@ fn progress(json: bool) -> impl FnMut(&str) {
 
 /// The board's loop against cyclictest; `require_baseline` fails when cyclictest is missing.
 fn run_loop(opts: &loop_bench::Options, require_baseline: bool, json: bool) -> anyhow::Result<()> {
-    if !opts.config.is_file() {
+    if !vic_plan::scenario::exists(&opts.config) {
         return Err(input_error(format!(
             "{}: no such scenario file",
             opts.config.display()

@@ -80,7 +80,7 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
         FigureArg::Icub => Figure::Icub,
     };
     let o = &a.run;
-    if !o.config_dir.is_dir() {
+    if !vic_plan::scenario::is_folder(&o.config_dir) {
         return Err(input_error(format!(
             "--config-dir {}: not a folder of scenario files",
             o.config_dir.display()

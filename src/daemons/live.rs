@@ -170,7 +170,7 @@ impl PlanStore {
     ) -> anyhow::Result<PathBuf> {
         use std::hash::{Hash, Hasher};
         let config = scenario.config;
-        let text = std::fs::read_to_string(config)
+        let text = vic_plan::scenario::read_text(config)
             .map_err(|e| format!("{}: cannot read: {e}", config.display()))
             .input()?;
         let method = request.method.name();

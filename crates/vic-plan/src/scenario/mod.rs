@@ -8,6 +8,7 @@
 //! be inconsistent ([`validate`]). Every error names the file, the key and what is wrong.
 
 mod board;
+mod built_in;
 mod edit;
 mod error;
 mod overrides;
@@ -18,6 +19,7 @@ mod stability;
 mod validate;
 
 pub use board::{BOARD_RANGES, BoardRange, BoardSection, JOINT_LIMIT_RAD};
+pub use built_in::{exists, is_folder, read as read_text};
 pub use error::ConfigError;
 pub use solver::SolverSection;
 
@@ -95,9 +97,10 @@ pub struct Scenario {
 }
 
 impl Scenario {
-    /// Reads a scenario file and applies `section.key=value` overrides.
+    /// Reads a scenario file (or, for a missing `config/NAME.toml`, the built-in copy of
+    /// `config/`: [`read_text`]) and applies `section.key=value` overrides.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Scenario, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        let text = built_in::read(path).map_err(|source| ConfigError::Io {
             path: path.to_path_buf(),
             source,
         })?;
