@@ -230,6 +230,11 @@ fn injected_pulses_show_within_two_ticks_and_namespaces_do_not_cross() {
     assert_eq!(out.status.code(), Some(1));
     let msg = String::from_utf8_lossy(&out.stderr);
     assert!(msg.contains("disturbance-out-of-bounds"), "{msg}");
+    // ... and names the keys that bound a pulse.
+    assert!(
+        msg.contains("max_pulse_torque") && msg.contains("max_pulse_duration"),
+        "{msg}"
+    );
     let out = vic(&["status", "--namespace", &b, "--json"]);
     assert!(out.status.success());
     let st: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

@@ -20,8 +20,13 @@ use vic_rt::transport::{
 pub(crate) enum OperatorError {
     #[error("no board in namespace \"{0}\" (start one with vic-board --namespace {0})")]
     NoBoard(String),
-    #[error("namespace \"{namespace}\": the board rejected the disturbance ({reason})")]
-    Rejected { namespace: String, reason: String },
+    #[error("namespace \"{namespace}\": the board rejected the disturbance ({reason}){hint}")]
+    Rejected {
+        namespace: String,
+        reason: String,
+        /// Which keys of the board's scenario bound this disturbance, when it was out of them.
+        hint: String,
+    },
     #[error(
         "namespace \"{0}\": the board did not acknowledge the disturbance (no state with its \
          sequence number)"
@@ -55,6 +60,27 @@ pub(crate) enum Request {
 }
 
 impl Request {
+    /// The keys of the board's scenario (`[board]`) that bound this disturbance, for the message
+    /// of a rejection: the board reports only that a limit was passed, not which.
+    pub(crate) fn limits(&self) -> &'static str {
+        match self {
+            Request::Pulse { .. } => {
+                "a pulse is bounded by the board's [board] max_pulse_torque (N m, each joint) and \
+                 max_pulse_duration (s)"
+            }
+            Request::Load { .. } => {
+                "a load is bounded by the board's [board] max_load_torque (N m, each joint)"
+            }
+            Request::Field { .. } => {
+                "a field is bounded by the board's [board] max_field_beta (N/m), and only a \
+                 two-link arm takes one"
+            }
+            Request::Noise { .. } => {
+                "a noise factor is bounded by the board's [board] max_noise_factor (and at least 0)"
+            }
+        }
+    }
+
     /// The message (sequence number and time stamp are set when it is sent).
     pub(crate) fn message(&self) -> Disturbance {
         let mut d = Disturbance {
@@ -177,9 +203,16 @@ pub(crate) fn inject(
     if reasons.is_empty() {
         Err(OperatorError::NoAck(namespace.into()))
     } else {
+        let out_of_bounds = Rejection::DisturbanceOutOfBounds.name();
+        let hint = if reasons.iter().any(|r| r == out_of_bounds) {
+            format!(": {}", request.limits())
+        } else {
+            String::new()
+        };
         Err(OperatorError::Rejected {
             namespace: namespace.into(),
             reason: reasons.join(", "),
+            hint,
         })
     }
 }

@@ -204,6 +204,7 @@ fn answers_count_acknowledged_pulses_and_show_refusals() {
         Err(OperatorError::Rejected {
             namespace: "lab".into(),
             reason: "stale".into(),
+            hint: String::new(),
         }),
     );
     assert_eq!((app.pulses_sent, app.pulses_acked), (1, 1));
