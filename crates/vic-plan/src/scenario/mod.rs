@@ -133,4 +133,6 @@ impl Scenario {
 }
 
 #[cfg(test)]
+mod doc_tests;
+#[cfg(test)]
 mod tests;
