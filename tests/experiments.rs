@@ -106,3 +106,41 @@ fn experiment_outputs_are_valid_png_svg_and_json() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `vic experiment icub` puts the paper's costs beside the ratio that can be compared: its line
+/// carries this run's Monte Carlo / predicted, the same as the JSON's two costs give (same seed).
+#[test]
+fn the_icub_table_compares_the_ratio_with_the_papers() {
+    let dir = std::env::temp_dir().join(format!("vic-icub-ratio-{}", std::process::id()));
+    let vic = |json: bool| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_vic"));
+        c.current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(["experiment", "icub", "--trials", "3", "--out-dir"])
+            .arg(&dir);
+        if json {
+            c.arg("--json");
+        }
+        let out = c.output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let text = vic(false);
+    let v: serde_json::Value = serde_json::from_str(&vic(true)).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    let col = &v["columns"][0];
+    let ratio = col["expected_cost_mc"].as_f64().unwrap()
+        / col["expected_cost_predicted"].as_f64().unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("paper:"))
+        .unwrap_or_else(|| panic!("no paper line in {text}"));
+    assert!(line.contains("ratio 1.41"), "{line}");
+    assert!(
+        line.ends_with(&format!("Monte Carlo / predicted = {ratio:.2}")),
+        "{line} vs {ratio}"
+    );
+}
