@@ -17,7 +17,7 @@ pub(crate) use run::run;
 
 use crate::views::operator::{Ack, OperatorError, Request, Status};
 use std::collections::VecDeque;
-use vic_rt::transport::{MAX_JOINTS, StateMsg, Telemetry};
+use vic_rt::transport::{CENTRAL_NODE, MAX_JOINTS, NodeInfo, NodeLiveness, StateMsg, Telemetry};
 
 /// What the keys send and how much history the plots keep.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -159,6 +159,9 @@ pub(crate) struct App {
     pub(crate) late_per_interval: VecDeque<u64>,
     last_late: Option<u64>,
     last_sample_s: f64,
+    /// Whether a central process (`vic-planner`) is alive in the namespace, from the last look
+    /// at its nodes (`None` before the first).
+    pub(crate) central: Option<bool>,
     /// Pulses sent and acknowledged by the board.
     pub(crate) pulses_sent: u64,
     pub(crate) pulses_acked: u64,
@@ -192,6 +195,7 @@ impl App {
             pulses_sent: 0,
             pulses_acked: 0,
             log: VecDeque::new(),
+            central: None,
         }
     }
 
@@ -243,6 +247,15 @@ impl App {
         self.stale = false;
     }
 
+    /// The namespace's nodes: whether a central process is connected.
+    pub(crate) fn on_nodes(&mut self, nodes: &[NodeInfo]) {
+        self.central = Some(
+            nodes
+                .iter()
+                .any(|n| n.name == CENTRAL_NODE && n.state == NodeLiveness::Alive),
+        );
+    }
+
     /// No telemetry for a while: the board may have stopped (it may come back).
     pub(crate) fn on_silence(&mut self) {
         self.stale = true;
@@ -255,6 +268,10 @@ impl App {
         };
         let mode = match s.mode.as_str() {
             "running" => "RUNNING".to_string(),
+            // A central process between trials: the board idles until its next reset.
+            "idle" if self.central == Some(true) => {
+                format!("IDLE: BETWEEN TRIALS ({CENTRAL_NODE} connected)")
+            }
             // Holding only when the board says so: a board that freezes its plant while idle
             // reports no stiffness.
             "idle" if s.stiffness.iter().any(|k| *k > 0.0) => {

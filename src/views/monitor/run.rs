@@ -29,6 +29,9 @@ const SILENT: Duration = Duration::from_secs(1);
 /// How long a sent disturbance waits for the board's acknowledgement.
 const ACK_TIMEOUT: Duration = Duration::from_secs(2);
 
+/// How often the view lists the namespace's nodes.
+const NODES_EVERY: Duration = Duration::from_secs(1);
+
 /// The board's answer to one request, from the sending thread.
 type Answer = (
     String,
@@ -61,8 +64,17 @@ fn view(
     let mut app = App::new(namespace, settings);
     let (tx, rx) = mpsc::channel::<Answer>();
     let mut last_telemetry = Instant::now();
+    let mut last_nodes: Option<Instant> = None;
     let mut senders = Vec::new();
     while !stop.load(Ordering::Relaxed) {
+        // Who is connected, once a second: the banner tells a board between trials from one
+        // without a central process.
+        if last_nodes.is_none_or(|t| t.elapsed() >= NODES_EVERY) {
+            if let Ok(nodes) = vic_rt::transport::list_nodes(namespace) {
+                app.on_nodes(&nodes);
+            }
+            last_nodes = Some(Instant::now());
+        }
         ports.drain_states(|s| app.on_state(s));
         if let Some(t) = ports.latest_telemetry() {
             app.on_telemetry(&t);

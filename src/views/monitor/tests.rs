@@ -58,6 +58,25 @@ fn the_banner_names_the_mode_and_a_fault_its_reason() {
     t.stiffness = [100.0, 100.0];
     app.on_telemetry(&t);
     assert!(screen(&app, 100, 30)[1].contains("IDLE: HOLDING POSTURE"));
+    // Idle with a central process connected: between its trials, not abandoned.
+    let node = |name: &str, state| vic_rt::transport::NodeInfo {
+        name: name.into(),
+        pid: 1,
+        state,
+        id: "0".into(),
+    };
+    use vic_rt::transport::NodeLiveness::{Alive, Dead};
+    app.on_nodes(&[node("vic-board", Alive), node("vic-planner", Alive)]);
+    let banner = &screen(&app, 100, 30)[1];
+    assert!(
+        banner.contains("IDLE: BETWEEN TRIALS (vic-planner connected)"),
+        "{banner}"
+    );
+    // A planner that died, or only other tools: no central process.
+    app.on_nodes(&[node("vic-board", Alive), node("vic-planner", Dead)]);
+    assert!(screen(&app, 100, 30)[1].contains("IDLE: HOLDING POSTURE (no central process)"));
+    app.on_nodes(&[node("vic-observer", Alive)]);
+    assert!(screen(&app, 100, 30)[1].contains("no central process"));
     app.on_silence();
     assert!(screen(&app, 100, 30)[1].contains("(board silent)"));
 }

@@ -42,7 +42,7 @@ pub use namespace::{
     list_nodes, namespace_files, prefix, remove_namespace, root_dir, validate_namespace,
 };
 pub use ports::{
-    BoardObserver, BoardPorts, BoardWatch, CentralPorts, MonitorPorts, ObserverPorts, RawPorts,
-    RecorderPorts, STATE_BUFFER, ToolPorts, board_present,
+    BoardObserver, BoardPorts, BoardWatch, CENTRAL_NODE, CentralPorts, MonitorPorts, ObserverPorts,
+    RawPorts, RecorderPorts, STATE_BUFFER, ToolPorts, board_present,
 };
 pub use protocol::*;

@@ -42,8 +42,9 @@ fn send_relayed<T: Topic>(
 
 /// The board's node name: how a second board finds the first.
 pub(crate) const BOARD_NODE: &str = "vic-board";
-/// The central process's node name: how a second one finds the first.
-pub(crate) const CENTRAL_NODE: &str = "vic-planner";
+/// The central process's node name: how a second one finds the first, and how the monitor
+/// tells a board between trials from one without a central process.
+pub const CENTRAL_NODE: &str = "vic-planner";
 /// The node name of `vic inject` (the one tool with a publisher).
 pub(crate) const INJECT_NODE: &str = "vic-inject";
 /// The node name of the read-only tools (`vic status`, `vic monitor`).
