@@ -253,6 +253,21 @@ fn apply_scheduling(req: &RtRequest, memory_locked: bool) -> vic_rt::sched::RtSe
     } else {
         tracing::warn!("real-time: {}", got.describe());
     }
+    // Another real-time loop on the same CPU (a second board on its defaults): both miss
+    // deadlines and nothing else says why.
+    if let (Some(_), Some(cpu)) = (got.fifo, got.cpu) {
+        for r in vic_rt::sched::fifo_threads_pinned_to(cpu, std::process::id()) {
+            tracing::warn!(
+                "CPU {cpu} is shared with another SCHED_FIFO loop: {} (pid {}, thread {}, \
+                 priority {}); the two preempt each other. Give this board another CPU with \
+                 --cpu N (or stop the other)",
+                r.name,
+                r.pid,
+                r.tid,
+                r.priority
+            );
+        }
+    }
     got
 }
 

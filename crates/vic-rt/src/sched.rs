@@ -271,6 +271,80 @@ pub fn apply_realtime(req: &RtRequest, memory_locked: bool, timer_slack_1ns: boo
     got
 }
 
+/// A thread of another process under `SCHED_FIFO` and pinned to one CPU: another real-time loop
+/// the calling one would share its CPU with.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RivalLoop {
+    pub pid: u32,
+    pub tid: u32,
+    /// The thread's name (`/proc/PID/task/TID/comm`).
+    pub name: String,
+    pub priority: i32,
+}
+
+/// The `SCHED_FIFO` threads pinned to `cpu` alone, of every user process but `own_pid` (read from
+/// `/proc`; threads that vanish or cannot be read are skipped). Two loops at the same priority on
+/// one CPU preempt each other and miss their deadlines, without any error.
+pub fn fifo_threads_pinned_to(cpu: usize, own_pid: u32) -> Vec<RivalLoop> {
+    let mut found = Vec::new();
+    let Ok(procs) = std::fs::read_dir("/proc") else {
+        return found;
+    };
+    for p in procs.flatten() {
+        let Some(pid) = p.file_name().to_str().and_then(|n| n.parse::<u32>().ok()) else {
+            continue;
+        };
+        // Kernel threads (the CPU's migration thread, threaded interrupts) have an empty
+        // command line; they are the kernel's, not another loop.
+        let user = std::fs::read(p.path().join("cmdline")).is_ok_and(|c| !c.is_empty());
+        if pid == own_pid || !user {
+            continue;
+        }
+        let Ok(tasks) = std::fs::read_dir(p.path().join("task")) else {
+            continue;
+        };
+        for t in tasks.flatten() {
+            let Some(tid) = t.file_name().to_str().and_then(|n| n.parse::<u32>().ok()) else {
+                continue;
+            };
+            if let Some(priority) = fifo_pinned(&t.path(), cpu) {
+                let name = std::fs::read_to_string(t.path().join("comm"))
+                    .map(|n| n.trim().to_string())
+                    .unwrap_or_default();
+                found.push(RivalLoop {
+                    pid,
+                    tid,
+                    name,
+                    priority,
+                });
+            }
+        }
+    }
+    found
+}
+
+/// The `SCHED_FIFO` priority of the thread at `/proc/PID/task/TID` when it is pinned to `cpu`
+/// alone.
+fn fifo_pinned(task: &std::path::Path, cpu: usize) -> Option<i32> {
+    let stat = std::fs::read_to_string(task.join("stat")).ok()?;
+    // Fields after the parenthesised name (which may hold spaces) start at field 3, `state`;
+    // field 40 is rt_priority, 41 the policy (1: SCHED_FIFO).
+    let rest: Vec<&str> = stat
+        .get(stat.rfind(')')? + 1..)?
+        .split_whitespace()
+        .collect();
+    let field = |n: usize| rest.get(n - 3).and_then(|v| v.parse::<i64>().ok());
+    if field(41)? != i64::from(libc::SCHED_FIFO) {
+        return None;
+    }
+    let status = std::fs::read_to_string(task.join("status")).ok()?;
+    let allowed = status
+        .lines()
+        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))?
+        .trim();
+    (allowed == cpu.to_string()).then(|| field(40).map(|p| p as i32))?
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -323,6 +397,31 @@ mod tests {
             assert!(got.describe().contains("spin 100 µs"));
             let none = apply_realtime(&RtRequest::none(), false, false);
             assert!(!none.requested && none.refused.is_empty() && none.cpu.is_none());
+        })
+        .join()
+        .unwrap();
+    }
+
+    /// A thread of this process pinned to CPU 0 under `SCHED_FIFO` is found by its tid (as
+    /// another process's loop would be), not once it is back under the normal scheduler, and not
+    /// when the caller excludes its own process.
+    #[test]
+    fn a_pinned_fifo_thread_is_found_in_proc() {
+        let pid = std::process::id();
+        std::thread::spawn(move || {
+            // SAFETY: gettid has no preconditions.
+            let tid = unsafe { libc::gettid() } as u32;
+            pin_to_cpu(0).unwrap();
+            if set_policy(SchedPolicy::Fifo(7)).is_err() {
+                return; // not permitted here: nothing to find
+            }
+            let found = fifo_threads_pinned_to(0, 0);
+            let me = found.iter().find(|r| r.tid == tid);
+            assert_eq!(me.map(|r| (r.pid, r.priority)), Some((pid, 7)), "{found:?}");
+            assert!(fifo_threads_pinned_to(1, 0).iter().all(|r| r.tid != tid));
+            assert!(fifo_threads_pinned_to(0, pid).iter().all(|r| r.tid != tid));
+            set_policy(SchedPolicy::Other).unwrap();
+            assert!(fifo_threads_pinned_to(0, 0).iter().all(|r| r.tid != tid));
         })
         .join()
         .unwrap();
