@@ -20,37 +20,9 @@ use vic_core::solver::sooc_newton::SoocOptions;
 const DOC: &str = include_str!("../../../../docs/CONFIG.md");
 
 /// A valid scenario that leaves every optional `[task]`, `[solver]` and `[board]` key at its
-/// default (but the hold stiffness, which the default makes unstable on this forearm).
-const BASE: &str = r#"
-[plant]
-kind = "single_joint"
-inertia = 5.08e-3
-mass = 0.812
-com = 0.103
-length = 0.273
-gravity = 9.81
-[actuator]
-type = "impedance"
-alpha = 0.2
-[field]
-kind = "none"
-[noise]
-kind = "state"
-sigma = 0.03
-[cost]
-w_torque = 1.0
-w_stiffness = 1e-4
-w_p = 1e6
-w_v = 1e5
-[task]
-kind = "joint"
-start_deg = [-60.0]
-target_deg = [-30.0]
-duration = 1.5
-dt = 0.01
-[board]
-hold_stiffness = 40.0
-"#;
+/// default (but the hold stiffness, which the default makes unstable on this forearm): the loader
+/// tests' elbow.
+const BASE: &str = super::tests::ELBOW;
 
 const BOGUS_KEY: &str = "bogus_key";
 const BOGUS_VALUE: &str = "zz_bogus";

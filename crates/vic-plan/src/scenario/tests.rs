@@ -2,7 +2,9 @@ use super::*;
 use std::path::Path;
 use vic_core::model::Noise;
 
-const ELBOW: &str = r#"
+/// A valid elbow scenario with every optional `[task]`, `[solver]` and `[board]` key at its
+/// default but the hold stiffness (shared with the documentation's test).
+pub(super) const ELBOW: &str = r#"
 [plant]
 kind = "single_joint"
 inertia = 5.08e-3
