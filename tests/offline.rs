@@ -34,6 +34,7 @@ mod plot;
 mod predicted_cost;
 mod predictor;
 mod protocol;
+mod readme;
 mod record_format;
 mod replan;
 mod sooc;
