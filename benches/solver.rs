@@ -534,8 +534,7 @@ fn receding(
 /// flow's third, then the costate-contracted second derivatives), along the first guess, on
 /// moment dimensions 5, 14 and 44.
 fn sooc_scaling(c: &mut Criterion) {
-    use vic_core::dynamics::{Dynamics, Linearization};
-    use vic_core::solver::sooc::MomentExpansion;
+    use vic::bench::sooc_scaling::Knots;
     let mut group = c.benchmark_group("sooc_scaling");
     for file in [
         "icub_elbow.toml",
@@ -543,47 +542,18 @@ fn sooc_scaling(c: &mut Criterion) {
         "two_link_vsa_divergent.toml",
     ] {
         let (s, setup) = load(file, &[]);
-        let base = &setup.dynamics;
-        let moments = MomentDynamics::new(base);
-        let (n, nz, horizon) = (base.nx(), moments.nx(), s.task.steps);
-        let mut x = vec![setup.x0.clone()];
-        let mut z = vec![moments.initial_state(&setup.x0)];
-        for k in 0..horizon {
-            let u = setup.u_init[k].as_slice();
-            let (mut xn, mut zn) = (vec![0.0; n], vec![0.0; nz]);
-            base.step(k, &x[k], u, &mut xn);
-            moments.step(k, &z[k], u, &mut zn);
-            x.push(xn);
-            z.push(zn);
-        }
-        let lam: Vec<f64> = (0..nz).map(|i| 1.0 / (1.0 + i as f64)).collect();
-        let name = |what: &str| format!("{what}/nz{nz}_{}", file.trim_end_matches(".toml"));
-        let mut lin = Linearization::new(n, base.nu(), base.nw());
-        group.bench_function(name("nominal"), |b| {
-            b.iter(|| {
-                for (k, (x, u)) in x.iter().zip(&setup.u_init).enumerate() {
-                    base.linearize(k, x, u.as_slice(), &mut lin);
-                }
-                black_box(&lin);
-            })
+        let horizon = s.task.steps;
+        let mut knots = Knots::new(&setup, horizon);
+        let stem = file.trim_end_matches(".toml");
+        let nz = knots.moment_dim();
+        group.bench_function(format!("nominal/nz{nz}_{stem}"), |b| {
+            b.iter(|| (0..horizon).for_each(|k| knots.nominal(k)))
         });
-        let mut e = MomentExpansion::for_dynamics(&moments);
-        group.bench_function(name("first"), |b| {
-            b.iter(|| {
-                for (k, (z, u)) in z.iter().zip(&setup.u_init).enumerate() {
-                    moments.expand(k, z, u.as_slice(), &mut e);
-                }
-                black_box(&e);
-            })
+        group.bench_function(format!("first/nz{nz}_{stem}"), |b| {
+            b.iter(|| (0..horizon).for_each(|k| knots.first(k)))
         });
-        group.bench_function(name("newton"), |b| {
-            b.iter(|| {
-                for (k, (z, u)) in z.iter().zip(&setup.u_init).enumerate() {
-                    moments.expand_with_third(k, z, u.as_slice(), &mut e);
-                    moments.second_order(k, z, u.as_slice(), &lam, true, &mut e);
-                }
-                black_box(&e);
-            })
+        group.bench_function(format!("newton/nz{nz}_{stem}"), |b| {
+            b.iter(|| (0..horizon).for_each(|k| knots.newton(k)))
         });
     }
     group.finish();

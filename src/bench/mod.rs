@@ -13,7 +13,7 @@ pub(crate) mod error;
 pub(crate) mod ipc;
 pub mod loop_bench;
 pub(crate) mod pair;
-pub(crate) mod sooc_scaling;
+pub mod sooc_scaling;
 
 pub(crate) use error::BenchError;
 pub use error::HistogramError;

@@ -20,6 +20,7 @@ use vic_core::solver::sooc::{MomentDynamics, MomentExpansion};
 use vic_core::solver::sooc_newton::SoocStop;
 use vic_plan::plan;
 use vic_plan::scenario::Scenario;
+use vic_plan::setup::Setup;
 
 /// What `vic bench sooc` runs.
 #[derive(Debug, Clone)]
@@ -118,42 +119,14 @@ fn point(path: &Path, opts: &Options) -> Result<Point, BenchError> {
     let s = Scenario::load(path, &[])?;
     let setup = plan::setup(&s)?;
     let base = &setup.dynamics;
-    let (n, m, p) = (base.nx(), base.nu(), base.nw());
+    let (n, m) = (base.nx(), base.nu());
     let horizon = s.task.steps;
-    let moments = MomentDynamics::new(base);
-    let nz = moments.nx();
 
-    // The first guess's means and moments, the points every model is taken at.
-    let mut x = vec![setup.x0.clone()];
-    let mut z = vec![moments.initial_state(&setup.x0)];
-    for k in 0..horizon {
-        let u = setup.u_init[k].as_slice();
-        let mut xn = vec![0.0; n];
-        base.step(k, &x[k], u, &mut xn);
-        x.push(xn);
-        let mut zn = vec![0.0; nz];
-        moments.step(k, &z[k], u, &mut zn);
-        z.push(zn);
-    }
-    // A costate of the moment problem's size; the timing does not depend on its values.
-    let lam: Vec<f64> = (0..nz).map(|i| 1.0 / (1.0 + i as f64)).collect();
-
-    let mut lin = Linearization::new(n, m, p);
-    let nominal_us = per_knot(opts.passes, horizon, |k| {
-        base.linearize(k, &x[k], setup.u_init[k].as_slice(), &mut lin);
-        black_box(&lin);
-    });
-    let mut e = MomentExpansion::for_dynamics(&moments);
-    let first_us = per_knot(opts.passes, horizon, |k| {
-        moments.expand(k, &z[k], setup.u_init[k].as_slice(), &mut e);
-        black_box(&e);
-    });
-    let newton_us = per_knot(opts.passes, horizon, |k| {
-        let u = setup.u_init[k].as_slice();
-        moments.expand_with_third(k, &z[k], u, &mut e);
-        moments.second_order(k, &z[k], u, &lam, true, &mut e);
-        black_box(&e);
-    });
+    let mut knots = Knots::new(&setup, horizon);
+    let nz = knots.moment_dim();
+    let nominal_us = per_knot(opts.passes, horizon, |k| knots.nominal(k));
+    let first_us = per_knot(opts.passes, horizon, |k| knots.first(k));
+    let newton_us = per_knot(opts.passes, horizon, |k| knots.newton(k));
 
     let solve = if opts.solve {
         let plain = setup.problem(horizon);
@@ -182,6 +155,79 @@ fn point(path: &Path, opts: &Options) -> Result<Point, BenchError> {
         newton_over_nominal: newton_us / nominal_us,
         solve,
     })
+}
+
+/// The three models of the curve at the knots of a scenario's first guess (its means and
+/// moments rolled out from the first-guess controls), each taken by one call; `cargo bench`'s
+/// `sooc_scaling` group times the same calls.
+pub struct Knots<'a> {
+    setup: &'a Setup,
+    moments: MomentDynamics<'a>,
+    x: Vec<Vec<f64>>,
+    z: Vec<Vec<f64>>,
+    /// A costate of the moment problem's size; the timing does not depend on its values.
+    lam: Vec<f64>,
+    lin: Linearization,
+    e: MomentExpansion,
+}
+
+impl<'a> Knots<'a> {
+    pub fn new(setup: &'a Setup, horizon: usize) -> Self {
+        let base = &setup.dynamics;
+        let moments = MomentDynamics::new(base);
+        let (n, nz) = (base.nx(), moments.nx());
+        let mut x = vec![setup.x0.clone()];
+        let mut z = vec![moments.initial_state(&setup.x0)];
+        for k in 0..horizon {
+            let u = setup.u_init[k].as_slice();
+            let (mut xn, mut zn) = (vec![0.0; n], vec![0.0; nz]);
+            base.step(k, &x[k], u, &mut xn);
+            moments.step(k, &z[k], u, &mut zn);
+            x.push(xn);
+            z.push(zn);
+        }
+        Knots {
+            setup,
+            lam: (0..nz).map(|i| 1.0 / (1.0 + i as f64)).collect(),
+            lin: Linearization::new(n, base.nu(), base.nw()),
+            e: MomentExpansion::for_dynamics(&moments),
+            moments,
+            x,
+            z,
+        }
+    }
+
+    /// The moment dimension n + n(n+1)/2.
+    pub fn moment_dim(&self) -> usize {
+        self.moments.nx()
+    }
+
+    /// The plant's linearisation at knot `k` (ILQG's model).
+    pub fn nominal(&mut self, k: usize) {
+        let u = self.setup.u_init[k].as_slice();
+        self.setup
+            .dynamics
+            .linearize(k, &self.x[k], u, &mut self.lin);
+        black_box(&self.lin);
+    }
+
+    /// The moment step's first derivatives at knot `k` (every SOOC iteration).
+    pub fn first(&mut self, k: usize) {
+        let u = self.setup.u_init[k].as_slice();
+        self.moments.expand(k, &self.z[k], u, &mut self.e);
+        black_box(&self.e);
+    }
+
+    /// The exact Newton model at knot `k`: the first derivatives with the flow's third, then
+    /// the costate-contracted second derivatives.
+    pub fn newton(&mut self, k: usize) {
+        let u = self.setup.u_init[k].as_slice();
+        self.moments
+            .expand_with_third(k, &self.z[k], u, &mut self.e);
+        self.moments
+            .second_order(k, &self.z[k], u, &self.lam, true, &mut self.e);
+        black_box(&self.e);
+    }
 }
 
 /// The median over `passes` of one pass over the horizon's knots, per knot [µs] (after one
