@@ -50,6 +50,21 @@ fn the_distributed_demo_ends_as_the_one_host_demo_and_reports_the_link() {
         s[0]["final_errors"][0].as_f64().expect("a final error")
     };
     let (a, b) = (final_error(&one), final_error(&two));
+    // The verdict is the run's: its best row is the one strategy that ran, with its numbers,
+    // and the offline curve of the same scenario says where the predictor stops beating the
+    // stiffness plan.
+    let v = &one["verdict"];
+    assert_eq!(v["best"], "stiffness", "{v}");
+    assert_eq!(
+        v["best_final_error_mean"],
+        one["strategies"][0]["final_error_mean"]
+    );
+    let c = &v["offline"]["crossings"][0];
+    assert_eq!(
+        (&c["feedback"], &c["stiffness"]),
+        (&"predictor".into(), &"stiffness".into())
+    );
+    assert!(c["kind"].is_string(), "{v}");
     eprintln!(
         "final error: one host {a} mm, distributed {b} mm; link: {}",
         two["link"]

@@ -2,7 +2,7 @@
 //! ordering the paper's argument rests on.
 
 use std::path::Path;
-use vic::studies::sweep::{Engine, Strategy, SweepOptions, sweep_latency, write_figure};
+use vic::studies::sweep::{Crossing, Engine, Strategy, SweepOptions, sweep_latency, write_figure};
 use vic_plan::plan::{Method, plan};
 use vic_plan::scenario::Scenario;
 
@@ -74,6 +74,26 @@ fn the_sweep_orders_the_strategies_as_the_paper_argues() {
         "{} vs {k}",
         s0.mean_stiffness
     );
+    // The stored crossings (naive-delayed and the predictor, each against the stiffness plan)
+    // agree with the points they come from.
+    assert_eq!(sweep.crossings.len(), 2, "{:?}", sweep.crossings);
+    for c in &sweep.crossings {
+        let closer = |ms: f64| match (
+            at(c.feedback, ms).final_error_mean,
+            at(c.stiffness, ms).final_error_mean,
+        ) {
+            (Some(f), Some(s)) => f < s,
+            (f, _) => f.is_some(),
+        };
+        match c.crossing {
+            Crossing::AlwaysBetter => assert!(opts.latencies_ms.iter().all(|&l| closer(l))),
+            Crossing::NeverBetter => assert!(!closer(0.0), "{c:?}"),
+            Crossing::Between { below, above, at } => {
+                assert!(closer(below) && !closer(above), "{c:?}");
+                assert!(at.is_none_or(|x| (below..=above).contains(&x)), "{c:?}");
+            }
+        }
+    }
     let dir = std::env::temp_dir().join(format!("vic_sweep_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (png, svg) = (dir.join("sweep.png"), dir.join("sweep.svg"));

@@ -111,6 +111,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     print!("{}", sweep.table());
+    for c in &sweep.crossings {
+        println!("crossing: {}", c.sentence());
+    }
     for note in sweep.schedule_notes() {
         println!("note: {note}");
     }

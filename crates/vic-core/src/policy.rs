@@ -108,6 +108,18 @@ impl Strategy {
         }
     }
 
+    /// What the strategy does, in plain words for a reader who has not met the names (the
+    /// demo's legend and verdict).
+    pub fn plain(self) -> &'static str {
+        match self {
+            Strategy::NaiveDelayed => "delayed feedback as planned for the latency, no stiffness",
+            Strategy::Predictor => "delayed feedback on the predicted present, no stiffness",
+            Strategy::Stiffness => "planned torque and stiffness, no feedback at all",
+            Strategy::StiffnessPredictor => "planned stiffness plus the predictor's feedback",
+            Strategy::Replan => "stiffness re-planned every period from the predicted present",
+        }
+    }
+
     /// The strategy called `name`, or an error that lists the names.
     pub fn from_name(name: &str) -> Result<Strategy, UnknownStrategy> {
         Strategy::ALL

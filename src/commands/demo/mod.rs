@@ -11,12 +11,14 @@
 //! run, however it ends.
 
 mod distributed;
+mod verdict;
 
 use crate::cli::{Classify, DefaultScenarioArgs, JsonArg, SeedArgs, latency_arg, sibling_binary};
 use crate::daemons::live::{
     BoardFlags, PlanStore, PlannerRun, ScenarioFile, run_planner, start_board, stop_board,
 };
 use crate::studies::experiment::column_plot;
+use crate::views::plot::Caption;
 use crate::views::report::{StrategyResult, Trajectories};
 use anyhow::anyhow;
 use distributed::{DistributedLink, describe};
@@ -163,8 +165,19 @@ pub(crate) fn run(o: Args) -> anyhow::Result<()> {
     let figure = trajectories_figure(o, &scenario, &runs)?;
     drop(store);
     let leftover = vic_rt::transport::namespace_files(&namespace);
+    // The offline curve of the same scenario and seed says where the run's latency sits; the
+    // live rows stand on their own if it cannot be made.
+    if std::io::stderr().is_terminal() {
+        eprintln!("the offline curve (Monte Carlo, predictor and stiffness, 0-300 ms) ...");
+    }
+    let (config, overrides) = (&o.scenario.config, &o.scenario.set.overrides);
+    let offline = verdict::offline_curve(config, overrides, latency.ms(), o.seed.seed)
+        .inspect_err(|e| eprintln!("vic: warning: no offline curve for the verdict: {e:#}"))
+        .ok();
+    let verdict = verdict::verdict(&results, latency.ms(), offline.as_ref());
     let mut doc = document(o, &results, &stats, &leftover, &figure);
     doc["link"] = link.clone().unwrap_or_default();
+    doc["verdict"] = verdict.json;
     let json_path = o.out_dir.join("demo.json");
     std::fs::write(&json_path, format!("{doc:#}"))
         .map_err(|e| anyhow!("cannot write {}: {e}", json_path.display()))?;
@@ -174,6 +187,10 @@ pub(crate) fn run(o: Args) -> anyhow::Result<()> {
     }
     print_table(&results, &stats);
     link.inspect(|l| println!("{}", describe(l, o.latency_ms)));
+    println!("strategies:");
+    for line in verdict::legend(&results) {
+        println!("{line}");
+    }
     println!(
         "trajectories: {} (and .svg); table as JSON: {}",
         figure[0].display(),
@@ -181,6 +198,11 @@ pub(crate) fn run(o: Args) -> anyhow::Result<()> {
     );
     if !leftover.is_empty() {
         eprintln!("vic: warning: files left in /dev/shm: {leftover:?}");
+    }
+    // Last, where a reader looks first.
+    println!("verdict:");
+    for line in &verdict.lines {
+        println!("  {line}");
     }
     Ok(())
 }
@@ -206,12 +228,39 @@ fn trajectories_figure(
         .collect::<anyhow::Result<Vec<_>>>()?;
     let png = o.out_dir.join("trajectories.png");
     let svg = o.out_dir.join("trajectories.svg");
-    if scenario.model.dof() == 2 {
-        crate::views::plot::arm_figure(&columns, &png, &svg)?;
-    } else {
-        crate::views::plot::joint_figure(&columns, &png, &svg)?;
-    }
+    let caption = figure_caption(scenario, runs, o.trials);
+    crate::views::plot::captioned_figure(&columns, &caption, &png, &svg)?;
     Ok([png, svg])
+}
+
+/// The figure's title and caption: what the columns are and how to read them.
+fn figure_caption(scenario: &Scenario, runs: &[StrategyRun], trials: u64) -> Caption {
+    let latency = runs.iter().map(|r| r.latency.ms()).fold(0.0, f64::max);
+    let arm = scenario.model.dof() == 2;
+    let columns: Vec<String> = runs
+        .iter()
+        .map(|r| match r.latency.is_zero() && latency > 0.0 {
+            true => format!("{} at 0 ms (reference)", r.strategy.name()),
+            false => format!("{} ({})", r.strategy.name(), r.strategy.plain()),
+        })
+        .collect();
+    let rows = if arm {
+        "Top: hand paths of every trial (grey), their mean (black), the spread across the path \
+         (blue) and the 95 % ellipse of the final hand position (red). Middle: joint angles \
+         and velocities. Bottom: the commands the board executed, torque and stiffness per \
+         joint."
+    } else {
+        "Top: joint angle of every trial with the reference. Middle: velocity. Bottom: the \
+         commands the board executed, torque and stiffness."
+    };
+    Caption {
+        title: format!(
+            "Delayed feedback against planned stiffness at {latency} ms of feedback latency \
+             (live, {trials} trial{} per column)",
+            if trials == 1 { "" } else { "s" }
+        ),
+        text: format!("Columns, left to right: {}. {rows}", columns.join("; ")),
+    }
 }
 
 /// The plans of the strategies, the SOOC plan beside the ILQG ones on another thread.

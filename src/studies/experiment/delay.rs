@@ -3,9 +3,7 @@
 //! field of Fig. 1, its figures, its table and the latency at which the best delayed feedback
 //! (the predictor) stops beating the open-loop stiffness plan.
 
-use crate::studies::sweep::{
-    Strategy, Sweep, SweepOptions, SweepPoint, sweep_latency, write_figure,
-};
+use crate::studies::sweep::{Strategy, Sweep, SweepOptions, crossing, sweep_latency, write_figure};
 use std::path::{Path, PathBuf};
 
 /// The latencies of the section [ms].
@@ -101,80 +99,6 @@ pub(crate) fn write_delay_outputs(
     Ok(vec![png, svg, json])
 }
 
-/// Where one strategy stops being better than another as the latency grows.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) enum Crossing {
-    /// The first strategy is better (lower) at every latency.
-    AlwaysBetter,
-    /// The first strategy is worse (or equal) at every latency.
-    NeverBetter,
-    /// Better at `below`, worse at `above` [ms]; `at`: the log-linear interpolation of the two
-    /// curves' ratio, when both values are known on both sides.
-    Between {
-        below: f64,
-        above: f64,
-        at: Option<f64>,
-    },
-}
-
-/// Where `a` stops being better than `b` by `metric` (lower is better; `None`, every trial
-/// diverged, is worse than any number).
-pub(crate) fn crossing(
-    sweep: &Sweep,
-    a: Strategy,
-    b: Strategy,
-    metric: fn(&SweepPoint) -> Option<f64>,
-) -> Crossing {
-    let value = |s: Strategy, l: f64| {
-        sweep
-            .points
-            .iter()
-            .find(|p| p.strategy == s && p.latency_ms == l)
-            .and_then(metric)
-    };
-    // ln(a / b): negative where a is better; +∞ where a has no value.
-    let log_ratio = |l: f64| match (value(a, l), value(b, l)) {
-        (Some(x), Some(y)) if x > 0.0 && y > 0.0 => Some((x / y).ln()),
-        (None, Some(_)) => Some(f64::INFINITY),
-        (Some(_), None) => Some(f64::NEG_INFINITY),
-        _ => None,
-    };
-    let mut latencies: Vec<f64> = sweep.points.iter().map(|p| p.latency_ms).collect();
-    latencies.sort_by(f64::total_cmp);
-    latencies.dedup();
-    let known: Vec<(f64, f64)> = latencies
-        .iter()
-        .filter_map(|&l| log_ratio(l).map(|r| (l, r)))
-        .collect();
-    if known.iter().all(|(_, r)| *r < 0.0) {
-        return Crossing::AlwaysBetter;
-    }
-    match known.first() {
-        Some((_, r)) if *r >= 0.0 => return Crossing::NeverBetter,
-        None => return Crossing::NeverBetter,
-        _ => {}
-    }
-    let i = known.iter().position(|(_, r)| *r >= 0.0).expect("some ≥ 0");
-    let ((l0, r0), (l1, r1)) = (known[i - 1], known[i]);
-    let at = (r0.is_finite() && r1.is_finite()).then(|| l0 + (l1 - l0) * (-r0) / (r1 - r0));
-    Crossing::Between {
-        below: l0,
-        above: l1,
-        at,
-    }
-}
-
-fn crossing_text(c: Crossing) -> String {
-    match c {
-        Crossing::AlwaysBetter => "at every latency of the sweep".into(),
-        Crossing::NeverBetter => "at no latency of the sweep".into(),
-        Crossing::Between { below, above, at } => match at {
-            Some(at) => format!("up to ≈ {at:.0} ms (between {below} and {above} ms)"),
-            None => format!("up to {below} ms, not at {above} ms"),
-        },
-    }
-}
-
 /// The section's markdown: per scenario the figure, the table and the crossing latencies, then the
 /// paragraph on what they show.
 pub(crate) fn delay_markdown(sweeps: &[DelaySweep], figure_dir: &str) -> String {
@@ -238,9 +162,9 @@ fn scenario_markdown(s: &DelaySweep, figure_dir: &str) -> String {
     md.push_str(&format!(
         "\nThe predictor ends closer to the target than stiffness {}; its Monte Carlo expected \
          cost is lower {}; its RMS error over the movement is lower {}.",
-        crossing_text(crossing(&s.sweep, pr, st, |p| p.final_error_mean)),
-        crossing_text(crossing(&s.sweep, pr, st, |p| p.expected_cost_mc)),
-        crossing_text(crossing(&s.sweep, pr, st, |p| p.rms_error)),
+        crossing(&s.sweep, pr, st, |p| p.final_error_mean).text(),
+        crossing(&s.sweep, pr, st, |p| p.expected_cost_mc).text(),
+        crossing(&s.sweep, pr, st, |p| p.rms_error).text(),
     ));
     let first_diverged = |strategy: Strategy| {
         s.sweep
@@ -260,10 +184,11 @@ fn scenario_markdown(s: &DelaySweep, figure_dir: &str) -> String {
     };
     md.push_str(&format!(
         " Replanning ends closer to the target than stiffness {}; stiffness+predictor {}.",
-        crossing_text(crossing(&s.sweep, Strategy::Replan, st, |p| p.final_error_mean)),
-        crossing_text(crossing(&s.sweep, Strategy::StiffnessPredictor, st, |p| {
+        crossing(&s.sweep, Strategy::Replan, st, |p| p.final_error_mean).text(),
+        crossing(&s.sweep, Strategy::StiffnessPredictor, st, |p| {
             p.final_error_mean
-        })),
+        })
+        .text(),
     ));
     md.push_str(&format!(
         " The naive law {}; the predictor {}; stiffness {}; stiffness+predictor {}; replanning {}.\n\n",
@@ -316,81 +241,3 @@ stiffness (on the arm it chatters between its bounds and averages 40–43 N m/ra
 cost is several times the stiffness plan's at every latency, the trap of optimising a feedback policy over the stiffness (the \
 open-loop SOOC plan does better). Live, `replan` re-solves on a worker thread one period ahead, \
 so a re-solve slower than the period delays the new plan rather than the slices (`vic demo`).";
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use vic_plan::unit::Unit;
-
-    fn sweep(pred: &[Option<f64>], stiff: &[Option<f64>]) -> Sweep {
-        let point = |strategy, latency_ms, v: Option<f64>| SweepPoint {
-            strategy,
-            latency_ms,
-            final_error_mean: v,
-            final_error_max: v,
-            rms_error: v,
-            diverged: usize::from(v.is_none()),
-            diverged_fraction: if v.is_some() { 0.0 } else { 1.0 },
-            expected_cost_mc: v,
-            expected_cost_predicted: v,
-            mean_stiffness: 0.0,
-            unit: Unit::Millimetre,
-            live: None,
-        };
-        let lat = [0.0, 50.0, 100.0];
-        let mut points = Vec::new();
-        for (s, vs) in [(Strategy::Predictor, pred), (Strategy::Stiffness, stiff)] {
-            points.extend(lat.iter().zip(vs).map(|(&l, &v)| point(s, l, v)));
-        }
-        Sweep {
-            scenario: "x.toml".into(),
-            trials: 2,
-            seed: 1,
-            execution: Default::default(),
-            pulse: None,
-            points,
-        }
-    }
-
-    fn cross(pred: &[Option<f64>], stiff: &[Option<f64>]) -> Crossing {
-        let s = sweep(pred, stiff);
-        crossing(&s, Strategy::Predictor, Strategy::Stiffness, |p| {
-            p.final_error_mean
-        })
-    }
-
-    #[test]
-    fn the_crossing_is_interpolated_on_the_log_ratio() {
-        // ln(2/4) at 50 ms, ln(8/4) at 100 ms: the ratio is 1 half-way, at 75 ms.
-        let c = cross(&[Some(1.0), Some(2.0), Some(8.0)], &[Some(4.0); 3]);
-        match c {
-            Crossing::Between { below, above, at } => {
-                assert_eq!((below, above), (50.0, 100.0));
-                assert!((at.unwrap() - 75.0).abs() < 1e-9, "{at:?}");
-            }
-            other => panic!("{other:?}"),
-        }
-    }
-
-    #[test]
-    fn diverged_points_count_as_worse_and_have_no_interpolation() {
-        let c = cross(&[Some(1.0), Some(2.0), None], &[Some(4.0); 3]);
-        assert_eq!(
-            c,
-            Crossing::Between {
-                below: 50.0,
-                above: 100.0,
-                at: None
-            }
-        );
-        assert_eq!(
-            cross(&[Some(1.0); 3], &[Some(4.0); 3]),
-            Crossing::AlwaysBetter
-        );
-        assert_eq!(
-            cross(&[Some(5.0); 3], &[Some(4.0); 3]),
-            Crossing::NeverBetter
-        );
-        assert_eq!(cross(&[None; 3], &[Some(4.0); 3]), Crossing::NeverBetter);
-    }
-}

@@ -16,7 +16,10 @@
 
 pub use vic_plan::strategy::Strategy;
 
+mod crossing;
 mod output;
+pub use crossing::{Crossing, FinalErrorCrossing};
+pub(crate) use crossing::{crossing, final_error_crossings};
 pub use output::write_figure;
 pub(crate) use output::{pulse_from_flags, write_outputs};
 use serde::{Deserialize, Serialize};
@@ -215,6 +218,11 @@ pub struct Sweep {
     #[serde(default)]
     pub(crate) pulse: Option<Pulse>,
     pub points: Vec<SweepPoint>,
+    /// Where each feedback strategy's lead over each stiffness strategy ends, by the mean final
+    /// error ([`final_error_crossings`]; empty when the sweep ran fewer than two latencies of a
+    /// pair).
+    #[serde(default)]
+    pub crossings: Vec<FinalErrorCrossing>,
 }
 
 /// Runs the sweep on the scenario at `path` (with `overrides`); `progress` is told each point.
@@ -338,14 +346,17 @@ pub fn sweep_latency(
             });
         }
     }
-    Ok(Sweep {
+    let mut sweep = Sweep {
         scenario: path.display().to_string(),
         trials: opts.trials,
         seed: opts.seed,
         execution: opts.execution,
         pulse: opts.pulse,
         points,
-    })
+        crossings: Vec::new(),
+    };
+    sweep.crossings = final_error_crossings(&sweep);
+    Ok(sweep)
 }
 
 /// The live daemons of a sweep: one board in a fresh namespace, the plans in a temporary folder

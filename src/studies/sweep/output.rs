@@ -208,6 +208,7 @@ mod tests {
                 point(Strategy::NaiveDelayed, None, Some(LiveTiming::default())),
                 point(Strategy::Stiffness, Some(6.25), Some(late)),
             ],
+            crossings: Vec::new(),
         };
         let table = sweep.table();
         let lines: Vec<&str> = table.lines().collect();

@@ -22,6 +22,7 @@ use plotters::style::FontStyle;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 mod arm;
+mod caption;
 mod clip;
 mod curves;
 mod joint;
@@ -29,6 +30,8 @@ mod panels;
 mod ranges;
 
 use arm::*;
+pub use caption::Caption;
+use caption::Captioned;
 use clip::*;
 pub(crate) use curves::Curve;
 use curves::CurveFigure;
@@ -97,6 +100,38 @@ pub enum PlotError {
 pub fn arm_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {
     check_columns(columns, png)?;
     render(&ArmFigure::new(columns), png, svg)
+}
+
+/// [`arm_figure`] or, for a single joint, [`joint_figure`] (by the columns' `dof`) with a title
+/// above and a caption below: a figure that stands alone.
+pub fn captioned_figure(
+    columns: &[ColumnPlot],
+    caption: &Caption,
+    png: &Path,
+    svg: &Path,
+) -> Result<(), PlotError> {
+    check_columns(columns, png)?;
+    if columns[0].dof == 2 {
+        let figure = ArmFigure::new(columns);
+        render(
+            &Captioned {
+                figure: &figure,
+                caption,
+            },
+            png,
+            svg,
+        )
+    } else {
+        let figure = JointFigure::new(columns);
+        render(
+            &Captioned {
+                figure: &figure,
+                caption,
+            },
+            png,
+            svg,
+        )
+    }
 }
 
 /// Lines of an error (log scale) against the feedback latency, one per strategy, with the spread
