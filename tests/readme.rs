@@ -1,6 +1,6 @@
-//! README's command synopses against the binaries' own `--help`: every `--flag` a synopsis in a
-//! code block writes for `vic …`, `vic-board` or `vic-planner` is one that command's help lists,
-//! so the README cannot drift from the command line.
+//! The command synopses of README.md and docs/GUIDE.md against the binaries' own `--help`: every
+//! `--flag` a synopsis in a code block writes for `vic …`, `vic-board` or `vic-planner` is one
+//! that command's help lists, so the docs cannot drift from the command line.
 
 use std::process::Command;
 
@@ -51,7 +51,8 @@ fn flags(text: &str) -> Vec<String> {
 
 #[test]
 fn every_flag_of_the_readmes_synopses_is_in_its_commands_help() {
-    let readme = include_str!("../README.md");
+    // The README gives the two commands; the guide every synopsis.
+    let readme = [include_str!("../README.md"), include_str!("../docs/GUIDE.md")].join("\n");
     let mut in_block = false;
     let (mut checked, mut wrong) = (0, Vec::new());
     for line in readme.lines() {
