@@ -52,7 +52,11 @@ fn flags(text: &str) -> Vec<String> {
 #[test]
 fn every_flag_of_the_readmes_synopses_is_in_its_commands_help() {
     // The README gives the two commands; the guide every synopsis.
-    let readme = [include_str!("../README.md"), include_str!("../docs/GUIDE.md")].join("\n");
+    let readme = [
+        include_str!("../README.md"),
+        include_str!("../docs/GUIDE.md"),
+    ]
+    .join("\n");
     let mut in_block = false;
     let (mut checked, mut wrong) = (0, Vec::new());
     for line in readme.lines() {

@@ -6,9 +6,11 @@
 //!
 //! Conventions:
 //! - Columns are conditions (actuator types, delays), side by side, each with its title on top.
-//! - Rows that are compared across columns share their axes. Their ranges are robust: a column
-//!   whose trials diverge far beyond the others does not widen the shared range, and its curves
-//!   simply leave the frame (everything is clipped to the plotting area).
+//! - Rows that are compared across columns share their axes, except the torques, which differ
+//!   between columns by orders of magnitude: each column has its own torque range. The ranges
+//!   are robust: a column whose trials diverge far beyond the others does not widen the shared
+//!   range (nor get one of its own), and its curves simply leave the frame (everything is
+//!   clipped to the plotting area).
 //! - Non-finite values are skipped: a curve breaks where a value is NaN or infinite.
 
 use std::path::{Path, PathBuf};
@@ -96,7 +98,8 @@ pub enum PlotError {
 /// in the first column, in the panel corner with the fewest data.
 ///
 /// The hand-path view is the same for all columns: the reference paths, plus the spread of the
-/// trials of every column that does not diverge, plus a margin. Time rows share their y ranges.
+/// trials of every column that does not diverge, plus a margin. Time rows share their y ranges,
+/// but for the torques (each column its own).
 pub fn arm_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {
     check_columns(columns, png)?;
     render(&ArmFigure::new(columns), png, svg)
@@ -163,7 +166,7 @@ pub(crate) fn curve_figure(
 
 /// Fig. 2 layout for a single joint: columns side by side; rows: angle [deg] of every trial with
 /// the reference, velocity [deg/s] of every trial, commands (torque, stiffness) of every trial.
-/// Rows share their y ranges across columns; a second stiffness panel is added to row C when any
+/// Rows share their y ranges across columns (the torques: each column its own); a second stiffness panel is added to row C when any
 /// column has stiffness commands. Writes both PNG and SVG, `28 + 400 × columns` px wide and 1003
 /// px tall (768 without stiffness commands).
 pub fn joint_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {

@@ -46,11 +46,33 @@ pub(super) fn n_torques(col: &ColumnPlot) -> usize {
     n_controls(col).min(col.dof.max(1))
 }
 
+/// A command's name as a legend writes it: the plan's `tau1` and `k1` as the symbols τ₁ and K₁.
 pub(super) fn control_name(col: &ColumnPlot, i: usize) -> String {
-    col.control_names
+    let name = col
+        .control_names
         .get(i)
         .cloned()
-        .unwrap_or_else(|| format!("u{}", i + 1))
+        .unwrap_or_else(|| format!("u{}", i + 1));
+    symbol(&name)
+}
+
+/// `tau2` → `τ₂`, `k1` → `K₁`; any other name as it is.
+pub(super) fn symbol(name: &str) -> String {
+    let subscript = |digits: &str| -> Option<String> {
+        let all = !digits.is_empty() && digits.chars().all(|c| c.is_ascii_digit());
+        all.then(|| {
+            digits
+                .chars()
+                .filter_map(|c| c.to_digit(10).and_then(|d| char::from_u32(0x2080 + d)))
+                .collect()
+        })
+    };
+    let (letter, digits) = match (name.strip_prefix("tau"), name.strip_prefix('k')) {
+        (Some(d), _) => ("τ", d),
+        (_, Some(d)) => ("K", d),
+        _ => return name.to_string(),
+    };
+    subscript(digits).map_or_else(|| name.to_string(), |d| format!("{letter}{d}"))
 }
 
 pub(super) fn command_values(columns: &[ColumnPlot], kind: Commands) -> Vec<Vec<f64>> {
@@ -204,7 +226,8 @@ pub(super) struct ColumnAxes<'a> {
     pub(super) time: Span,
     pub(super) angle: Span,
     pub(super) velocity: Span,
-    pub(super) torque: Span,
+    /// Per column ([`command_ranges`]).
+    pub(super) torque: Vec<Span>,
     /// None when no column has stiffness commands (the row is left out).
     pub(super) stiffness: Option<Span>,
 }
@@ -275,7 +298,7 @@ impl<F: ColumnFigure> Figure for F {
                 draw_command_rows(
                     &panels[own..],
                     a.time,
-                    a.torque,
+                    a.torque[c],
                     a.stiffness,
                     column,
                     c == 0,
@@ -491,4 +514,20 @@ pub(super) fn draw_command_rows<DB: DrawingBackend>(
         draw_commands(&mut chart, column, kind, with_legend)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::symbol;
+
+    #[test]
+    fn the_plans_command_names_become_symbols() {
+        assert_eq!(symbol("tau1"), "τ₁");
+        assert_eq!(symbol("tau12"), "τ₁₂");
+        assert_eq!(symbol("k2"), "K₂");
+        // Not a command name of a plan: unchanged.
+        for other in ["u3", "k", "kx1", "tau", "theta1"] {
+            assert_eq!(symbol(other), other);
+        }
+    }
 }

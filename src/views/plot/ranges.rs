@@ -141,9 +141,32 @@ pub(super) fn reference_degrees(columns: &[ColumnPlot]) -> Vec<f64> {
         .collect()
 }
 
-/// The shared torque range, and the stiffness range when some column has stiffness commands.
-pub(super) fn command_ranges(columns: &[ColumnPlot]) -> ((f64, f64), Option<(f64, f64)>) {
-    let torque = shared_range(command_values(columns, Commands::Torque), &[], true);
+/// Each column's torque range, and the stiffness range shared by all columns when some column
+/// has stiffness commands.
+///
+/// Torques differ between columns by orders of magnitude (a feedback law's corrections against
+/// an open-loop plan's, a VSA's motor torques against a joint's): on one shared range the small
+/// ones are flat lines at 0. So each column has its own range, with 0 in it; a column that
+/// spreads [`OUTLIER_FACTOR`] times more than the median one (a diverging run) takes the range
+/// of the others instead, and its curves leave the frame. Stiffnesses share one range: their
+/// bounds are the same and their levels are what the columns compare.
+pub(super) fn command_ranges(columns: &[ColumnPlot]) -> (Vec<Span>, Option<Span>) {
+    let values = command_values(columns, Commands::Torque);
+    let shared = shared_range(values.clone(), &[], true);
+    let own: Vec<Option<(f64, f64)>> = values
+        .into_iter()
+        .map(|v| quantile_range(v, TAIL))
+        .collect();
+    let sizes: Vec<Option<f64>> = own.iter().map(|r| r.map(|(lo, hi)| hi - lo)).collect();
+    let keep = non_outliers(&sizes, OUTLIER_FACTOR, 0.0);
+    let torque = own
+        .iter()
+        .zip(keep)
+        .map(|(range, keep)| match (range, keep) {
+            (Some((lo, hi)), true) => pad(lo.min(0.0), hi.max(0.0)),
+            _ => shared,
+        })
+        .collect();
     let stiffness = columns
         .iter()
         .any(|c| n_controls(c) > n_torques(c))
