@@ -25,6 +25,7 @@ mod flood;
 mod interleaved_senders;
 mod monitor_tui;
 mod namespaces;
+mod observers;
 mod other_user;
 mod protocol_doc;
 mod python_client;

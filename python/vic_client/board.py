@@ -200,8 +200,11 @@ class Board:
         services = self._open_services(timeout)
         self._state_sub = services["state"].subscriber_builder().buffer_size(STATE_BUFFER).create()
         self._telemetry_sub = services["telemetry"].subscriber_builder().buffer_size(1).create()
-        self._control_pub = services["control"].publisher_builder().create()
-        self._disturbance_pub = services["disturbance"].publisher_builder().create()
+        # Publishers are opened at the first send: a client that only watches takes no slot a
+        # sender (the central process, `vic inject`) needs.
+        self._services = services
+        self._control_pub = None
+        self._disturbance_pub = None
         self.session = secrets.randbelow(2**32 - 1) + 1
         self._seq = 0
         self.ring = StateRing(ring)
@@ -317,6 +320,15 @@ class Board:
             raise VicError(f"{len(values)} joint values: a message carries at most {MAX_JOINTS}")
         return (ctypes.c_double * MAX_JOINTS)(*values, *[0.0] * (MAX_JOINTS - len(values)))
 
+    def _publisher(self, service):
+        """The publisher of ``service`` ("control" or "disturbance"), opened at its first use."""
+        attr = f"_{service}_pub"
+        pub = getattr(self, attr)
+        if pub is None:
+            pub = self._services[service].publisher_builder().create()
+            setattr(self, attr, pub)
+        return pub
+
     def _disturb(self, kind, torque=(), duration_ns=0, value=0.0, wait=2.0):
         msg = Disturbance(
             header=self._header(),
@@ -326,7 +338,7 @@ class Board:
             value=value,
         )
         self.poll()
-        self._disturbance_pub.send_copy(msg)
+        self._publisher("disturbance").send_copy(msg)
         return self._ack(msg.header.seq, "disturbance_seq", wait)
 
     def _ack(self, seq, field, wait):
@@ -376,12 +388,12 @@ class Board:
             qd0=self._joints(qd0),
         )
         self.poll()
-        self._control_pub.send_copy(msg)
+        self._publisher("control").send_copy(msg)
         return self._ack(header.seq, "reset_seq", wait)
 
     def stop(self):
         """Ends the trial: the board goes idle, holding the arm at its posture, until the next reset."""
-        self._control_pub.send_copy(Control(header=self._header(), kind=ControlKind.STOP))
+        self._publisher("control").send_copy(Control(header=self._header(), kind=ControlKind.STOP))
 
     # -- lifetime ----------------------------------------------------------------------------
 
@@ -390,6 +402,7 @@ class Board:
             p = self.__dict__.pop(port, None)
             if p is not None:
                 p.delete()
+        self._services = None
         self._node = None
 
     def __enter__(self):

@@ -21,10 +21,10 @@ MAX_REACH_NS = 2_000_000_000
 MAX_MESSAGE_AGE_NS = 100_000_000
 REJECTION_COUNT = 17
 MAX_PUBLISHERS = 4
-MAX_SUBSCRIBERS = 16
-MAX_NODES = 32
+MAX_SUBSCRIBERS = 48
+MAX_NODES = 64
 MAX_NOTIFIERS = 4
-MAX_LISTENERS = 24
+MAX_LISTENERS = 56
 STATE_BUFFER = 128
 # The board counts sequence gaps per sender session in a table of this many sessions, and no gap
 # larger than this (a jump, not a loss).

@@ -2,8 +2,10 @@
 //! reached: which limit, the configured number, and which processes hold the slots (node name and
 //! pid), never a bare iceoryx2 error name.
 //!
-//! The limits are sized for one board, one central process, one recorder, `vic inject` and at
-//! least 8 read-only observers (`vic status`, `vic monitor`, a Python client), with room to spare.
+//! The limits are sized for one board, one central process, one recorder, `vic inject`, the
+//! bridges and at least 32 read-only observers (`vic status`, `vic monitor`, Python clients that
+//! only watch), with room to spare: observers take no publisher, so they cannot lock out a
+//! sender, and 32 of them leave every subscriber and listener a sender or the board needs.
 //! They are fixed when the first process of a namespace creates a service; a later process
 //! (including a client of iceoryx2's own bindings) opens the service with the limits it has.
 
@@ -17,19 +19,22 @@ use std::collections::BTreeMap;
 /// Publishers per message service: the board or the central process, `vic inject` (the
 /// disturbance service) and a tool or a test's hostile sender.
 pub const MAX_PUBLISHERS: usize = 4;
-/// Subscribers per message service: board, central process, recorder, `vic inject` and 8
-/// observers are 12; 16 leaves room for 4 more observers.
-pub const MAX_SUBSCRIBERS: usize = 16;
-/// Nodes (processes) per service.
-pub const MAX_NODES: usize = 32;
+/// Subscribers per message service: board, central process, recorder, `vic inject`, a bridge
+/// and 32 observers are 37; 48 leaves room for 11 more. (The cost is shared memory, not time:
+/// a publisher's segment holds a buffer per possible subscriber, 48 × 128 states of 176 bytes,
+/// about 1 MiB, for the state service.)
+pub const MAX_SUBSCRIBERS: usize = 48;
+/// Nodes (processes) per service: the subscribers' and the publishers' processes, with room.
+pub const MAX_NODES: usize = 64;
 /// Notifiers of the board's event service (the board; the rest is spare).
 pub const MAX_NOTIFIERS: usize = 4;
 /// Notifiers of each relay event service (`transport::relay`): every process that publishes
 /// commands, controls or disturbances holds one (central process, `vic inject`, a raw sender, the
 /// board-side bridge's two roles), with room to spare.
 pub const MAX_RELAY_NOTIFIERS: usize = 8;
-/// Listeners of the board's event service: the central process, `vic inject` and every observer.
-pub const MAX_LISTENERS: usize = 24;
+/// Listeners of the board's event service: the central process, `vic inject`, a bridge and every
+/// observer (32 and more).
+pub const MAX_LISTENERS: usize = 56;
 
 /// The live nodes of a namespace by id: (node name, pid).
 fn live_nodes(cfg: &Config) -> BTreeMap<UniqueNodeId, (String, u32)> {
