@@ -267,17 +267,17 @@ fn body(tree: &Tree, links: &[(usize, Frame)], moved: usize) -> Result<Body, Urd
     Ok(body)
 }
 
-/// Every principal minor non-negative, to a relative rounding tolerance (no iteration, so huge or
-/// odd numbers cannot make it loop).
+/// Positive semidefinite to a rounding tolerance: `m + ε 1` positive definite by Sylvester's
+/// criterion (every leading principal minor positive; no iteration, so huge or odd numbers cannot
+/// make it loop), `ε` 1e-9 of the largest entry plus 1e-12 kg m² (files write 1e-35 for 0).
 fn positive_semidefinite(m: &[[f64; 3]; 3]) -> bool {
-    let scale = m[0][0].abs().max(m[1][1].abs()).max(m[2][2].abs());
-    let tol = 1e-9 * scale;
-    let minor = |a: usize, b: usize| m[a][a] * m[b][b] - m[a][b] * m[b][a] >= -tol * scale;
-    (0..3).all(|i| m[i][i] >= -tol)
-        && minor(0, 1)
-        && minor(0, 2)
-        && minor(1, 2)
-        && det(m) >= -tol * scale * scale
+    let scale = m.iter().flatten().fold(0.0_f64, |a, v| a.max(v.abs()));
+    let eps = 1e-9 * scale + 1e-12;
+    let mut s = *m;
+    for (i, row) in s.iter_mut().enumerate() {
+        row[i] += eps;
+    }
+    s[0][0] > 0.0 && s[0][0] * s[1][1] - s[0][1] * s[1][0] > 0.0 && det(&s) > 0.0
 }
 
 fn det(m: &[[f64; 3]; 3]) -> f64 {
