@@ -3,7 +3,7 @@
 //! their zero position, as Pinocchio's reduced model locks them), in the joint's own frame.
 
 use super::MAX_DOF;
-use super::dynamics::{crba, ldl_pivots, rotation_parts};
+use super::dynamics::{crba, ldl_pivots, rotation_parts, rotations};
 use super::urdf::{Frame, Kind, Tree, UrdfError, UrdfReason, joint_name, link_name};
 
 /// The mass properties of a rigid body in a frame: mass `m` [kg], first moment `h = m c` [kg m]
@@ -146,7 +146,7 @@ impl Chain {
         let chain = Chain { joints, tip };
         // The mass matrix at q = 0 is positive definite: every joint moves some inertia about
         // its axis that the joints before it do not already account for.
-        let m = crba::<f64>(&chain, &[0.0; MAX_DOF]);
+        let m = crba::<f64>(&chain, &rotations(&chain, &[0.0; MAX_DOF]));
         let n = chain.joints.len();
         let pivots = ldl_pivots(&m, n);
         if let Some(i) = pivots[..n].iter().position(|&d| d.is_nan() || d <= 0.0) {

@@ -85,8 +85,11 @@ pub(crate) fn rotation_parts(r0: &[[f64; 3]; 3], a: &[f64; 3]) -> [[[f64; 3]; 3]
     parts
 }
 
+/// `R_i(q_i)` for every joint, what the algorithms below share for one configuration.
+pub(crate) type Rotations<S> = [M3<S>; MAX_DOF];
+
 /// `R_i(q_i)` for every joint.
-fn rotations<S: Scalar>(chain: &Chain, q: &[S]) -> [M3<S>; MAX_DOF] {
+pub(crate) fn rotations<S: Scalar>(chain: &Chain, q: &[S]) -> Rotations<S> {
     let mut out = [[[S::zero(); 3]; 3]; MAX_DOF];
     for (i, j) in chain.joints.iter().enumerate() {
         let (s, cq) = q[i].sin_cos();
@@ -106,13 +109,12 @@ fn rotations<S: Scalar>(chain: &Chain, q: &[S]) -> [M3<S>; MAX_DOF] {
 pub(crate) fn rnea<S: Scalar>(
     chain: &Chain,
     gravity: &[f64; 3],
-    q: &[S],
+    rot: &Rotations<S>,
     qd: &[S],
     qdd: &[S],
     damping: bool,
 ) -> [S; MAX_DOF] {
     let n = chain.joints.len();
-    let rot = rotations(chain, q);
     let (mut w, mut al) = (zero3::<S>(), zero3::<S>());
     let mut a: V<S> = lift(&gravity.map(|g| -g));
     let mut f = [zero3::<S>(); MAX_DOF];
@@ -162,9 +164,8 @@ pub(crate) fn rnea<S: Scalar>(
 }
 
 /// The composite rigid body algorithm: the mass matrix `M(q)` (symmetric, `dof × dof`).
-pub(crate) fn crba<S: Scalar>(chain: &Chain, q: &[S]) -> Square<S> {
+pub(crate) fn crba<S: Scalar>(chain: &Chain, rot: &Rotations<S>) -> Square<S> {
     let n = chain.joints.len();
-    let rot = rotations(chain, q);
     // Composite bodies (joint i and all below it) in frame i: mass, first moment, inertia.
     let mut cm = [0.0; MAX_DOF];
     let mut ch = [zero3::<S>(); MAX_DOF];
@@ -225,7 +226,7 @@ pub(crate) fn crba<S: Scalar>(chain: &Chain, q: &[S]) -> Square<S> {
 
 /// The `L D Lᵀ` factors of a symmetric `m` (`n × n`): `L` unit lower triangular, `D` diagonal
 /// (all positive when `m` is positive definite).
-fn ldl<S: Scalar>(m: &Square<S>, n: usize) -> (Square<S>, [S; MAX_DOF]) {
+pub(crate) fn ldl<S: Scalar>(m: &Square<S>, n: usize) -> (Square<S>, [S; MAX_DOF]) {
     let mut l = [[S::zero(); MAX_DOF]; MAX_DOF];
     let mut d = [S::zero(); MAX_DOF];
     for j in 0..n {
@@ -253,6 +254,16 @@ pub(crate) fn ldl_pivots(m: &Square<f64>, n: usize) -> [f64; MAX_DOF] {
 /// Solves `m x = b` for a symmetric positive definite `m` (`n × n`) by `L D Lᵀ`.
 pub(crate) fn solve<S: Scalar>(m: &Square<S>, n: usize, b: &[S]) -> [S; MAX_DOF] {
     let (l, d) = ldl(m, n);
+    solve_factored(&l, &d, n, b)
+}
+
+/// Solves `L D Lᵀ x = b` with the factors of [`ldl`].
+pub(crate) fn solve_factored<S: Scalar>(
+    l: &Square<S>,
+    d: &[S; MAX_DOF],
+    n: usize,
+    b: &[S],
+) -> [S; MAX_DOF] {
     let mut x = [S::zero(); MAX_DOF];
     for i in 0..n {
         let mut v = b[i];

@@ -32,6 +32,20 @@ pub const MAX_DOF: usize = 7;
 /// Gravity unless set [m/s²]: 9.81 down the base link's z axis.
 pub const DEFAULT_GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 
+/// The forward dynamics and its first derivatives at one state (row `i`: `q''_i`, column `j`:
+/// the variable `j`; the first [`SerialChain::dof`] rows and columns used).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForwardDerivatives {
+    /// `q''` [rad/s²].
+    pub qdd: [f64; MAX_DOF],
+    /// `∂q''/∂q`.
+    pub d_q: [[f64; MAX_DOF]; MAX_DOF],
+    /// `∂q''/∂q'`.
+    pub d_qd: [[f64; MAX_DOF]; MAX_DOF],
+    /// `∂q''/∂τ = M⁻¹`.
+    pub d_tau: [[f64; MAX_DOF]; MAX_DOF],
+}
+
 /// A serial chain of a URDF file with its dynamics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SerialChain {
@@ -93,29 +107,104 @@ impl SerialChain {
 
     /// The mass matrix `M(q)` [kg m²] (composite rigid body algorithm).
     pub fn mass_matrix<S: Scalar>(&self, q: &[S]) -> [[S; MAX_DOF]; MAX_DOF] {
-        dynamics::crba(&self.chain, q)
+        dynamics::crba(&self.chain, &dynamics::rotations(&self.chain, q))
     }
 
     /// The bias torques `C(q, q') + g(q) + B q'` [N m]: what the joints need at `q'' = 0`.
     pub fn bias<S: Scalar>(&self, q: &[S], qd: &[S]) -> [S; MAX_DOF] {
+        let rot = dynamics::rotations(&self.chain, q);
         let qdd = [S::zero(); MAX_DOF];
-        dynamics::rnea(&self.chain, &self.gravity, q, qd, &qdd, true)
+        dynamics::rnea(&self.chain, &self.gravity, &rot, qd, &qdd, true)
     }
 
     /// The joint torques `τ = M(q) q'' + C(q, q') + g(q) + B q'` [N m] (recursive Newton–Euler).
     pub fn inverse_dynamics<S: Scalar>(&self, q: &[S], qd: &[S], qdd: &[S]) -> [S; MAX_DOF] {
-        dynamics::rnea(&self.chain, &self.gravity, q, qd, qdd, true)
+        let rot = dynamics::rotations(&self.chain, q);
+        dynamics::rnea(&self.chain, &self.gravity, &rot, qd, qdd, true)
     }
 
     /// The joint accelerations `q'' = M(q)⁻¹ (τ − C(q, q') − g(q) − B q')` [rad/s²].
     pub fn forward_dynamics<S: Scalar>(&self, q: &[S], qd: &[S], tau: &[S]) -> [S; MAX_DOF] {
-        let m = self.mass_matrix(q);
-        let b = self.bias(q, qd);
+        let n = self.dof();
+        let rot = dynamics::rotations(&self.chain, q);
+        let m = dynamics::crba(&self.chain, &rot);
+        let zero = [S::zero(); MAX_DOF];
+        let b = dynamics::rnea(&self.chain, &self.gravity, &rot, qd, &zero, true);
         let mut rhs = [S::zero(); MAX_DOF];
-        for i in 0..self.dof() {
+        for i in 0..n {
             rhs[i] = tau[i] - b[i];
         }
-        dynamics::solve(&m, self.dof(), &rhs)
+        dynamics::solve(&m, n, &rhs)
+    }
+
+    /// The forward dynamics and its first derivatives at one state, in `f64`: `q''` from
+    /// [`SerialChain::forward_dynamics`], and `∂q''/∂x = −M⁻¹ ∂τ_ID/∂x` for `x = q, q'` (the
+    /// inverse dynamics differentiated at the state's own `q''`, by dual numbers over the
+    /// 14 directions at once), `∂q''/∂τ = M⁻¹`. Cheaper than the forward dynamics in dual numbers:
+    /// only the inverse dynamics carries derivatives, and the factorisation is reused.
+    pub fn forward_dynamics_derivatives(
+        &self,
+        q: &[f64],
+        qd: &[f64],
+        tau: &[f64],
+    ) -> ForwardDerivatives {
+        type D = num_dual::DualSVec64<{ 2 * MAX_DOF }>;
+        let n = self.dof();
+        let rot = dynamics::rotations(&self.chain, q);
+        let m = dynamics::crba(&self.chain, &rot);
+        let b = dynamics::rnea(&self.chain, &self.gravity, &rot, qd, &[0.0; MAX_DOF], true);
+        let (l, d) = dynamics::ldl(&m, n);
+        let mut rhs = [0.0; MAX_DOF];
+        for i in 0..n {
+            rhs[i] = tau[i] - b[i];
+        }
+        let qdd = dynamics::solve_factored(&l, &d, n, &rhs);
+        let seed = |v: &[f64], offset: usize| -> [D; MAX_DOF] {
+            std::array::from_fn(|i| match v.get(i) {
+                Some(&x) if i < n => D::from_re(x).derivative(offset + i),
+                _ => D::from_re(0.0),
+            })
+        };
+        let (qx, qdx) = (seed(q, 0), seed(qd, MAX_DOF));
+        let rotx = dynamics::rotations(&self.chain, &qx);
+        let id = dynamics::rnea(
+            &self.chain,
+            &self.gravity,
+            &rotx,
+            &qdx,
+            &qdd.map(D::from),
+            true,
+        );
+        let grads = id.map(|t| {
+            let g = t.eps.unwrap_generic(nalgebra::Const, nalgebra::U1);
+            let mut out = [0.0; 2 * MAX_DOF];
+            out.copy_from_slice(g.as_slice());
+            out
+        });
+        let mut out = ForwardDerivatives {
+            qdd,
+            d_q: [[0.0; MAX_DOF]; MAX_DOF],
+            d_qd: [[0.0; MAX_DOF]; MAX_DOF],
+            d_tau: [[0.0; MAX_DOF]; MAX_DOF],
+        };
+        for j in 0..n {
+            let column =
+                |offset: usize| std::array::from_fn::<f64, MAX_DOF, _>(|i| -grads[i][offset + j]);
+            let (dq, dqd) = (column(0), column(MAX_DOF));
+            let mut unit = [0.0; MAX_DOF];
+            unit[j] = 1.0;
+            let cols = [
+                dynamics::solve_factored(&l, &d, n, &dq),
+                dynamics::solve_factored(&l, &d, n, &dqd),
+                dynamics::solve_factored(&l, &d, n, &unit),
+            ];
+            for i in 0..n {
+                out.d_q[i][j] = cols[0][i];
+                out.d_qd[i][j] = cols[1][i];
+                out.d_tau[i][j] = cols[2][i];
+            }
+        }
+        out
     }
 
     /// The tip link's origin in the base link's frame [m].

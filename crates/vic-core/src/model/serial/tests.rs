@@ -171,6 +171,46 @@ fn dual_numbers_give_the_derivatives_of_forward_dynamics() {
 }
 
 #[test]
+fn the_derivatives_through_the_inverse_dynamics_are_the_dual_numbers_of_forward_dynamics() {
+    // −M⁻¹ ∂τ_ID/∂x against the forward dynamics carried through in dual numbers, and
+    // ∂q''/∂τ against M⁻¹ from the mass matrix.
+    for chain in [panda(), icub_arm()] {
+        let n = chain.dof();
+        let mut rng = StdRng::seed_from_u64(8);
+        for _ in 0..10 {
+            let (q, qd, tau) = random_state(&mut rng, n);
+            let fd = chain.forward_dynamics_derivatives(&q[..n], &qd[..n], &tau[..n]);
+            let plain = chain.forward_dynamics(&q[..n], &qd[..n], &tau[..n]);
+            let m = chain.mass_matrix(&q[..n]);
+            for k in 0..3 * n {
+                let dir = |i: usize, v: f64| Dual64::new(v, if i == k { 1.0 } else { 0.0 });
+                let qx: Vec<Dual64> = (0..n).map(|i| dir(i, q[i])).collect();
+                let qdx: Vec<Dual64> = (0..n).map(|i| dir(n + i, qd[i])).collect();
+                let taux: Vec<Dual64> = (0..n).map(|i| dir(2 * n + i, tau[i])).collect();
+                let exact = chain.forward_dynamics(&qx, &qdx, &taux);
+                let (block, j) = (k / n, k % n);
+                for i in 0..n {
+                    let ours = [fd.d_q, fd.d_qd, fd.d_tau][block][i][j];
+                    assert!(
+                        close(ours, exact[i].eps, 1e-9),
+                        "{k} {i}: {ours} vs {}",
+                        exact[i].eps
+                    );
+                    assert_eq!(fd.qdd[i], plain[i]);
+                }
+            }
+            // M (∂q''/∂τ) = 1.
+            for i in 0..n {
+                for j in 0..n {
+                    let mm: f64 = (0..n).map(|k| m[i][k] * fd.d_tau[k][j]).sum();
+                    assert!((mm - if i == j { 1.0 } else { 0.0 }).abs() < 1e-9);
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn newton_euler_agrees_with_the_composite_mass_matrix() {
     // τ = RNEA(q, q', q'') equals M(q) q'' + bias(q, q') from CRBA, and forward dynamics
     // inverts it: two algorithms that share only the kinematics.
