@@ -12,6 +12,7 @@
 
 mod chain;
 mod dynamics;
+mod lanes;
 mod urdf;
 
 #[cfg(test)]
@@ -140,7 +141,7 @@ impl SerialChain {
     /// The forward dynamics and its first derivatives at one state, in `f64`: `q''` from
     /// [`SerialChain::forward_dynamics`], and `∂q''/∂x = −M⁻¹ ∂τ_ID/∂x` for `x = q, q'` (the
     /// inverse dynamics differentiated at the state's own `q''`, by dual numbers over the
-    /// 14 directions at once), `∂q''/∂τ = M⁻¹`. Cheaper than the forward dynamics in dual numbers:
+    /// 14 directions at once, in plain arrays), `∂q''/∂τ = M⁻¹`. Cheaper than the forward dynamics in dual numbers:
     /// only the inverse dynamics carries derivatives, and the factorisation is reused.
     pub fn forward_dynamics_derivatives(
         &self,
@@ -148,7 +149,7 @@ impl SerialChain {
         qd: &[f64],
         tau: &[f64],
     ) -> ForwardDerivatives {
-        type D = num_dual::DualSVec64<{ 2 * MAX_DOF }>;
+        type D = lanes::Lanes<{ 2 * MAX_DOF }>;
         let n = self.dof();
         let rot = dynamics::rotations(&self.chain, q);
         let m = dynamics::crba(&self.chain, &rot);
@@ -161,8 +162,8 @@ impl SerialChain {
         let qdd = dynamics::solve_factored(&l, &d, n, &rhs);
         let seed = |v: &[f64], offset: usize| -> [D; MAX_DOF] {
             std::array::from_fn(|i| match v.get(i) {
-                Some(&x) if i < n => D::from_re(x).derivative(offset + i),
-                _ => D::from_re(0.0),
+                Some(&x) if i < n => D::variable(x, Some(offset + i)),
+                _ => D::from(0.0),
             })
         };
         let (qx, qdx) = (seed(q, 0), seed(qd, MAX_DOF));
@@ -175,12 +176,7 @@ impl SerialChain {
             &qdd.map(D::from),
             true,
         );
-        let grads = id.map(|t| {
-            let g = t.eps.unwrap_generic(nalgebra::Const, nalgebra::U1);
-            let mut out = [0.0; 2 * MAX_DOF];
-            out.copy_from_slice(g.as_slice());
-            out
-        });
+        let grads = id.map(|t| t.d);
         let mut out = ForwardDerivatives {
             qdd,
             d_q: [[0.0; MAX_DOF]; MAX_DOF],
