@@ -45,6 +45,20 @@ fn cross_c<S: Scalar>(a: &V<S>, b: &[f64; 3]) -> V<S> {
     ]
 }
 
+/// `a × b` with a constant `a`.
+fn c_cross<S: Scalar>(a: &[f64; 3], b: &V<S>) -> V<S> {
+    [
+        b[2] * a[1] - b[1] * a[2],
+        b[0] * a[2] - b[2] * a[0],
+        b[1] * a[0] - b[0] * a[1],
+    ]
+}
+
+/// `m v` with a constant `v`.
+fn mul_vc<S: Scalar>(m: &M3<S>, v: &[f64; 3]) -> V<S> {
+    [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
+}
+
 /// `a · b` with a constant `a`.
 fn dot_c<S: Scalar>(a: &[f64; 3], b: &V<S>) -> S {
     b[0] * a[0] + b[1] * a[1] + b[2] * a[2]
@@ -143,7 +157,7 @@ pub(crate) fn rnea<S: Scalar>(
             cross(&w, &wh),
         );
         let iw = mul_c(&body.inertia, &w);
-        let ha = cross(&lift(h), &a);
+        let ha = c_cross(h, &a);
         m[i] = add(add(mul_c(&body.inertia, &al), cross(&w, &iw)), ha);
     }
     let mut tau = [S::zero(); MAX_DOF];
@@ -155,7 +169,7 @@ pub(crate) fn rnea<S: Scalar>(
         }
         if i > 0 {
             let rf = mul(&rot[i], &f[i]);
-            let rn = add(mul(&rot[i], &m[i]), cross(&lift(&j.origin.pos), &rf));
+            let rn = add(mul(&rot[i], &m[i]), c_cross(&j.origin.pos, &rf));
             f[i - 1] = add(f[i - 1], rf);
             m[i - 1] = add(m[i - 1], rn);
         }
@@ -207,15 +221,12 @@ pub(crate) fn crba<S: Scalar>(chain: &Chain, rot: &Rotations<S>) -> Square<S> {
     for i in 0..n {
         // The force that accelerates composite i about its axis at a unit rate, carried up.
         let ax = &chain.joints[i].axis;
-        let mut nv = mul(&ci[i], &lift(ax));
-        let mut fv = cross(&lift(ax), &ch[i]);
+        let mut nv = mul_vc(&ci[i], ax);
+        let mut fv = c_cross(ax, &ch[i]);
         mm[i][i] = dot_c(ax, &nv);
         for j in (1..=i).rev() {
             let rf = mul(&rot[j], &fv);
-            nv = add(
-                mul(&rot[j], &nv),
-                cross(&lift(&chain.joints[j].origin.pos), &rf),
-            );
+            nv = add(mul(&rot[j], &nv), c_cross(&chain.joints[j].origin.pos, &rf));
             fv = rf;
             mm[j - 1][i] = dot_c(&chain.joints[j - 1].axis, &nv);
             mm[i][j - 1] = mm[j - 1][i];
@@ -299,7 +310,7 @@ fn frames<S: Scalar>(chain: &Chain, q: &[S]) -> ([M3<S>; MAX_DOF + 1], [V<S>; MA
         } else {
             &chain.tip.pos
         };
-        p = add(p, mul(&r, &lift(offset)));
+        p = add(p, mul_vc(&r, offset));
         let local: M3<S> = if i < n {
             rot[i]
         } else {
@@ -329,7 +340,7 @@ pub(crate) fn potential_energy<S: Scalar>(chain: &Chain, gravity: &[f64; 3], q: 
     let (rs, ps) = frames(chain, q);
     let mut v = S::zero();
     for (i, j) in chain.joints.iter().enumerate() {
-        let com = mul(&rs[i], &lift(&j.body.first_moment));
+        let com = mul_vc(&rs[i], &j.body.first_moment);
         let moment = [0, 1, 2].map(|k| ps[i][k] * j.body.mass + com[k]);
         v -= dot_c(gravity, &moment);
     }
