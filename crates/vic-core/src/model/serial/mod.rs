@@ -4,6 +4,10 @@
 //! - Revolute and continuous joints move; fixed joints merge their links into the body before
 //!   them; joints off the chain are held at their zero position (their links ride on the chain
 //!   link they hang from, as in Pinocchio's reduced model); what hangs off the base is ignored.
+//!   A prismatic, floating, planar, spherical or mimic joint on the chain is refused.
+//! - A link that a joint moves needs a positive mass; inertias must be positive semidefinite (a
+//!   point mass is allowed) and the mass matrix positive definite. Visuals, collisions and
+//!   materials are dropped unread: no mesh file is opened.
 //! - Gravity is a parameter: −9.81 m/s² along the base link's z axis unless set.
 //! - `B` is the diagonal of the joints' `<dynamics damping>`; friction is kept in
 //!   [`JointLimits`] but is not part of the dynamics.

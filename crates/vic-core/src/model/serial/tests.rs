@@ -372,6 +372,16 @@ fn every_unusable_document_is_refused_with_the_element_and_the_reason() {
             R::UnsupportedJoint("planar"),
         ),
         (
+            doc(
+                &joint2("revolute", r#"<mimic joint="joint1"/>"#),
+                good_inertial,
+            ),
+            "base",
+            "link2",
+            "joint 'joint2'",
+            R::UnsupportedJoint("mimic"),
+        ),
+        (
             doc(&joint2("revolute", ""), ""),
             "base",
             "link2",

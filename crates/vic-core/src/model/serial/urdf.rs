@@ -69,7 +69,8 @@ pub(crate) enum Kind {
         continuous: bool,
     },
     Fixed,
-    /// A joint a chain cannot carry (prismatic, floating, planar, spherical).
+    /// A joint a chain cannot carry (prismatic, floating, planar, spherical, or one that mimics
+    /// another).
     Other(&'static str),
 }
 
@@ -217,6 +218,8 @@ impl Tree {
             }
             use urdf_rs::JointType as T;
             let kind = match j.joint_type {
+                // A joint that mimics another is not a degree of freedom of its own.
+                T::Revolute | T::Continuous if j.mimic.is_some() => Kind::Other("mimic"),
                 T::Revolute => Kind::Rotation { continuous: false },
                 T::Continuous => Kind::Rotation { continuous: true },
                 T::Fixed => Kind::Fixed,
