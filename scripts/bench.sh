@@ -4,7 +4,7 @@
 #   vic bench loop  (board loop variants + cyclictest, 30 s each)
 #   vic bench ipc   (transport vs bare iceoryx2, then the running pair)
 #   vic bench sooc  (the SOOC iteration's cost against the state dimension)
-#   cargo bench     (solver, scenarios, board)
+#   cargo bench     (solver, scenarios, board, and vic-core's URDF chain dynamics)
 # Installs cyclictest (Debian package rt-tests) with apt-get when it is missing.
 # Environment: SECONDS_PER_RUN (default 30), ITERATIONS (default 100000), SKIP_CARGO_BENCH=1.
 set -euo pipefail
@@ -38,4 +38,5 @@ if [ "${SKIP_CARGO_BENCH:-0}" != 1 ]; then
     cargo bench --bench board 2>&1 | tee "$out/cargo-bench-board.txt"
     cargo bench --bench scenarios 2>&1 | tee "$out/cargo-bench-scenarios.txt"
     cargo bench --bench solver 2>&1 | tee "$out/cargo-bench-solver.txt"
+    cargo bench -p vic-core --bench dynamics 2>&1 | tee "$out/cargo-bench-dynamics.txt"
 fi

@@ -12,12 +12,14 @@ pub(crate) mod field;
 mod jacobian;
 pub mod noise;
 pub mod plant;
+pub mod serial;
 
 pub use actuator::{Actuator, Damping};
 pub use field::Field;
 pub use noise::Noise;
 pub(crate) use plant::Angles;
 pub use plant::{Plant, SingleJoint, TwoLink};
+pub use serial::{SerialChain, UrdfError};
 
 use crate::scalar::{Scalar, c};
 use serde::{Deserialize, Serialize};
