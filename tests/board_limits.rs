@@ -142,7 +142,7 @@ fn the_hold_stiffness_must_be_stable_under_the_damping_law() {
         "0.01",
         &["negative damping"],
     );
-    load("icub_experiment", &["board.hold_stiffness=0.05".into()]).unwrap();
+    load("icub_experiment", &["board.hold_stiffness=5".into()]).unwrap();
     // Independent check of the boundary on the two-link arm: the stable limit from the closed
     // form h · α k / I < 2 with I the smallest eigenvalue of M(q) over the task's postures lies
     // between the accepted and the refused value.
@@ -172,6 +172,34 @@ fn the_hold_stiffness_must_be_stable_under_the_damping_law() {
         k >= 100.0 && k > k_lo - 10.0 && k < k_hi,
         "largest accepted hold stiffness {k}, closed form between {k_lo:.0} and {k_hi:.0}"
     );
+}
+
+/// The lower bound, from the closed form: the plant's own negative stiffness (gravity, the
+/// divergent field) plus the largest accepted load within half the joint range.
+#[test]
+fn the_hold_stiffness_must_hold_the_arm_against_its_plant_and_the_largest_load() {
+    use std::f64::consts::PI;
+    // Two-link arm in the horizontal plane, field β = 50 N/m: β ((l1 + l2)² + l2²) with l1 = 0.3,
+    // l2 = 0.33 m; the default largest load 10 N m within half the default range ±π.
+    let arm = 50.0 * (0.63_f64.powi(2) + 0.33_f64.powi(2)) + 10.0 / PI;
+    // The iCub forearm in the vertical plane, no field: m g l_c = 0.812 · 9.81 · 0.103.
+    let forearm = 0.812 * 9.81 * 0.103 + 10.0 / PI;
+    for (stem, k_min) in [("two_link_divergent", arm), ("icub_experiment", forearm)] {
+        let below = format!("{:e}", k_min * 0.99);
+        refused(stem, "hold_stiffness", &below, &["below", "raise it"]);
+        let above = vec![format!("board.hold_stiffness={:e}", k_min * 1.01)];
+        load(stem, &above).unwrap_or_else(|e| panic!("{stem}: {e}"));
+    }
+    // A larger accepted load raises the bound: 200 N m within ±π needs 200 / π more.
+    let set = |k: f64| {
+        vec![
+            "board.max_load_torque=200".to_string(),
+            format!("board.hold_stiffness={k:e}"),
+        ]
+    };
+    let k_min = arm - 10.0 / PI + 200.0 / PI;
+    assert!(load("two_link_divergent", &set(k_min * 0.99)).is_err());
+    load("two_link_divergent", &set(k_min * 1.01)).unwrap();
 }
 
 #[test]
