@@ -275,3 +275,67 @@ fn the_board_refuses_a_bad_flag_or_key_with_exit_2() {
         }
     }
 }
+
+/// The ends of the flags' ranges run (issue 66, item 8: values that passed the old checks
+/// panicked later): the board at its fastest rate and longest spin, recording through the largest
+/// queue; the recorder with the longest duration and the shortest wait, the operator tools with
+/// the shortest timeout and the largest noise factor. Each ends by itself: the board with 0, the
+/// tools with 1 (no board any more), never 101 or a signal.
+#[test]
+fn the_ends_of_the_flags_ranges_run() {
+    let ns = crate::common::daemons::unique_namespace("flagends");
+    let dir = std::env::temp_dir().join(&ns);
+    std::fs::create_dir_all(&dir).unwrap();
+    let board = Command::new(env!("CARGO_BIN_EXE_vic-board"))
+        .arg("--config")
+        .arg(config("two_link_divergent"))
+        .args([
+            "--namespace",
+            &ns,
+            "--duration-s",
+            "0.3",
+            "--no-rt",
+            "--json",
+        ])
+        .args([
+            "--rate-hz",
+            "10000",
+            "--spin-us",
+            "10000",
+            "--record-queue",
+            "131072",
+        ])
+        .arg("--record")
+        .arg(dir.join("run.csv"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&board.stderr);
+    assert_eq!(board.status.code(), Some(0), "{stderr}");
+    let stats: serde_json::Value = serde_json::from_slice(&board.stdout).unwrap();
+    assert!(stats["ticks"].as_u64().unwrap() > 100, "{stats}");
+    let out = dir.join("out.mcap");
+    let out = out.to_str().unwrap();
+    for args in [
+        &[
+            "record",
+            "--out",
+            out,
+            "--duration",
+            "604800",
+            "--wait",
+            "0.001",
+        ][..],
+        &["status", "--timeout-s", "0.001"],
+        &["inject", "noise", "--factor", "100", "--timeout-s", "0.001"],
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_vic"))
+            .args(args)
+            .args(["--namespace", &ns])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {stderr}");
+    }
+    vic_rt::transport::remove_namespace(&ns);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
