@@ -6,10 +6,12 @@
 //! [`vic::daemons::board::run`] does the rest.
 
 use std::process::ExitCode;
-use vic::cli::finish;
+use vic::cli::{finish, parse};
 use vic::daemons::board::BoardOptions;
 
 fn main() -> ExitCode {
-    let options: BoardOptions = clap::Parser::parse();
-    finish("vic-board", vic::daemons::board::run(&options))
+    match parse::<BoardOptions>("vic-board") {
+        Ok(options) => finish("vic-board", vic::daemons::board::run(&options)),
+        Err(code) => code,
+    }
 }

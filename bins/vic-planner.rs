@@ -5,10 +5,12 @@
 //! [`vic::daemons::central::run`] does the rest.
 
 use std::process::ExitCode;
-use vic::cli::finish;
+use vic::cli::{finish, parse};
 use vic::daemons::central::CentralOptions;
 
 fn main() -> ExitCode {
-    let options: CentralOptions = clap::Parser::parse();
-    finish("vic-planner", vic::daemons::central::run(&options))
+    match parse::<CentralOptions>("vic-planner") {
+        Ok(options) => finish("vic-planner", vic::daemons::central::run(&options)),
+        Err(code) => code,
+    }
 }

@@ -80,6 +80,21 @@ pub fn finish(program: &str, result: anyhow::Result<()>) -> ExitCode {
     }
 }
 
+/// Parses the command line of `program`. Help and version print and end with exit code 0; a
+/// command line clap refuses (an unknown flag, a missing one, a value outside its range) prints
+/// `PROGRAM: error: …` with clap's message and ends with exit code 2, as [`finish`] does.
+pub fn parse<T: clap::Parser>(program: &str) -> Result<T, ExitCode> {
+    T::try_parse().map_err(|e| {
+        let text = e.render().to_string();
+        if e.use_stderr() && text.starts_with("error: ") {
+            eprint!("{program}: {text}");
+        } else {
+            let _ = e.print();
+        }
+        ExitCode::from(e.exit_code().clamp(0, 255) as u8)
+    })
+}
+
 /// `--namespace`: which board the command talks to.
 #[derive(Debug, Clone, clap::Args)]
 pub(crate) struct NamespaceArgs {
@@ -131,7 +146,8 @@ pub(crate) struct DefaultScenarioArgs {
 #[derive(Debug, Clone, Copy, clap::Args)]
 pub(crate) struct SeedArgs {
     /// Seed of the noise (each trial derives its own stream from it).
-    #[arg(long, default_value_t = 1)]
+    /// [range: 0 to 18446744073709551615]
+    #[arg(long, default_value_t = 1, value_parser = crate::ranges::whole(0u64, u64::MAX))]
     pub(crate) seed: u64,
 }
 
@@ -165,23 +181,6 @@ pub(crate) fn print_report<T: serde::Serialize>(
 
 /// The latency of `ms` given with `flag` on a grid of `dt` s ([`Latency::from_ms`]), else an
 /// input error naming `flag`.
-/// Parses a `--trials` count of at least `min`; the error says why fewer will not do (clap's
-/// range parser would print `not in 3..18446744073709551615`).
-pub(crate) fn trials_at_least(
-    min: u64,
-    why: &'static str,
-) -> impl Fn(&str) -> Result<u64, String> + Clone + Send + Sync + 'static {
-    move |s: &str| {
-        let n: u64 = s
-            .parse()
-            .map_err(|_| format!("'{s}' is not a whole number of trials"))?;
-        if n < min {
-            return Err(format!("at least {min} trials are needed: {why}"));
-        }
-        Ok(n)
-    }
-}
-
 pub(crate) fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latency> {
     Latency::from_ms(ms, dt).map_err(|e| {
         input_error(format!(
@@ -189,29 +188,6 @@ pub(crate) fn latency_arg(flag: &str, ms: f64, dt: f64) -> anyhow::Result<Latenc
             e.ms, e.step_ms
         ))
     })
-}
-
-/// A positive, finite number of seconds given with `flag`.
-pub(crate) fn positive_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::Duration> {
-    if !(seconds.is_finite() && seconds > 0.0) {
-        return Err(input_error(format!(
-            "{flag} {seconds}: must be a positive number of seconds"
-        )));
-    }
-    Ok(std::time::Duration::from_secs_f64(seconds))
-}
-
-/// A finite number of seconds ≥ 0 given with `flag`.
-pub(crate) fn non_negative_seconds(
-    flag: &str,
-    seconds: f64,
-) -> anyhow::Result<std::time::Duration> {
-    if !(seconds.is_finite() && seconds >= 0.0) {
-        return Err(input_error(format!(
-            "{flag} {seconds}: must be a number of seconds ≥ 0"
-        )));
-    }
-    Ok(std::time::Duration::from_secs_f64(seconds))
 }
 
 /// The distance beyond which a trial counts as diverged: the user's, else the default of the

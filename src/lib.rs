@@ -36,5 +36,6 @@ pub mod cli;
 pub mod commands;
 pub mod daemons;
 pub(crate) mod progress;
+pub(crate) mod ranges;
 pub mod studies;
 pub mod views;

@@ -142,7 +142,7 @@ fn the_hold_stiffness_must_be_stable_under_the_damping_law() {
         "0.01",
         &["negative damping"],
     );
-    load("icub_experiment", &["board.hold_stiffness=0.05".into()]).unwrap();
+    load("icub_experiment", &["board.hold_stiffness=5".into()]).unwrap();
     // Independent check of the boundary on the two-link arm: the stable limit from the closed
     // form h · α k / I < 2 with I the smallest eigenvalue of M(q) over the task's postures lies
     // between the accepted and the refused value.
@@ -172,6 +172,34 @@ fn the_hold_stiffness_must_be_stable_under_the_damping_law() {
         k >= 100.0 && k > k_lo - 10.0 && k < k_hi,
         "largest accepted hold stiffness {k}, closed form between {k_lo:.0} and {k_hi:.0}"
     );
+}
+
+/// The lower bound, from the closed form: the plant's own negative stiffness (gravity, the
+/// divergent field) plus the largest accepted load within half the joint range.
+#[test]
+fn the_hold_stiffness_must_hold_the_arm_against_its_plant_and_the_largest_load() {
+    use std::f64::consts::PI;
+    // Two-link arm in the horizontal plane, field β = 50 N/m: β ((l1 + l2)² + l2²) with l1 = 0.3,
+    // l2 = 0.33 m; the default largest load 10 N m within half the default range ±π.
+    let arm = 50.0 * (0.63_f64.powi(2) + 0.33_f64.powi(2)) + 10.0 / PI;
+    // The iCub forearm in the vertical plane, no field: m g l_c = 0.812 · 9.81 · 0.103.
+    let forearm = 0.812 * 9.81 * 0.103 + 10.0 / PI;
+    for (stem, k_min) in [("two_link_divergent", arm), ("icub_experiment", forearm)] {
+        let below = format!("{:e}", k_min * 0.99);
+        refused(stem, "hold_stiffness", &below, &["below", "raise it"]);
+        let above = vec![format!("board.hold_stiffness={:e}", k_min * 1.01)];
+        load(stem, &above).unwrap_or_else(|e| panic!("{stem}: {e}"));
+    }
+    // A larger accepted load raises the bound: 200 N m within ±π needs 200 / π more.
+    let set = |k: f64| {
+        vec![
+            "board.max_load_torque=200".to_string(),
+            format!("board.hold_stiffness={k:e}"),
+        ]
+    };
+    let k_min = arm - 10.0 / PI + 200.0 / PI;
+    assert!(load("two_link_divergent", &set(k_min * 0.99)).is_err());
+    load("two_link_divergent", &set(k_min * 1.01)).unwrap();
 }
 
 #[test]
@@ -217,15 +245,17 @@ fn the_board_refuses_a_bad_flag_or_key_with_exit_2() {
     for (args, needles) in [
         (
             &["--hold-stiffness", "1e308"][..],
-            &[
-                "--hold-stiffness",
-                "[board] hold_stiffness",
-                "(0, 1000] N m/rad",
-            ][..],
+            &["--hold-stiffness", "0.001 to 1000"][..],
         ),
         (
             &["--hold-stiffness", "0"],
-            &["--hold-stiffness", "(0, 1000] N m/rad"],
+            &["--hold-stiffness", "0.001 to 1000"],
+        ),
+        // Within the flag's range, below what the scenario's arm needs (issue 66: 1e-9 was
+        // accepted and a 2 N m push ran the arm into a fault).
+        (
+            &["--hold-stiffness", "1"],
+            &["--hold-stiffness", "[board] hold_stiffness", "below"],
         ),
         (
             &["--set", "board.watchdog=3600"],
@@ -244,4 +274,68 @@ fn the_board_refuses_a_bad_flag_or_key_with_exit_2() {
             assert!(err.contains(n), "{args:?}: {err} lacks {n:?}");
         }
     }
+}
+
+/// The ends of the flags' ranges run (issue 66, item 8: values that passed the old checks
+/// panicked later): the board at its fastest rate and longest spin, recording through the largest
+/// queue; the recorder with the longest duration and the shortest wait, the operator tools with
+/// the shortest timeout and the largest noise factor. Each ends by itself: the board with 0, the
+/// tools with 1 (no board any more), never 101 or a signal.
+#[test]
+fn the_ends_of_the_flags_ranges_run() {
+    let ns = crate::common::daemons::unique_namespace("flagends");
+    let dir = std::env::temp_dir().join(&ns);
+    std::fs::create_dir_all(&dir).unwrap();
+    let board = Command::new(env!("CARGO_BIN_EXE_vic-board"))
+        .arg("--config")
+        .arg(config("two_link_divergent"))
+        .args([
+            "--namespace",
+            &ns,
+            "--duration-s",
+            "0.3",
+            "--no-rt",
+            "--json",
+        ])
+        .args([
+            "--rate-hz",
+            "10000",
+            "--spin-us",
+            "10000",
+            "--record-queue",
+            "131072",
+        ])
+        .arg("--record")
+        .arg(dir.join("run.csv"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&board.stderr);
+    assert_eq!(board.status.code(), Some(0), "{stderr}");
+    let stats: serde_json::Value = serde_json::from_slice(&board.stdout).unwrap();
+    assert!(stats["ticks"].as_u64().unwrap() > 100, "{stats}");
+    let out = dir.join("out.mcap");
+    let out = out.to_str().unwrap();
+    for args in [
+        &[
+            "record",
+            "--out",
+            out,
+            "--duration",
+            "604800",
+            "--wait",
+            "0.001",
+        ][..],
+        &["status", "--timeout-s", "0.001"],
+        &["inject", "noise", "--factor", "100", "--timeout-s", "0.001"],
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_vic"))
+            .args(args)
+            .args(["--namespace", &ns])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {stderr}");
+    }
+    vic_rt::transport::remove_namespace(&ns);
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -151,8 +151,8 @@ fn no_board_to_talk_to_is_a_failure_not_bad_input() {
 
 #[test]
 fn too_few_trials_say_how_many_and_why() {
-    // clap's range parser printed `not in 3..18446744073709551615`; the message says the minimum
-    // and the reason.
+    // clap's range parser printed `not in 3..18446744073709551615`; the message says the range,
+    // the minimum and the reason.
     for (args, minimum) in [
         (
             &["experiment", "fig1", "--trials", "2"][..],
@@ -169,7 +169,12 @@ fn too_few_trials_say_how_many_and_why() {
     }
     let out = run(VIC, &["experiment", "fig1", "--trials", "many"]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("not a whole number of trials"));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.starts_with("vic: error: ")
+            && stderr.contains("not a whole number in the range 3 to"),
+        "{stderr}"
+    );
 }
 
 /// From a folder without `config/` (an installed `vic`), `config/NAME.toml` is the built-in copy

@@ -226,7 +226,7 @@ fn injected_pulses_show_within_two_ticks_and_namespaces_do_not_cross() {
 
     // A pulse beyond the board's limits is refused, clearly, with exit 1 — and it is b's
     // board that says so: a's pulse never reached b.
-    let out = vic(&["inject", "pulse", "--torque", "1000", "--namespace", &b]);
+    let out = vic(&["inject", "pulse", "--torque", "100", "--namespace", &b]);
     assert_eq!(out.status.code(), Some(1));
     let msg = String::from_utf8_lossy(&out.stderr);
     assert!(msg.contains("disturbance-out-of-bounds"), "{msg}");

@@ -29,6 +29,7 @@ mod ilqg_workspace;
 mod kkt;
 mod late_knots;
 mod multiplicative_noise;
+mod numeric_flags;
 mod plan_file;
 mod plot;
 mod predicted_cost;

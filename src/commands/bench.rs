@@ -5,6 +5,7 @@ use crate::bench::{cyclictest, ipc, loop_bench, sooc_scaling};
 use crate::cli::{
     Classify, DefaultScenarioArgs, JsonArg, input_error, print_report, sibling_binary,
 };
+use crate::ranges::whole;
 use anyhow::anyhow;
 use clap::Subcommand;
 use std::path::PathBuf;
@@ -68,7 +69,8 @@ struct BenchSoocArgs {
     #[arg(long = "config", short, value_name = "FILE", value_delimiter = ',')]
     configs: Vec<PathBuf>,
     /// Timed passes over the horizon per model; the median pass is reported.
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+    /// [range: 1 to 10000]
+    #[arg(long, default_value_t = 20, value_parser = whole(1u64, 10_000))]
     passes: u64,
     /// Skip the cold solves (the VSA arm's takes seconds).
     #[arg(long)]
@@ -84,11 +86,12 @@ struct BenchSoocArgs {
      bridge: {p50_us, p99_us, zenoh_p50_us, zenoh_p99_us, ratio_p50, ratio_p99}}"
 )))]
 struct BenchBridgeArgs {
-    /// Round trips per channel (after 10 % more for warm-up).
-    #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u64).range(10..=10_000_000))]
+    /// Round trips per channel (after 10 % more for warm-up). [range: 10 to 10000000]
+    #[arg(long, default_value_t = 20_000, value_parser = whole(10u64, 10_000_000))]
     iterations: u64,
     /// Loopback TCP port of the link (the bare Zenoh pair uses the next one).
-    #[arg(long, default_value_t = 17447)]
+    /// [range: 1024 to 65534]
+    #[arg(long, default_value_t = 17447, value_parser = whole(1024u16, 65_534))]
     port: u16,
     /// The ping–pong's two ends spin on their subscribers (by default they sleep until the
     /// other end's publisher notifies, as the bare Zenoh pair sleeps in its receiver).
@@ -111,8 +114,8 @@ struct BenchBridgeArgs {
     )),
 )]
 struct BenchLoopArgs {
-    /// Seconds per variant and per cyclictest run.
-    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..=3600))]
+    /// Seconds per variant and per cyclictest run. [range: 1 to 3600]
+    #[arg(long, default_value_t = 30, value_parser = whole(1u64, 3600))]
     seconds: u64,
     /// Run only these variants (repeatable or comma-separated): sleep-slack50, sleep, spin,
     /// spin-mlock, spin-mlock-pin, fifo, fifo-spin.
@@ -142,11 +145,11 @@ struct BenchLoopArgs {
     )),
 )]
 struct BenchIpcArgs {
-    /// Ping-pongs per transport (after 1000 not recorded).
-    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    /// Ping-pongs per transport (after 1000 not recorded). [range: 1 to 100000000]
+    #[arg(long, default_value_t = 100_000, value_parser = whole(1u64, 100_000_000))]
     iterations: u64,
-    /// Trials of the running pair (about 1.5 s each; 0 skips the pair).
-    #[arg(long, default_value_t = 5)]
+    /// Trials of the running pair (about 1.5 s each; 0 skips the pair). [range: 0 to 1000]
+    #[arg(long, default_value_t = 5, value_parser = whole(0u64, 1000))]
     pair_trials: u64,
     #[command(flatten)]
     scenario: DefaultScenarioArgs,

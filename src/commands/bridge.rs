@@ -4,9 +4,8 @@
 //! between the hosts' clocks (board − central), its uncertainty (± half the best probe's round
 //! trip), that round trip and the drift; the central side's with the probes it answered.
 
-use crate::cli::{
-    Classify, JsonArg, NamespaceArgs, input_error, non_negative_seconds, print_json, stop_on_signal,
-};
+use crate::cli::{Classify, JsonArg, NamespaceArgs, input_error, print_json, stop_on_signal};
+use crate::ranges::{MAX_RUN_S, real, seconds, whole};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 use vic_rt::bridge::clock::ClockStats;
@@ -50,8 +49,8 @@ pub(crate) struct Args {
     link_name: Option<String>,
     /// Messages are forwarded as they are published (the local daemons notify the bridge) and as
     /// they arrive from the link; this is only the longest the bridge waits before looking at the
-    /// local subscribers without a notification [ms] (1 to 60000).
-    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=60_000))]
+    /// local subscribers without a notification [ms]. [range: 1 to 60000]
+    #[arg(long, default_value_t = 100, value_parser = whole(1u64, 60_000))]
     safety_interval_ms: u64,
     /// Board side: what to do with the time stamps of the messages forwarded to the board.
     /// `translate` measures the offset to the central host's clock (probes over the link, a few
@@ -60,11 +59,13 @@ pub(crate) struct Args {
     /// senders' stamps: only when both daemons share one machine's clock.
     #[arg(long, value_enum, default_value = "translate")]
     stamps: StampsArg,
-    /// Central side, tests only: pretend this host's clock is ahead by MS milliseconds.
-    #[arg(long, hide = true, default_value_t = 0, allow_negative_numbers = true)]
+    /// Central side, tests only: pretend this host's clock is ahead by MS milliseconds (at most a
+    /// day either way).
+    #[arg(long, hide = true, default_value_t = 0, allow_negative_numbers = true,
+          value_parser = whole(-86_400_000i64, 86_400_000))]
     clock_skew_ms: i64,
-    /// Stop after this many seconds (0: run until SIGINT/SIGTERM).
-    #[arg(long, default_value_t = 0.0)]
+    /// Stop after this many seconds (0: run until SIGINT/SIGTERM). [range: 0 to 604800]
+    #[arg(long, default_value_t = 0.0, value_parser = real(0.0, MAX_RUN_S))]
     duration_s: f64,
     #[command(flatten)]
     json: JsonArg,
@@ -73,7 +74,7 @@ pub(crate) struct Args {
 /// Runs the bridge until a signal or `--duration-s`.
 pub(crate) fn run(a: Args) -> anyhow::Result<()> {
     let namespace = a.namespace.validated()?.to_string();
-    let duration = non_negative_seconds("--duration-s", a.duration_s)?;
+    let duration = seconds(a.duration_s);
     if a.clock_skew_ms != 0 && !matches!(a.side, SideArg::Central) {
         return Err(input_error("--clock-skew-ms: only with --side central"));
     }

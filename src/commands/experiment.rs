@@ -23,10 +23,10 @@ enum FigureArg {
 /// The Monte Carlo of every column and the folder of the scenarios (`vic experiment` and
 /// `vic results`).
 #[derive(clap::Args)]
-#[command(mut_arg("seed", |a| a.help("Seed of the noise")))]
+#[command(mut_arg("seed", |a| a.help("Seed of the noise [range: 0 to 18446744073709551615]")))]
 pub(crate) struct FigureRunArgs {
-    /// Monte Carlo trials per column.
-    #[arg(long, default_value_t = 20, value_parser = crate::cli::trials_at_least(3, "the 95 % ellipse of the final positions needs three"))]
+    /// Monte Carlo trials per column. [range: 3 to 100000]
+    #[arg(long, default_value_t = 20, value_parser = crate::ranges::trials(3, "the 95 % ellipse of the final positions needs three"))]
     pub(crate) trials: u64,
     #[command(flatten)]
     pub(crate) seed: SeedArgs,

@@ -2,6 +2,7 @@
 //! parameters from a single-joint scenario (else the iCub forearm's).
 
 use crate::cli::{Classify, JsonArg, input_error, print_report};
+use crate::ranges::whole;
 use crate::studies::identify::{
     IdentifyError, IdentifyOptions, JointParams, identify, read_log_file,
 };
@@ -17,17 +18,18 @@ pub(crate) struct Args {
     /// Single-joint scenario whose [plant] gives J, m, l_c and g (default: the iCub forearm).
     #[arg(long, short, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Number of velocity bins.
-    #[arg(long, default_value_t = 20)]
+    /// Number of velocity bins. [range: 1 to 10000]
+    #[arg(long, default_value_t = 20, value_parser = whole(1usize, 10_000))]
     bins: usize,
-    /// Fewest samples a bin needs to be used.
-    #[arg(long, default_value_t = 30)]
+    /// Fewest samples a bin needs to be used. [range: 1 to 1000000000]
+    #[arg(long, default_value_t = 30, value_parser = whole(1usize, 1_000_000_000))]
     min_bin_count: usize,
-    /// Degree of the polynomial fitted to the mean error (the paper: 1).
-    #[arg(long, default_value_t = 1)]
+    /// Degree of the polynomial fitted to the mean error (the paper: 1). [range: 0 to 10]
+    #[arg(long, default_value_t = 1, value_parser = whole(0usize, 10))]
     mean_degree: usize,
     /// Degree of the polynomial fitted to the error's standard deviation (the paper: 2).
-    #[arg(long, default_value_t = 2)]
+    /// [range: 0 to 10]
+    #[arg(long, default_value_t = 2, value_parser = whole(0usize, 10))]
     std_degree: usize,
     /// Subtract the fitted mean error before estimating (a, b).
     #[arg(long)]

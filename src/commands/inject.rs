@@ -2,7 +2,10 @@
 //! checked here as typed, and the board's acknowledgement printed. The waiting and matching are
 //! [`crate::views::operator`]'s.
 
-use crate::cli::{JsonArg, NamespaceArgs, input_error, positive_seconds, print_json};
+use crate::cli::{JsonArg, NamespaceArgs, input_error, print_json};
+use crate::ranges::{
+    MAX_FIELD_BETA, MAX_NOISE_FACTOR, MAX_PULSE_MS, MAX_TORQUE_NM, MAX_WAIT_S, real, seconds,
+};
 use crate::views::operator::{Ack, Request, inject};
 use clap::Subcommand;
 
@@ -16,8 +19,8 @@ pub(crate) struct Args {
     what: InjectWhat,
     #[command(flatten)]
     namespace: NamespaceArgs,
-    /// Seconds to wait for the board and its acknowledgement.
-    #[arg(long, global = true, default_value_t = 2.0)]
+    /// Seconds to wait for the board and its acknowledgement. [range: 0.001 to 3600]
+    #[arg(long, global = true, default_value_t = 2.0, value_parser = real(0.001, MAX_WAIT_S))]
     timeout_s: f64,
     #[command(flatten)]
     json: JsonArg,
@@ -29,8 +32,9 @@ enum InjectWhat {
     Pulse {
         #[command(flatten)]
         torque: TorqueArg,
-        /// Pulse duration [ms].
-        #[arg(long, default_value_t = 50.0)]
+        /// Pulse duration [ms] (the board refuses one longer than its
+        /// board.max_pulse_duration). [range: 0.001 to 10000]
+        #[arg(long, default_value_t = 50.0, value_parser = real(0.001, MAX_PULSE_MS))]
         duration_ms: f64,
     },
     /// A steady load torque until changed (all zeros remove it).
@@ -40,14 +44,15 @@ enum InjectWhat {
     },
     /// Switch the divergent force field on (β > 0) or off (0). Two-link arm only.
     Field {
-        /// β [N/m].
-        #[arg(long, allow_negative_numbers = true)]
+        /// β [N/m] (the board refuses one above its board.max_field_beta). [range: 0 to 5000]
+        #[arg(long, allow_negative_numbers = true, value_parser = real(0.0, MAX_FIELD_BETA))]
         beta: f64,
     },
     /// Scale the plant noise (1: as configured, 0: none).
     Noise {
-        /// The factor (≥ 0).
-        #[arg(long, allow_negative_numbers = true)]
+        /// The factor (the board refuses one above its board.max_noise_factor).
+        /// [range: 0 to 100]
+        #[arg(long, allow_negative_numbers = true, value_parser = real(0.0, MAX_NOISE_FACTOR))]
         factor: f64,
     },
 }
@@ -55,12 +60,14 @@ enum InjectWhat {
 /// `--torque T1[,T2]` of a pulse or a load.
 #[derive(clap::Args)]
 struct TorqueArg {
-    /// Joint torques [N m], comma-separated (one per joint; missing joints get 0).
+    /// Joint torques [N m], comma-separated (one per joint; missing joints get 0; the board
+    /// refuses more than its board.max_pulse_torque or max_load_torque). [range: -200 to 200]
     #[arg(
         long,
         value_name = "T1[,T2]",
         value_delimiter = ',',
-        allow_negative_numbers = true
+        allow_negative_numbers = true,
+        value_parser = real(-MAX_TORQUE_NM, MAX_TORQUE_NM)
     )]
     torque: Vec<f64>,
 }
@@ -68,7 +75,7 @@ struct TorqueArg {
 /// Sends the disturbance to the board of `--namespace` and prints its acknowledgement.
 pub(crate) fn run(a: Args) -> anyhow::Result<()> {
     let namespace = a.namespace.validated()?;
-    let timeout = positive_seconds("--timeout-s", a.timeout_s)?;
+    let timeout = seconds(a.timeout_s);
     let request = match &a.what {
         InjectWhat::Pulse {
             torque,

@@ -28,8 +28,8 @@ pub(crate) struct Args {
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// Feedback latency of the central controller the plan is made for [ms] (a whole number of
-    /// time steps); instead of task.delay_ms.
-    #[arg(long, value_name = "MS", alias = "delay-ms")]
+    /// time steps); instead of task.delay_ms. [range: 0 to 1000]
+    #[arg(long, value_name = "MS", alias = "delay-ms", value_parser = crate::ranges::real(0.0, crate::ranges::MAX_LATENCY_MS))]
     latency_ms: Option<f64>,
     /// Write the plan (time grid, controls, states, gains, resolved config) to this JSON file.
     #[arg(long, short, value_name = "FILE")]

@@ -1,12 +1,11 @@
 //! `vic record`: an MCAP recording of a live namespace, from outside the board (states, command
 //! slices, control requests, disturbances and telemetry, each on its own channel).
 
-use crate::cli::{
-    Classify, JsonArg, NamespaceArgs, input_error, non_negative_seconds, positive_seconds,
-    print_json, stop_on_signal,
-};
+use crate::cli::{Classify, JsonArg, NamespaceArgs, input_error, print_json, stop_on_signal};
+use crate::ranges::{MAX_RUN_S, MAX_WAIT_S, real, seconds};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
+use vic_plan::bounded_read::MAX_PLAN_BYTES;
 use vic_rt::record::{
     ExternalOptions, ExternalSummary, RecordError, RecordFormat, record_namespace,
 };
@@ -20,10 +19,11 @@ pub(crate) struct Args {
     #[arg(long, value_name = "FILE.mcap")]
     out: PathBuf,
     /// Stop this many seconds after the board's first state (0: at Ctrl-C / SIGTERM).
-    #[arg(long, value_name = "S", default_value_t = 0.0)]
+    /// [range: 0 to 604800]
+    #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = real(0.0, MAX_RUN_S))]
     duration: f64,
-    /// Seconds to wait for a board before giving up (exit 1).
-    #[arg(long, value_name = "S", default_value_t = 2.0)]
+    /// Seconds to wait for a board before giving up (exit 1). [range: 0.001 to 3600]
+    #[arg(long, value_name = "S", default_value_t = 2.0, value_parser = real(0.001, MAX_WAIT_S))]
     wait: f64,
     /// The scenario the run uses (its path goes into the file's metadata).
     #[arg(long, value_name = "FILE")]
@@ -49,8 +49,7 @@ pub fn fnv1a64(bytes: &[u8]) -> String {
 /// Records the namespace until the duration ends or SIGINT / SIGTERM, then prints the summary.
 pub(crate) fn run(a: Args) -> anyhow::Result<()> {
     let namespace = a.namespace.validated()?;
-    let duration = non_negative_seconds("--duration", a.duration)?;
-    let wait = positive_seconds("--wait", a.wait)?;
+    let (duration, wait) = (seconds(a.duration), seconds(a.wait));
     if RecordFormat::from_path(&a.out).input()? != RecordFormat::Mcap {
         return Err(input_error(format!(
             "--out {}: vic record writes MCAP (FILE.mcap); vic convert makes the CSV of a board recording",
@@ -66,7 +65,7 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
         metadata.insert("scenario".into(), s.display().to_string());
     }
     if let Some(p) = &a.plan {
-        let bytes = std::fs::read(p)
+        let bytes = vic_plan::bounded_read::read_at_most(p, MAX_PLAN_BYTES, "plan file")
             .map_err(|e| format!("--plan {}: {e}", p.display()))
             .input()?;
         metadata.insert("plan".into(), p.display().to_string());

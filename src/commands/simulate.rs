@@ -52,18 +52,19 @@ pub(crate) struct Args {
     /// How the plan is executed.
     #[arg(long, value_enum, default_value = "open-loop")]
     pub(crate) policy: PolicyArg,
-    /// Number of trials.
-    #[arg(long, default_value_t = 20, value_parser = crate::cli::trials_at_least(2, "a spread needs two"))]
+    /// Number of trials. [range: 2 to 100000]
+    #[arg(long, default_value_t = 20, value_parser = crate::ranges::trials(2, "a spread needs two"))]
     pub(crate) trials: u64,
     #[command(flatten)]
     pub(crate) seed: SeedArgs,
     /// Feedback latency for --policy naive-delayed [ms] (default: the plan's delay) and for
     /// --policy predictor, stiffness+predictor and replan (default 0); a whole number of steps.
-    #[arg(long, value_name = "MS", alias = "delay-ms")]
+    /// [range: 0 to 1000]
+    #[arg(long, value_name = "MS", alias = "delay-ms", value_parser = crate::ranges::real(0.0, crate::ranges::MAX_LATENCY_MS))]
     pub(crate) latency_ms: Option<f64>,
     /// A trial has diverged when it ends further than this from the target [mm for the arm,
-    /// degrees for a single joint] (default 50 mm / 10°).
-    #[arg(long, value_name = "DIST")]
+    /// degrees for a single joint] (default 50 mm / 10°). [range: 0.001 to 100000]
+    #[arg(long, value_name = "DIST", value_parser = crate::ranges::real(0.001, crate::ranges::MAX_DIVERGENCE))]
     pub(crate) divergence: Option<f64>,
     /// Write every trial's states and commands to this CSV file.
     #[arg(long, value_name = "FILE")]

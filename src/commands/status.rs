@@ -1,6 +1,7 @@
 //! `vic status`: one snapshot of a running board's telemetry, as text or JSON.
 
-use crate::cli::{JsonArg, NamespaceArgs, positive_seconds, print_json};
+use crate::cli::{JsonArg, NamespaceArgs, print_json};
+use crate::ranges::{MAX_WAIT_S, real, seconds};
 use crate::views::operator::status;
 
 #[derive(clap::Args)]
@@ -8,8 +9,8 @@ use crate::views::operator::status;
 pub(crate) struct Args {
     #[command(flatten)]
     namespace: NamespaceArgs,
-    /// Seconds to wait for the board's telemetry (it publishes at 10 Hz).
-    #[arg(long, default_value_t = 1.0)]
+    /// Seconds to wait for the board's telemetry (it publishes at 10 Hz). [range: 0.001 to 3600]
+    #[arg(long, default_value_t = 1.0, value_parser = real(0.001, MAX_WAIT_S))]
     timeout_s: f64,
     #[command(flatten)]
     json: JsonArg,
@@ -18,7 +19,7 @@ pub(crate) struct Args {
 /// Prints one snapshot of the telemetry of the board in `--namespace`.
 pub(crate) fn run(a: Args) -> anyhow::Result<()> {
     let namespace = a.namespace.validated()?;
-    let timeout = positive_seconds("--timeout-s", a.timeout_s)?;
+    let timeout = seconds(a.timeout_s);
     let s = status(namespace, timeout)?;
     if a.json.json {
         print_json(&s)

@@ -29,7 +29,9 @@ struct LatencyArgs {
     #[command(flatten)]
     scenario: ScenarioArgs,
     /// Feedback latencies [ms], each a whole number of the scenario's plan steps.
-    #[arg(long, value_delimiter = ',', default_value = "0,20,50,100,150,200,300")]
+    /// [range: 0 to 1000]
+    #[arg(long, value_delimiter = ',', default_value = "0,20,50,100,150,200,300",
+          value_parser = crate::ranges::real(0.0, crate::ranges::MAX_LATENCY_MS))]
     latencies: Vec<f64>,
     /// Strategies: naive-delayed (Eq. 13, planned for the latency, no stiffness), predictor
     /// (a Smith predictor across the latency, no stiffness), stiffness (the open-loop SOOC plan),
@@ -38,24 +40,28 @@ struct LatencyArgs {
     #[arg(long, value_delimiter = ',', value_parser = Strategy::from_name,
           default_value = "naive-delayed,predictor,stiffness")]
     strategies: Vec<Strategy>,
-    /// Monte Carlo trials per point.
-    #[arg(long, default_value_t = 20, value_parser = crate::cli::trials_at_least(2, "a spread needs two"))]
+    /// Monte Carlo trials per point. [range: 2 to 100000]
+    #[arg(long, default_value_t = 20, value_parser = crate::ranges::trials(2, "a spread needs two"))]
     trials: u64,
     #[command(flatten)]
     seed: SeedArgs,
     /// A trial has diverged when it ends further than this from the target [mm for the arm,
-    /// degrees for a single joint] (default 50 mm / 10°).
-    #[arg(long, value_name = "DIST")]
+    /// degrees for a single joint] (default 50 mm / 10°). [range: 0.001 to 100000]
+    #[arg(long, value_name = "DIST", value_parser = crate::ranges::real(0.001, crate::ranges::MAX_DIVERGENCE))]
     divergence: Option<f64>,
     /// Disturbance rejection: a torque pulse of this size [N m] on the first joint (or
     /// `T1,T2` per joint) in every trial of every strategy, unknown to the controllers.
-    #[arg(long, value_name = "TORQUE", value_delimiter = ',', num_args = 1..=2)]
+    /// [range: -200 to 200]
+    #[arg(long, value_name = "TORQUE", value_delimiter = ',', num_args = 1..=2,
+          allow_negative_numbers = true,
+          value_parser = crate::ranges::real(-crate::ranges::MAX_TORQUE_NM, crate::ranges::MAX_TORQUE_NM))]
     pulse: Vec<f64>,
-    /// When the pulse starts [ms after the movement's start].
-    #[arg(long, value_name = "MS", default_value_t = 400.0)]
+    /// When the pulse starts [ms after the movement's start]. [range: 0 to 60000]
+    #[arg(long, value_name = "MS", default_value_t = 400.0, value_parser = crate::ranges::real(0.0, 60_000.0))]
     pulse_at_ms: f64,
-    /// How long the pulse lasts [ms].
-    #[arg(long, value_name = "MS", default_value_t = 50.0)]
+    /// How long the pulse lasts [ms]. [range: 0.001 to 10000]
+    #[arg(long, value_name = "MS", default_value_t = 50.0,
+          value_parser = crate::ranges::real(0.001, crate::ranges::MAX_PULSE_MS))]
     pulse_ms: f64,
     /// Run each point's trials through the real-time code instead of the Monte Carlo: the 1 kHz
     /// board (its own plant integration) and the 50 Hz central controller (the latency in its

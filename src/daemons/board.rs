@@ -5,9 +5,9 @@
 //! SIGTERM, and prints its statistics.
 
 use crate::cli::{
-    Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, input_error, non_negative_seconds,
-    print_json, stop_on_signal,
+    Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, input_error, print_json, stop_on_signal,
 };
+use crate::ranges::{MAX_RUN_S, MAX_SPIN_US, real, whole};
 use std::path::PathBuf;
 use vic_plan::plan::setup;
 use vic_plan::scenario::{ConfigError, Scenario};
@@ -31,18 +31,21 @@ pub struct BoardOptions {
     pub(crate) scenario: DefaultScenarioArgs,
     #[command(flatten)]
     pub(crate) namespace: NamespaceArgs,
-    /// Tick rate [Hz].
-    #[arg(long, default_value_t = 1000)]
+    /// Tick rate [Hz]. [range: 1 to 10000]
+    #[arg(long, default_value_t = 1000, value_parser = whole(1u64, 10_000))]
     pub(crate) rate_hz: u64,
     #[command(flatten)]
     pub(crate) rt: RtArgs,
     /// Stiffness of the safe hold [N m/rad] (default: the scenario's board.hold_stiffness, 100).
-    /// The other limits (watchdog, ramp, joint and speed limits, disturbance limits) are keys
-    /// of the scenario's [board] section: --set board.watchdog=0.1
-    #[arg(long, value_name = "N_M_PER_RAD")]
+    /// The scenario raises the lower bound to what holds its arm against gravity, its field and
+    /// the largest load the board accepts, and lowers the upper one to what the board's step
+    /// integrates stably (docs/CONFIG.md, board.hold_stiffness). The other limits (watchdog,
+    /// ramp, joint and speed limits, disturbance limits) are keys of the scenario's [board]
+    /// section: --set board.watchdog=0.1 [range: 0.001 to 1000]
+    #[arg(long, value_name = "N_M_PER_RAD", value_parser = real(0.001, 1000.0))]
     pub(crate) hold_stiffness: Option<f64>,
-    /// Stop after this many seconds (0: run until SIGINT/SIGTERM).
-    #[arg(long, default_value_t = 0.0)]
+    /// Stop after this many seconds (0: run until SIGINT/SIGTERM). [range: 0 to 604800]
+    #[arg(long, default_value_t = 0.0, value_parser = real(0.0, MAX_RUN_S))]
     pub(crate) duration_s: f64,
     #[command(flatten)]
     pub(crate) json: JsonArg,
@@ -52,8 +55,10 @@ pub struct BoardOptions {
     /// the file and counted in the statistics.
     #[arg(long, value_name = "FILE.csv|FILE.mcap")]
     pub(crate) record: Option<PathBuf>,
-    /// Capacity of the recording queue [ticks].
-    #[arg(long, value_name = "TICKS", default_value_t = vic_rt::record::DEFAULT_CAPACITY)]
+    /// Capacity of the recording queue [ticks]; it is locked in memory with the rest of the
+    /// board (the largest, 131072, is 131 s at 1 kHz and about 48 MB). [range: 1 to 131072]
+    #[arg(long, value_name = "TICKS", default_value_t = vic_rt::record::DEFAULT_CAPACITY,
+          value_parser = whole(1usize, vic_rt::record::MAX_CAPACITY))]
     pub(crate) record_queue: usize,
     /// Level of the log on stderr: error, warn, info, debug, trace, off, or per target
     /// (vic=debug,warn). Default: RUST_LOG, else info. Nothing is logged inside the loop.
@@ -66,16 +71,19 @@ pub struct BoardOptions {
 pub(crate) struct RtArgs {
     /// Spin this long before each deadline [µs] (0: sleep only). Default 100 (10 % of a CPU,
     /// never enough to trip the kernel's real-time throttling), 0 with --no-rt.
-    #[arg(long, value_name = "US")]
+    /// [range: 0 to 10000]
+    #[arg(long, value_name = "US", value_parser = whole(0u64, MAX_SPIN_US))]
     pub(crate) spin_us: Option<u64>,
     /// SCHED_FIFO priority of the loop (1–99). Real-time is the default: the board asks for
     /// SCHED_FIFO, mlockall, a CPU of its own (the last one, where there are several) and a
     /// spin before each deadline, prints what it got and runs on with a warning when refused.
+    /// [range: 1 to 99]
     #[arg(long, value_name = "PRIO", default_value_t = vic_rt::sched::DEFAULT_FIFO_PRIORITY,
-          value_parser = clap::value_parser!(i32).range(1..=99))]
+          value_parser = whole(1i32, 99))]
     pub(crate) fifo: i32,
     /// Pin the loop to this CPU (default: the last CPU, where there are several).
-    #[arg(long, value_name = "N")]
+    /// [range: 0 to 1023]
+    #[arg(long, value_name = "N", value_parser = whole(0usize, 1023))]
     pub(crate) cpu: Option<usize>,
     /// Without the real-time settings: the normal scheduler instead of SCHED_FIFO, no pinning
     /// to a CPU and no spin before each deadline unless --spin-us asks (mlockall is still
@@ -104,13 +112,6 @@ impl RtArgs {
 pub fn run(o: &BoardOptions) -> anyhow::Result<()> {
     crate::daemons::logging::init(o.log_level.as_deref())?;
     let _log = tracing::info_span!("vic-board").entered();
-    if o.rate_hz == 0 || o.rate_hz > 10_000 {
-        return Err(input_error(format!(
-            "--rate-hz {}: use 1 to 10000",
-            o.rate_hz
-        )));
-    }
-    non_negative_seconds("--duration-s", o.duration_s)?;
     let namespace = o.namespace.validated()?;
     let scenario = load_with_hold_stiffness(o)?;
     let period_ns = 1_000_000_000 / o.rate_hz;

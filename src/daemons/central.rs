@@ -7,8 +7,9 @@
 
 use crate::cli::{
     Classify, DefaultScenarioArgs, JsonArg, NamespaceArgs, SeedArgs, divergence_or_default,
-    input_error, latency_arg, non_negative_seconds, print_json, stop_on_signal,
+    input_error, latency_arg, print_json, stop_on_signal,
 };
+use crate::ranges::{MAX_DIVERGENCE, MAX_LATENCY_MS, MAX_TRIALS, MAX_WAIT_S, real, seconds, whole};
 use crate::views::report::{StrategyResult, Trajectories};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -25,7 +26,7 @@ use vic_rt::transport::CentralPorts;
 #[command(name = "vic-planner", version, about, long_about)]
 #[command(
     mut_arg("config", |a| a.help("Scenario file (TOML) the plan runs on")),
-    mut_arg("seed", |a| a.help("Seed of the board's noise (trial i uses the stream of (seed, i))")),
+    mut_arg("seed", |a| a.help("Seed of the board's noise (trial i uses the stream of (seed, i)) [range: 0 to 18446744073709551615]")),
     mut_arg("json", |a| a.help("Print one JSON object")),
 )]
 pub struct CentralOptions {
@@ -45,33 +46,36 @@ pub struct CentralOptions {
     #[arg(long, default_value = "stiffness", value_parser = Strategy::from_name)]
     pub(crate) strategy: Strategy,
     /// Feedback latency [ms]: knot k feeds back the state of k − latency (default: the plan's
-    /// delay; a whole number of plan steps).
-    #[arg(long, value_name = "MS")]
+    /// delay; a whole number of plan steps). [range: 0 to 1000]
+    #[arg(long, value_name = "MS", value_parser = real(0.0, MAX_LATENCY_MS))]
     pub(crate) latency_ms: Option<f64>,
     /// Delay line on the state path [ms] (default: half of latency − lookahead).
-    #[arg(long, value_name = "MS")]
+    /// [range: 0 to 1000]
+    #[arg(long, value_name = "MS", value_parser = real(0.0, MAX_LATENCY_MS))]
     pub(crate) sensor_latency_ms: Option<f64>,
     /// Delay line on the command path [ms] (default: half of latency − lookahead).
-    #[arg(long, value_name = "MS")]
+    /// [range: 0 to 1000]
+    #[arg(long, value_name = "MS", value_parser = real(0.0, MAX_LATENCY_MS))]
     pub(crate) command_latency_ms: Option<f64>,
-    /// Loop rate [Hz].
-    #[arg(long, default_value_t = 50)]
+    /// Loop rate [Hz]. [range: 1 to 1000]
+    #[arg(long, default_value_t = 50, value_parser = whole(1u64, 1000))]
     pub(crate) rate_hz: u64,
-    /// Number of trials.
-    #[arg(long, default_value_t = 5)]
+    /// Number of trials. [range: 1 to 100000]
+    #[arg(long, default_value_t = 5, value_parser = whole(1usize, MAX_TRIALS as usize))]
     pub(crate) trials: usize,
     #[command(flatten)]
     pub(crate) seed: SeedArgs,
     #[command(flatten)]
     pub(crate) namespace: NamespaceArgs,
     /// A trial diverged when it ends further than this from the target [mm arm, deg joint].
-    #[arg(long, value_name = "DIST")]
+    /// [range: 0.001 to 100000]
+    #[arg(long, value_name = "DIST", value_parser = real(0.001, MAX_DIVERGENCE))]
     pub(crate) divergence: Option<f64>,
     /// Run board and planner in lockstep on a simulated clock in this process (no daemon).
     #[arg(long)]
     pub(crate) lockstep: bool,
-    /// Seconds to wait for a board before giving up.
-    #[arg(long, default_value_t = 5.0)]
+    /// Seconds to wait for a board before giving up. [range: 0 to 3600]
+    #[arg(long, default_value_t = 5.0, value_parser = real(0.0, MAX_WAIT_S))]
     pub(crate) board_timeout_s: f64,
     /// Also write the trials' recorded states and commands here (JSON: `x` per trial per knot,
     /// `u` per trial per step), e.g. for a figure.
@@ -87,8 +91,8 @@ pub struct CentralOptions {
 
 impl CentralOptions {
     /// How long to wait for a board (`--board-timeout-s`, checked).
-    fn board_timeout(&self) -> anyhow::Result<Duration> {
-        non_negative_seconds("--board-timeout-s", self.board_timeout_s)
+    fn board_timeout(&self) -> Duration {
+        seconds(self.board_timeout_s)
     }
 }
 
@@ -96,10 +100,6 @@ impl CentralOptions {
 pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
     crate::daemons::logging::init(o.log_level.as_deref())?;
     let _log = tracing::info_span!("vic-planner").entered();
-    o.board_timeout()?;
-    if o.rate_hz == 0 || o.rate_hz > 1000 || o.trials == 0 {
-        return Err(input_error("--rate-hz must be 1..1000 and --trials ≥ 1"));
-    }
     let namespace = o.namespace.validated()?;
     // The namespace is claimed before planning: a second central process is refused at once
     // (naming the first), not after minutes of planning, and the first is never disturbed.
@@ -208,7 +208,7 @@ fn run_trials(
         o.trials,
         o.seed.seed,
         period_ns,
-        o.board_timeout()?,
+        o.board_timeout(),
         &stop,
     ) {
         Err(LiveError::Transport(e)) => Err(e).runtime(),

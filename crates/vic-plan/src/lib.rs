@@ -8,6 +8,7 @@
 // Index loops read like the equations they implement; iterator chains over several arrays do not.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bounded_read;
 pub mod evaluation;
 pub mod method;
 pub mod montecarlo;

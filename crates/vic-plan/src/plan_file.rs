@@ -2,6 +2,7 @@
 //! trajectory, the commands, the feedback gains (Eq. 9, or Eq. 13's plant block with a delay) and
 //! the headline figures, with the policy that executes it.
 
+use crate::bounded_read::{MAX_PLAN_BYTES, read_text_at_most};
 use crate::method::Method;
 use crate::scenario::Scenario;
 use crate::setup::{PlanError, Setup};
@@ -126,11 +127,14 @@ pub enum PlanFileError {
 }
 
 impl PlanFile {
-    /// Reads a plan file written by [`PlanFile::write`] (`vic plan --out`).
+    /// Reads a plan file written by [`PlanFile::write`] (`vic plan --out`); one larger than
+    /// [`MAX_PLAN_BYTES`] is refused after reading that much.
     pub fn read(path: &Path) -> Result<PlanFile, PlanFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| PlanFileError::Read {
-            path: path.to_path_buf(),
-            source,
+        let text = read_text_at_most(path, MAX_PLAN_BYTES, "plan file").map_err(|source| {
+            PlanFileError::Read {
+                path: path.to_path_buf(),
+                source,
+            }
         })?;
         serde_json::from_str(&text).map_err(|source| PlanFileError::Parse {
             path: path.to_path_buf(),

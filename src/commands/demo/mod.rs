@@ -39,17 +39,18 @@ use vic_rt::daemon::Children;
     mut_arg("overrides", |a| a.help(
         "Override a configuration key (repeatable), for the plans and the board alike"
     )),
-    mut_arg("seed", |a| a.help("Seed of the board's noise (the same for every strategy)")),
+    mut_arg("seed", |a| a.help("Seed of the board's noise (the same for every strategy) [range: 0 to 18446744073709551615]")),
     mut_arg("json", |a| a.help("Print one JSON object instead of the table")),
 )]
 pub(crate) struct Args {
     #[command(flatten)]
     pub(crate) scenario: DefaultScenarioArgs,
     /// Feedback latency of the central controller [ms] (a whole number of plan steps).
-    #[arg(long, default_value_t = 200.0)]
+    /// [range: 0 to 1000]
+    #[arg(long, default_value_t = 200.0, value_parser = crate::ranges::real(0.0, crate::ranges::MAX_LATENCY_MS))]
     pub(crate) latency_ms: f64,
-    /// Trials per strategy.
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    /// Trials per strategy. [range: 1 to 100000]
+    #[arg(long, default_value_t = 3, value_parser = crate::ranges::trials(1, "a strategy needs one"))]
     pub(crate) trials: u64,
     #[command(flatten)]
     pub(crate) seed: SeedArgs,
@@ -68,7 +69,8 @@ pub(crate) struct Args {
     #[arg(long, value_name = "DIR", default_value = "vic-demo")]
     pub(crate) out_dir: PathBuf,
     /// Board spin before each deadline [µs] (default: the board's, 100; 0 with --no-rt).
-    #[arg(long, value_name = "US")]
+    /// [range: 0 to 10000]
+    #[arg(long, value_name = "US", value_parser = crate::ranges::whole(0u64, crate::ranges::MAX_SPIN_US))]
     pub(crate) spin_us: Option<u64>,
     /// Run the board without its real-time settings (no SCHED_FIFO, pinning or spin).
     #[arg(long)]

@@ -2,6 +2,7 @@
 //! from any folder finds `config/NAME.toml` although no such file is there. A file on disk always
 //! wins; the built-in copy is read only when the relative path `config/NAME.toml` names no file.
 
+use crate::bounded_read::{MAX_SCENARIO_BYTES, read_text_at_most};
 use std::path::Path;
 
 /// `(file name, text)` of every scenario in `config/`.
@@ -49,9 +50,11 @@ const BUILT_IN: [(&str, &str); 10] = [
 ];
 
 /// The text of the scenario at `path`: the file, or, when `path` is `config/NAME.toml`, names no
-/// file and `NAME.toml` is a scenario of `config/`, the built-in copy.
+/// file and `NAME.toml` is a scenario of `config/`, the built-in copy. A file larger than
+/// [`MAX_SCENARIO_BYTES`] is refused after reading that much.
 pub fn read(path: &Path) -> std::io::Result<String> {
-    std::fs::read_to_string(path).or_else(|e| built_in(path).map(str::to_string).ok_or(e))
+    read_text_at_most(path, MAX_SCENARIO_BYTES, "scenario file")
+        .or_else(|e| built_in(path).map(str::to_string).ok_or(e))
 }
 
 /// The built-in copy of `path` when it stands for one (see [`read`]); `None` when the file exists.

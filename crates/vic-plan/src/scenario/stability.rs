@@ -1,10 +1,11 @@
 //! Numerical stability of the plant integration: a scenario whose sub-step is too long for its
 //! stiffest impedance is refused before any plan is made on it.
 
+use super::board::BoardSection;
 use super::error::{ConfigError, FileCheck};
 use super::{Task, TaskPath};
 use vic_core::dynamics::Integrator;
-use vic_core::model::{Actuator, ArmModel};
+use vic_core::model::{Actuator, ArmModel, Field, Plant};
 use vic_core::solver::Bounds;
 
 /// Refuses integration sub-steps too long for the stiffest configured impedance: explicit and
@@ -98,18 +99,58 @@ fn smallest_inertia(model: &ArmModel, task: &Task) -> f64 {
 /// this nor than the scenario's own sub-step.
 pub(crate) const BOARD_TICK_S: f64 = 1e-3;
 
+/// The largest negative stiffness the plant itself adds at rest [N m/rad], posture-independent:
+/// the gradient of the gravity torque `m g l_c cos q` (Eq. 15) is at most `m g l_c`, and the
+/// divergent field `D = (β x, 0)` adds `−β J_xᵀ J_x` with `‖J_x‖² ≤ (l1 + l2)² + l2²` (a single
+/// joint: `l²`). A velocity field (curl) adds none at rest.
+fn plant_negative_stiffness(model: &ArmModel) -> f64 {
+    let gravity = match &model.plant {
+        Plant::SingleJoint(p) => p.mass * p.gravity.abs() * p.com,
+        Plant::TwoLink(_) => 0.0,
+    };
+    let reach_sq = match &model.plant {
+        Plant::SingleJoint(p) => p.length * p.length,
+        Plant::TwoLink(p) => (p.l1 + p.l2).powi(2) + p.l2 * p.l2,
+    };
+    let field = match model.field {
+        Field::Divergent { beta } => beta.max(0.0) * reach_sq,
+        Field::None | Field::Curl { .. } => 0.0,
+    };
+    gravity + field
+}
+
+/// The smallest safe-hold stiffness of a board [N m/rad]. Held at `q*` with stiffness `k`, the
+/// joint's static balance under a steady load `τ` is `(k − k_p) δ = τ`, where `k_p` is the
+/// plant's own negative stiffness ([`plant_negative_stiffness`]: gravity, the scenario's field).
+/// The hold is stable only when `k > k_p`, and the largest load the board accepts
+/// (`board.max_load_torque`) must not push a joint held in the middle of its range to a joint
+/// limit (a fault): `δ ≤ r`, `r` half the narrowest range `(joint_max − joint_min) / 2`. Hence
+/// `k ≥ k_p + max_load_torque / r`. A pulse (at most `board.max_pulse_torque`) is transient and
+/// is caught by the damping; a field switched on later with a larger β (up to
+/// `board.max_field_beta`) is the operator's choice and is not assumed here.
+pub(super) fn hold_stiffness_min(model: &ArmModel, board: &BoardSection) -> f64 {
+    let half_range = board
+        .joint_min
+        .iter()
+        .zip(&board.joint_max)
+        .map(|(lo, hi)| 0.5 * (hi - lo))
+        .fold(f64::INFINITY, f64::min);
+    plant_negative_stiffness(model) + board.max_load_torque / half_range
+}
+
 /// Refuses a safe-hold stiffness the board cannot hold stably: the impedance law's damping
-/// `K_D = gain(k)` (Eq. 4) must not be negative (it would pump energy in), and the board's
-/// semi-implicit Euler step `h = min(dt / substeps, 1 ms)` must satisfy both `h · K_D / I < 2`
-/// and `h · sqrt(k / I) < 2` at the smallest inertia of the task's postures (a VSA: the spring
-/// against the lighter of link and motor).
+/// `K_D = gain(k)` (Eq. 4) must not be negative (it would pump energy in), `k` must reach
+/// [`hold_stiffness_min`] (the plant's own negative stiffness plus the largest load within half
+/// the joint range), and the board's semi-implicit Euler step `h = min(dt / substeps, 1 ms)` must
+/// satisfy both `h · K_D / I < 2` and `h · sqrt(k / I) < 2` at the smallest inertia of the task's
+/// postures (a VSA: the spring against the lighter of link and motor).
 pub(super) fn check_hold_stiffness(
     model: &ArmModel,
     task: &Task,
-    hold_stiffness: f64,
+    board: &BoardSection,
     check: &FileCheck,
 ) -> Result<(), ConfigError> {
-    let k = hold_stiffness;
+    let k = board.hold_stiffness;
     let inertia = smallest_inertia(model, task);
     let rate = match &model.actuator {
         Actuator::Impedance { damping } => {
@@ -124,9 +165,11 @@ pub(super) fn check_hold_stiffness(
                     ),
                 ));
             }
+            check_hold_minimum(model, board, check)?;
             (d / inertia).max((k / inertia).sqrt())
         }
         Actuator::Vsa { motor_inertia } => {
+            check_hold_minimum(model, board, check)?;
             let b = motor_inertia.iter().copied().fold(f64::INFINITY, f64::min);
             (k / inertia.min(b)).sqrt()
         }
@@ -143,6 +186,33 @@ pub(super) fn check_hold_stiffness(
                  at the smallest inertia {inertia:.4} kg m² needs h < {:.2} ms): lower it",
                 h * 1000.0,
                 2000.0 / rate
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a hold stiffness below [`hold_stiffness_min`].
+fn check_hold_minimum(
+    model: &ArmModel,
+    board: &BoardSection,
+    check: &FileCheck,
+) -> Result<(), ConfigError> {
+    let (k, k_min, k_p) = (
+        board.hold_stiffness,
+        hold_stiffness_min(model, board),
+        plant_negative_stiffness(model),
+    );
+    if k < k_min || k <= k_p {
+        return Err(check.invalid(
+            "board",
+            "hold_stiffness",
+            format!(
+                "{k} N m/rad is below the {k_min:.3} N m/rad this board needs: the plant's own \
+                 negative stiffness (gravity, field) is {k_p:.3} N m/rad, and the largest load \
+                 (max_load_torque = {} N m) must not push a held joint past half its range; \
+                 raise it",
+                board.max_load_torque
             ),
         ));
     }

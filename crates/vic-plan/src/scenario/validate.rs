@@ -55,7 +55,7 @@ pub(super) fn validate(
     let mut solver = raw.solver.resolve(&check)?;
     solver.options.held_first = super::solver::held_first(&model, hold_stiffness_first);
     let board = raw.board.resolve(dof, &check)?;
-    check_hold_stiffness(&model, &task, board.hold_stiffness, &check)?;
+    check_hold_stiffness(&model, &task, &board, &check)?;
     Ok(Scenario {
         source: path.to_path_buf(),
         model,

@@ -62,6 +62,11 @@ use std::time::Duration;
 /// Default queue capacity: 8192 ticks, 8 s at 1 kHz (about 3 MB).
 pub const DEFAULT_CAPACITY: usize = 8192;
 
+/// Largest queue capacity: 131072 ticks, 131 s at 1 kHz (about 48 MB, locked in memory with the
+/// rest of the board). A longer stall of the writer loses ticks (marked as gaps) rather than
+/// memory.
+pub const MAX_CAPACITY: usize = 131_072;
+
 /// One tick as recorded: plain data, copied into the queue (the board's live runner makes it
 /// from a step: [`Sample::from_step`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -231,11 +236,12 @@ impl Recorder {
     /// the file's header (the CSV's banner and column names, the MCAP's schemas, channels and
     /// metadata), and starts the writer thread. The queue is allocated here, once.
     pub fn start(path: &Path, opts: &RecordOptions) -> io::Result<Recorder> {
-        if opts.capacity == 0 || !(1..=MAX_JOINTS).contains(&opts.joints) {
+        if !(1..=MAX_CAPACITY).contains(&opts.capacity) || !(1..=MAX_JOINTS).contains(&opts.joints)
+        {
             return Err(io::Error::new(
                 io::ErrorKind::InvalidInput,
                 format!(
-                    "recording: capacity must be ≥ 1 and joints 1 to {MAX_JOINTS} (got {} and {})",
+                    "recording: capacity must be 1 to {MAX_CAPACITY} and joints 1 to {MAX_JOINTS} (got {} and {})",
                     opts.capacity, opts.joints
                 ),
             ));
