@@ -7,10 +7,9 @@
 //! Conventions:
 //! - Columns are conditions (actuator types, delays), side by side, each with its title on top.
 //! - Rows that are compared across columns share their axes, except the torques, which differ
-//!   between columns by orders of magnitude: each column has its own torque range. The ranges
-//!   are robust: a column whose trials diverge far beyond the others does not widen the shared
-//!   range (nor get one of its own), and its curves simply leave the frame (everything is
-//!   clipped to the plotting area).
+//!   between columns by orders of magnitude: each column has its own torque range. The shared
+//!   ranges are robust: a column whose trials diverge far beyond the others does not widen them,
+//!   and its curves simply leave the frame (everything is clipped to the plotting area).
 //! - Non-finite values are skipped: a curve breaks where a value is NaN or infinite.
 
 use std::path::{Path, PathBuf};

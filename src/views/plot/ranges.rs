@@ -146,25 +146,16 @@ pub(super) fn reference_degrees(columns: &[ColumnPlot]) -> Vec<f64> {
 ///
 /// Torques differ between columns by orders of magnitude (a feedback law's corrections against
 /// an open-loop plan's, a VSA's motor torques against a joint's): on one shared range the small
-/// ones are flat lines at 0. So each column has its own range, with 0 in it; a column that
-/// spreads [`OUTLIER_FACTOR`] times more than the median one (a diverging run) takes the range
-/// of the others instead, and its curves leave the frame. Stiffnesses share one range: their
-/// bounds are the same and their levels are what the columns compare.
+/// ones are flat lines at 0, and the large ones a barcode of clipped steps. So each column has
+/// its own range, with 0 in it (a diverging column's spans its blow-up, in its own panel only).
+/// Stiffnesses share one range: their bounds are the same and their levels are what the
+/// columns compare.
 pub(super) fn command_ranges(columns: &[ColumnPlot]) -> (Vec<Span>, Option<Span>) {
-    let values = command_values(columns, Commands::Torque);
-    let shared = shared_range(values.clone(), &[], true);
-    let own: Vec<Option<(f64, f64)>> = values
+    let torque = command_values(columns, Commands::Torque)
         .into_iter()
-        .map(|v| quantile_range(v, TAIL))
-        .collect();
-    let sizes: Vec<Option<f64>> = own.iter().map(|r| r.map(|(lo, hi)| hi - lo)).collect();
-    let keep = non_outliers(&sizes, OUTLIER_FACTOR, 0.0);
-    let torque = own
-        .iter()
-        .zip(keep)
-        .map(|(range, keep)| match (range, keep) {
-            (Some((lo, hi)), true) => pad(lo.min(0.0), hi.max(0.0)),
-            _ => shared,
+        .map(|v| match quantile_range(v, TAIL) {
+            Some((lo, hi)) => pad(lo.min(0.0), hi.max(0.0)),
+            None => pad(0.0, 0.0),
         })
         .collect();
     let stiffness = columns
