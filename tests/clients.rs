@@ -6,6 +6,7 @@
 
 use crate::common;
 
+use common::cli::{text, vic};
 use common::daemons::{Daemons, unique_namespace};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Output, Stdio};
@@ -16,22 +17,6 @@ use vic_rt::transport::limits::{MAX_PUBLISHERS, MAX_SUBSCRIBERS};
 use vic_rt::transport::{ObserverPorts, PortKind, ToolPorts, TransportError};
 
 const MONITORS: usize = 8;
-
-fn vic(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vic"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "exit {:?}\nstdout {}\nstderr {}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 /// `vic status --json` until a board answers (it needs a moment to start).
 fn wait_for_board(ns: &str) {

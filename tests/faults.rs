@@ -5,6 +5,7 @@
 
 use crate::common;
 
+use common::cli::vic;
 use common::daemons::{CONFIG, Daemons, planner_command, run_planner, sooc_plan, unique_namespace};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -44,13 +45,6 @@ fn wait_for(ep: &BoardObserver, timeout: Duration, f: impl Fn(&StateMsg) -> bool
         assert!(t0.elapsed() < timeout, "no such state within {timeout:?}");
         std::thread::sleep(Duration::from_millis(5));
     }
-}
-
-fn vic(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_vic"))
-        .args(args)
-        .output()
-        .unwrap()
 }
 
 #[test]

@@ -7,10 +7,11 @@
 
 use crate::common;
 
+use common::cli::{text, vic};
 use common::daemons::{Daemons, run_planner, sooc_plan, unique_namespace};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -18,22 +19,6 @@ use std::time::{Duration, Instant};
 const OBSERVERS: usize = 32;
 /// Of them, Python clients (when `VIC_PYTHON` is set).
 const PYTHON_WATCHERS: usize = 8;
-
-fn vic(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vic"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "exit {:?}\nstdout {}\nstderr {}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 /// Counts the lines of `child`'s stdout that start with `prefix`, on a thread of its own.
 fn count_lines(child: &mut Child, prefix: &'static str) -> Arc<AtomicUsize> {

@@ -4,6 +4,7 @@
 
 pub mod alloc;
 pub mod bridge;
+pub mod cli;
 pub mod daemons;
 pub mod trial;
 
