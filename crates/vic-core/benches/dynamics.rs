@@ -19,7 +19,8 @@ const TAU: [f64; 7] = [2.0, -5.0, 1.0, 8.0, -0.5, 0.7, 0.1];
 
 fn panda() -> SerialChain {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/panda.urdf");
-    SerialChain::from_urdf_file(path, "panda_link0", "panda_hand").expect("the Panda loads")
+    let text = std::fs::read_to_string(path).expect("config/panda.urdf");
+    SerialChain::from_urdf(&text, path, "panda_link0", "panda_hand").expect("the Panda loads")
 }
 
 fn serial_dynamics(c: &mut Criterion) {

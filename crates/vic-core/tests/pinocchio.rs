@@ -83,7 +83,8 @@ fn the_dynamics_agree_with_pinocchio() {
     let mut chains = Vec::new();
     for (file, base, tip, gravity) in CHAINS {
         let path = root().join("config").join(file);
-        let chain = SerialChain::from_urdf_file(&path, base, tip)
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let chain = SerialChain::from_urdf(&text, file, base, tip)
             .unwrap_or_else(|e| panic!("{e}"))
             .with_gravity(gravity);
         let n = chain.dof();

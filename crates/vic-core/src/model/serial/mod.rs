@@ -29,7 +29,6 @@ pub use urdf::{UrdfError, UrdfReason};
 
 use crate::scalar::Scalar;
 use chain::Chain;
-use std::path::Path;
 
 /// The most joints a chain may move.
 pub const MAX_DOF: usize = 7;
@@ -64,16 +63,16 @@ impl SerialChain {
         Self::parse(text, "<string>", base_link, tip_link)
     }
 
-    /// The chain from `base_link` to `tip_link` of a URDF file (meshes are not read).
-    pub fn from_urdf_file(
-        path: impl AsRef<Path>,
+    /// The chain from `base_link` to `tip_link` of a URDF document read from `source` (a file
+    /// name, for the errors). Reading the file is the caller's: this crate does no I/O (the
+    /// scenario layer reads files with its size limits). Meshes are never read.
+    pub fn from_urdf(
+        text: &str,
+        source: &str,
         base_link: &str,
         tip_link: &str,
     ) -> Result<Self, UrdfError> {
-        let file = path.as_ref().display().to_string();
-        let text = std::fs::read_to_string(path.as_ref())
-            .map_err(|e| urdf::error(&file, "file", UrdfReason::Unreadable(e.to_string())))?;
-        Self::parse(&text, &file, base_link, tip_link)
+        Self::parse(text, source, base_link, tip_link)
     }
 
     fn parse(text: &str, file: &str, base: &str, tip: &str) -> Result<Self, UrdfError> {

@@ -21,8 +21,6 @@ pub struct UrdfError {
 /// What is wrong with an element of a URDF document.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum UrdfReason {
-    #[error("cannot be read: {0}")]
-    Unreadable(String),
     #[error("malformed URDF: {0}")]
     Malformed(String),
     #[error("not in the file")]
