@@ -6,7 +6,7 @@
 
 use crate::common;
 
-use common::cli::{text, vic};
+use common::cli::{inject, status, text, wait_for_board};
 use common::daemons::{Daemons, unique_namespace};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Output, Stdio};
@@ -17,41 +17,6 @@ use vic_rt::transport::limits::{MAX_PUBLISHERS, MAX_SUBSCRIBERS};
 use vic_rt::transport::{ObserverPorts, PortKind, ToolPorts, TransportError};
 
 const MONITORS: usize = 8;
-
-/// `vic status --json` until a board answers (it needs a moment to start).
-fn wait_for_board(ns: &str) {
-    let t0 = Instant::now();
-    loop {
-        let o = vic(&["status", "--namespace", ns, "--json"]);
-        if o.status.success() {
-            return;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(20),
-            "no board: {}",
-            text(&o)
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-}
-
-fn status(ns: &str) -> Output {
-    vic(&["status", "--namespace", ns, "--json", "--timeout-s", "3"])
-}
-
-fn inject(ns: &str) -> Output {
-    vic(&[
-        "inject",
-        "--namespace",
-        ns,
-        "--json",
-        "--timeout-s",
-        "3",
-        "noise",
-        "--factor",
-        "1",
-    ])
-}
 
 /// Whether `o` is a clean "too many" refusal: exit 1, no iceoryx2 enum name.
 fn assert_refused(o: &Output, needles: &[&str]) {

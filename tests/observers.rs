@@ -7,7 +7,7 @@
 
 use crate::common;
 
-use common::cli::{text, vic};
+use common::cli::{inject, status, text, wait_for_board};
 use common::daemons::{Daemons, run_planner, sooc_plan, unique_namespace};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -54,14 +54,7 @@ fn thirty_two_observers_leave_the_planner_inject_and_status_working() {
     let ns = unique_namespace("obs");
     let mut d = Daemons::default();
     d.board(&ns, &["--no-rt"]);
-    let t0 = Instant::now();
-    while !vic(&["status", "--namespace", &ns, "--json"])
-        .status
-        .success()
-    {
-        assert!(t0.elapsed() < Duration::from_secs(20), "no board");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_for_board(&ns);
     let python = std::env::var("VIC_PYTHON").ok();
     let pythons = if python.is_some() { PYTHON_WATCHERS } else { 0 };
     let mut shown = Vec::new();
@@ -103,19 +96,9 @@ fn thirty_two_observers_leave_the_planner_inject_and_status_working() {
     );
 
     // With every observer attached: status, inject and a planner's trial.
-    let s = vic(&["status", "--namespace", &ns, "--json", "--timeout-s", "3"]);
+    let s = status(&ns);
     assert!(s.status.success(), "status: {}", text(&s));
-    let i = vic(&[
-        "inject",
-        "--namespace",
-        &ns,
-        "--json",
-        "--timeout-s",
-        "3",
-        "noise",
-        "--factor",
-        "1",
-    ]);
+    let i = inject(&ns);
     assert!(i.status.success(), "inject: {}", text(&i));
     let r = run_planner(&ns, &sooc_plan(), "stiffness", 1, false);
     assert_eq!((r.trials, r.diverged), (1, 0), "the planner's trial");
