@@ -287,3 +287,91 @@ fn the_live_sweep_runs_the_daemons_and_matches_the_lockstep_without_noise() {
          {late_runs:?}"
     );
 }
+
+#[test]
+fn a_strategy_at_a_latency_means_one_thing_offline_and_in_lockstep() {
+    let _one = one_at_a_time();
+    // A central controller at 50 Hz computes each knot up to three periods (60 ms) before it
+    // acts, so at 0 ms `naive-delayed` once fed an undelayed plan's gains states 40–60 ms old and
+    // diverged in every lockstep and live trial while offline none did. The planner now ticks
+    // fast enough for its own delay to fit in the latency, and each strategy at each latency
+    // must end as the Monte Carlo ends, within the two runs' Monte Carlo error (their noise
+    // differs: the board draws its own at 1 kHz). At 0 ms a knot still feeds back the state
+    // one knot old (a state cannot be fed back before it exists): within the same error.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/two_link_divergent.toml");
+    let trials = 24;
+    let run = |strategies: Vec<Strategy>, latencies_ms: Vec<f64>, execution| {
+        let opts = SweepOptions {
+            latencies_ms,
+            strategies,
+            trials,
+            seed: 11,
+            divergence: None,
+            pulse: None,
+            execution,
+        };
+        sweep_latency(&path, &[], &opts, &|_| {}).expect("sweep")
+    };
+    // The replanner at 0 ms only: at 100 and 200 ms its lockstep run is the Monte Carlo's to
+    // the last digit without noise (the lockstep test above), and each point costs seconds.
+    let cases = [
+        (
+            vec![
+                Strategy::NaiveDelayed,
+                Strategy::Predictor,
+                Strategy::Stiffness,
+                Strategy::StiffnessPredictor,
+            ],
+            vec![0.0, 100.0, 200.0],
+        ),
+        (vec![Strategy::Replan], vec![0.0]),
+    ];
+    let n = trials as f64;
+    for (strategies, latencies) in cases {
+        let offline = run(strategies.clone(), latencies.clone(), Engine::Offline);
+        let lockstep = run(strategies, latencies, Engine::Lockstep);
+        for (a, b) in offline.points.iter().zip(&lockstep.points) {
+            assert_eq!((a.strategy, a.latency_ms), (b.strategy, b.latency_ms));
+            eprintln!(
+                "{} at {} ms: offline {:?} ± {:?} ({} diverged), lockstep {:?} ± {:?} ({})",
+                a.strategy.name(),
+                a.latency_ms,
+                a.final_error_mean,
+                a.final_error_se,
+                a.diverged,
+                b.final_error_mean,
+                b.final_error_se,
+                b.diverged
+            );
+            // Diverged fractions: within three binomial standard deviations of their
+            // difference (and one trial).
+            let p = (a.diverged + b.diverged) as f64 / (2.0 * n);
+            let allowed = 3.0 * (2.0 * p * (1.0 - p) / n).sqrt() + 1.0 / n;
+            assert!(
+                (a.diverged_fraction - b.diverged_fraction).abs() <= allowed,
+                "{} at {} ms: diverged offline {} lockstep {} of {trials}",
+                a.strategy.name(),
+                a.latency_ms,
+                a.diverged,
+                b.diverged
+            );
+            // Mean final errors of the trials kept: within three standard errors of their
+            // difference, where both runs kept enough trials to have one.
+            if let (Some(x), Some(y), Some(sx), Some(sy)) = (
+                a.final_error_mean,
+                b.final_error_mean,
+                a.final_error_se,
+                b.final_error_se,
+            ) {
+                let se = sx.hypot(sy);
+                assert!(
+                    (x - y).abs() <= 3.0 * se,
+                    "{} at {} ms: final error offline {x:.2} lockstep {y:.2} (3 s.e. = {:.2})",
+                    a.strategy.name(),
+                    a.latency_ms,
+                    3.0 * se
+                );
+            }
+        }
+    }
+}

@@ -64,8 +64,9 @@ struct LatencyArgs {
           value_parser = crate::ranges::real(0.001, crate::ranges::MAX_PULSE_MS))]
     pulse_ms: f64,
     /// Run each point's trials through the real-time code instead of the Monte Carlo: the 1 kHz
-    /// board (its own plant integration) and the 50 Hz central controller (the latency in its
-    /// delay lines) in lockstep on a simulated clock. Deterministic; no pulse.
+    /// board (its own plant integration) and the central controller (the latency in its delay
+    /// lines; 50 Hz, or 100 or 250 Hz below 60 ms so that its own delay fits in the latency) in
+    /// lockstep on a simulated clock. Deterministic; no pulse.
     #[arg(long, conflicts_with = "live")]
     lockstep: bool,
     /// Run each point's trials on the live daemons, as `vic demo` does: one `vic-board` in real

@@ -57,9 +57,12 @@ pub struct CentralOptions {
     /// [range: 0 to 1000]
     #[arg(long, value_name = "MS", value_parser = real(0.0, MAX_LATENCY_MS))]
     pub(crate) command_latency_ms: Option<f64>,
-    /// Loop rate [Hz]. [range: 1 to 1000]
-    #[arg(long, default_value_t = 50, value_parser = whole(1u64, 1000))]
-    pub(crate) rate_hz: u64,
+    /// Loop rate [Hz] (default: the slowest of 50, 100 and 250 Hz whose own delay, three
+    /// periods from computing a knot to its action, fits in the latency, so that the strategy
+    /// executes as the offline Monte Carlo does; 50 Hz for `stiffness` and `replan`).
+    /// [range: 1 to 1000]
+    #[arg(long, value_parser = whole(1u64, 1000))]
+    pub(crate) rate_hz: Option<u64>,
     /// Number of trials. [range: 1 to 100000]
     #[arg(long, default_value_t = 5, value_parser = whole(1usize, MAX_TRIALS as usize))]
     pub(crate) trials: usize,
@@ -128,7 +131,10 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         Some(l) => l,
         None => latency_arg("the plan's delay", plan.summary.delay_ms, base.task.dt)?,
     };
-    let period_ns = 1_000_000_000 / o.rate_hz;
+    let rate_hz = o
+        .rate_hz
+        .unwrap_or_else(|| Timing::planner_rate_hz(o.strategy, latency));
+    let period_ns = 1_000_000_000 / rate_hz;
     let lookahead_ms = Timing::lookahead_ms(period_ns);
     let lines = delay_lines(o, latency, period_ns)?;
     let setup = setup(&base).input()?;
@@ -143,8 +149,8 @@ pub fn run(o: &CentralOptions) -> anyhow::Result<()> {
         lines.sensor_ms,
         lines.command_ms,
         match o.lockstep {
-            true => "in lockstep on a simulated clock".to_string(),
-            false => format!("live in namespace \"{namespace}\" at {} Hz", o.rate_hz),
+            true => format!("in lockstep on a simulated clock at {rate_hz} Hz"),
+            false => format!("live in namespace \"{namespace}\" at {rate_hz} Hz"),
         }
     );
     let (records, lost) = match run_trials(o, ports.as_ref(), &mut central, &setup.x0, period_ns)? {

@@ -33,6 +33,10 @@ pub struct Report {
     /// not diverge (`None` when every trial diverged).
     pub final_error_mean: Option<f64>,
     pub final_error_max: Option<f64>,
+    /// Standard error of `final_error_mean` (`None` with fewer than two trials kept): how far
+    /// two runs of the same strategy with different noise may differ.
+    #[serde(default)]
+    pub final_error_se: Option<f64>,
     /// Trials that ended further than the divergence threshold from the target (or blew up).
     pub diverged: usize,
     pub diverged_fraction: f64,
@@ -102,6 +106,7 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         }
     }
     let kept_errors: Vec<f64> = kept.iter().map(|&i| final_errors[i]).collect();
+    let (final_error_mean, final_error_se) = mean_and_standard_error(&kept_errors);
     let costs: Vec<f64> = kept.iter().map(|&i| trials[i].cost).collect();
     let (cost_mean, cost_se) = mean_and_standard_error(&costs);
     let finite = |v: f64| v.is_finite().then_some(v);
@@ -113,7 +118,8 @@ pub fn summarize(setup: &Setup, trials: &[Trial], divergence: f64) -> Report {
         ellipse_95,
         ellipse_angle_deg: angle,
         rms_error: (n > 0.0).then(|| (sq / n).sqrt()).and_then(finite),
-        final_error_mean: mean_and_standard_error(&kept_errors).0,
+        final_error_mean,
+        final_error_se,
         final_error_max: kept_errors.iter().copied().reduce(f64::max),
         diverged,
         diverged_fraction: diverged as f64 / count,

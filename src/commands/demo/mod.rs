@@ -281,9 +281,9 @@ fn plan_strategies(o: &Args, store: &PlanStore, latency: Latency) -> anyhow::Res
         let stiffness = s.spawn(|| given_or_planned(&o.stiffness_plan, Strategy::Stiffness));
         let stiffness_feedback = s.spawn(|| plan_for(Strategy::StiffnessPredictor, latency));
         let feedback = given_or_planned(&o.feedback_plan, Strategy::NaiveDelayed);
-        // The reference row: central feedback without latency (planned for none, the planner at
-        // 250 Hz so that its own loop adds only a few ms): with 0 ms latency, delayed feedback
-        // works. The same plan is the predictor's undelayed one.
+        // The reference row: central feedback without latency (planned for none, the planner
+        // fast enough that its own loop adds one knot at most): with 0 ms latency, delayed
+        // feedback works. The same plan is the predictor's undelayed one.
         let feedback_at_zero = match latency.is_zero() {
             true => Ok(None),
             false => plan_for(Strategy::NaiveDelayed, Latency::ZERO).map(Some),
@@ -301,32 +301,32 @@ fn plan_strategies(o: &Args, store: &PlanStore, latency: Latency) -> anyhow::Res
     })
 }
 
-/// The rows: naive-delayed at 0 ms (the reference, planner at 250 Hz so that its own loop adds
-/// only a few ms), then the five strategies at the latency (50 Hz).
+/// The rows: naive-delayed at 0 ms (the reference), then the five strategies at the latency,
+/// each with the planner at the rate that gives it its offline meaning
+/// ([`Timing::planner_rate_hz`]: 250 Hz at 0 ms for the feedback strategies, 50 Hz from 60 ms).
 fn strategy_runs(plans: &DemoPlans, latency: Latency) -> Vec<StrategyRun<'_>> {
-    let at = |strategy, plan, latency, rate_hz| StrategyRun {
+    let at = |strategy, plan, latency| StrategyRun {
         strategy,
         plan,
         latency,
-        rate_hz,
+        rate_hz: vic_rt::central::Timing::planner_rate_hz(strategy, latency),
     };
     let mut runs = Vec::new();
     if let Some(p) = &plans.feedback_at_zero {
-        runs.push(at(Strategy::NaiveDelayed, p, Latency::ZERO, 250));
+        runs.push(at(Strategy::NaiveDelayed, p, Latency::ZERO));
     }
     // The predictor runs the undelayed plan's gains on the predicted present (at 0 ms latency
     // the feedback plan is that plan).
     let undelayed = plans.feedback_at_zero.as_ref().unwrap_or(&plans.feedback);
-    runs.push(at(Strategy::NaiveDelayed, &plans.feedback, latency, 50));
-    runs.push(at(Strategy::Predictor, undelayed, latency, 50));
-    runs.push(at(Strategy::Stiffness, &plans.stiffness, latency, 50));
+    runs.push(at(Strategy::NaiveDelayed, &plans.feedback, latency));
+    runs.push(at(Strategy::Predictor, undelayed, latency));
+    runs.push(at(Strategy::Stiffness, &plans.stiffness, latency));
     runs.push(at(
         Strategy::StiffnessPredictor,
         &plans.stiffness_feedback,
         latency,
-        50,
     ));
-    runs.push(at(Strategy::Replan, &plans.stiffness, latency, 50));
+    runs.push(at(Strategy::Replan, &plans.stiffness, latency));
     runs
 }
 
@@ -490,10 +490,12 @@ mod tests {
         assert_eq!(
             rows(&options(0.0), &plans),
             [
-                row("naive-delayed", "f.json", 0.0, 50),
-                row("predictor", "f.json", 0.0, 50),
+                // At 0 ms the feedback strategies' planner is fast (its own delay fits in
+                // one knot); the open-loop plan and the replanner keep the 20 ms period.
+                row("naive-delayed", "f.json", 0.0, 250),
+                row("predictor", "f.json", 0.0, 250),
                 row("stiffness", "s.json", 0.0, 50),
-                row("stiffness+predictor", "sf.json", 0.0, 50),
+                row("stiffness+predictor", "sf.json", 0.0, 250),
                 row("replan", "s.json", 0.0, 50),
             ]
         );

@@ -147,6 +147,7 @@ mod tests {
             latency_ms,
             final_error_mean: v,
             final_error_max: v,
+            final_error_se: None,
             rms_error: v,
             diverged: usize::from(v.is_none()),
             diverged_fraction: if v.is_some() { 0.0 } else { 1.0 },

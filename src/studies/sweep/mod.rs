@@ -12,7 +12,10 @@
 //!
 //! Each point's trials run offline (the Monte Carlo on the plan's grid, Eq. 10) or, with
 //! [`Engine::Lockstep`], through the real-time code: the 1 kHz board with its own plant
-//! integration and the 50 Hz central controller with its delay lines, on a simulated clock.
+//! integration and the central controller with its delay lines, on a simulated clock. The
+//! central controller ticks at 50 Hz, faster where its own delay (three periods) would exceed
+//! the latency ([`vic_rt::central::Timing::planner_rate_hz`]): then a strategy at a latency
+//! feeds back the same states offline, in lockstep and live.
 
 pub use vic_plan::strategy::Strategy;
 
@@ -123,8 +126,8 @@ pub enum Engine {
     #[default]
     Offline,
     /// The board (1 kHz, paper Eq. 4 and its own plant step) and the central controller
-    /// (50 Hz, the latency split into its sensor and command delay lines) in lockstep on a
-    /// simulated clock: the code that runs live, deterministic and as fast as it computes.
+    /// (50 Hz, faster below 60 ms of latency; the latency split into its sensor and command
+    /// delay lines) in lockstep on a simulated clock: the code that runs live, deterministic and as fast as it computes.
     Lockstep,
     /// The daemons themselves: one `vic-board` (real time) for the whole sweep, one
     /// `vic-planner` run per point over iceoryx2, as `vic demo` runs them. Wall-clock time:
@@ -141,6 +144,9 @@ pub struct SweepPoint {
     pub latency_ms: f64,
     pub final_error_mean: Option<f64>,
     pub final_error_max: Option<f64>,
+    /// Standard error of `final_error_mean` over the trials kept (`None` with fewer than two).
+    #[serde(default)]
+    pub final_error_se: Option<f64>,
     pub rms_error: Option<f64>,
     /// Trials that diverged, and their fraction.
     #[serde(default)]
@@ -193,9 +199,9 @@ impl LiveTiming {
 }
 
 /// What a point's trials measured, offline or live (the fields of [`SweepPoint`] of that name;
-/// `final_error`: mean and max, `diverged`: count and fraction).
+/// `final_error`: mean, max and the mean's standard error, `diverged`: count and fraction).
 struct Measured {
-    final_error: (Option<f64>, Option<f64>),
+    final_error: (Option<f64>, Option<f64>, Option<f64>),
     rms_error: Option<f64>,
     diverged: (usize, f64),
     expected_cost_mc: Option<f64>,
@@ -282,8 +288,13 @@ pub fn sweep_latency(
                             }
                         })?;
                     let fraction = r.diverged as f64 / r.trials.max(1) as f64;
+                    // The daemons' report has no spread: the recorded trials give it.
+                    let divergence = opts
+                        .divergence
+                        .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
+                    let se = summarize(&set, &trials, divergence).final_error_se;
                     Measured {
-                        final_error: (r.final_error_mean, r.final_error_max),
+                        final_error: (r.final_error_mean, r.final_error_max, se),
                         rms_error: r.rms_error,
                         diverged: (r.diverged, fraction),
                         expected_cost_mc: r.expected_cost,
@@ -320,7 +331,7 @@ pub fn sweep_latency(
                         .unwrap_or_else(|| Unit::for_model(&s.model).default_divergence());
                     let r = summarize(&set, &trials, divergence);
                     Measured {
-                        final_error: (r.final_error_mean, r.final_error_max),
+                        final_error: (r.final_error_mean, r.final_error_max, r.final_error_se),
                         rms_error: r.rms_error,
                         diverged: (r.diverged, r.diverged_fraction),
                         expected_cost_mc: r.expected_cost_mc,
@@ -335,6 +346,7 @@ pub fn sweep_latency(
                 latency_ms,
                 final_error_mean: m.final_error.0,
                 final_error_max: m.final_error.1,
+                final_error_se: m.final_error.2,
                 rms_error: m.rms_error,
                 diverged: m.diverged.0,
                 diverged_fraction: m.diverged.1,
@@ -396,7 +408,8 @@ impl<'a> LiveRig<'a> {
     }
 
     /// Runs the trials of one point: plan number `i` of the sweep (`plan`) with `strategy` at
-    /// `latency`, the central controller at 50 Hz.
+    /// `latency`, the central controller at the rate that gives the strategy its offline meaning
+    /// ([`vic_rt::central::Timing::planner_rate_hz`]).
     fn point(
         &self,
         i: usize,
@@ -415,7 +428,7 @@ impl<'a> LiveRig<'a> {
             strategy,
             plan: &file,
             latency,
-            rate_hz: 1_000_000_000 / CENTRAL_PERIOD_NS,
+            rate_hz: vic_rt::central::Timing::planner_rate_hz(strategy, latency),
             trials: opts.trials as u64,
             seed: opts.seed,
             trajectories: Some(traj.clone()),
@@ -443,13 +456,13 @@ struct Point {
     latency: Latency,
 }
 
-/// The board's period and the central controller's in lockstep [ns] (1 kHz, 50 Hz).
+/// The board's period in lockstep [ns] (1 kHz).
 const BOARD_PERIOD_NS: u64 = 1_000_000;
-const CENTRAL_PERIOD_NS: u64 = 20_000_000;
 
 /// A point's trials through the board and the central controller in lockstep, as `vic-planner
-/// --lockstep` runs them: the latency split into the sensor and command delay lines beside the
-/// slices' lookahead of two periods.
+/// --lockstep` runs them: at the rate that gives the strategy its offline meaning
+/// ([`Timing::planner_rate_hz`]), the latency split into the sensor and command delay lines
+/// beside the slices' lookahead of two periods.
 fn lockstep_trials(
     s: &Scenario,
     set: &vic_plan::plan::Setup,
@@ -464,7 +477,8 @@ fn lockstep_trials(
         source: e,
     };
     let track = crate::daemons::launch::track(plan, set).map_err(|e| fail(e.into()))?;
-    let timing = Timing::split(point.latency, CENTRAL_PERIOD_NS);
+    let period_ns = 1_000_000_000 / Timing::planner_rate_hz(point.strategy, point.latency);
+    let timing = Timing::split(point.latency, period_ns);
     let mut central = Central::new(track, point.strategy, timing);
     let cfg = crate::daemons::launch::board_config(s, BOARD_PERIOD_NS);
     let mut board =
@@ -473,7 +487,7 @@ fn lockstep_trials(
         &mut board,
         &mut central,
         BOARD_PERIOD_NS,
-        CENTRAL_PERIOD_NS,
+        period_ns,
         opts.trials,
         opts.seed,
     );

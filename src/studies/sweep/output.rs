@@ -160,6 +160,7 @@ mod tests {
             latency_ms: 200.0,
             final_error_mean: error,
             final_error_max: error.map(|e| 2.0 * e),
+            final_error_se: None,
             rms_error: error,
             diverged: usize::from(error.is_none()) * 20,
             diverged_fraction: if error.is_none() { 1.0 } else { 0.0 },

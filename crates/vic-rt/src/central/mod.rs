@@ -36,7 +36,7 @@ pub use compute::{ComputeTiming, ReplanTiming};
 pub use live::{LiveError, run_live};
 pub use lockstep::{lockstep, lockstep_polled};
 pub use runtime::Central;
-pub use timing::{DelayLines, Timing};
+pub use timing::{DelayLines, PLANNER_RATES_HZ, Timing};
 
 use crate::transport::{
     CommandSlice, Control, ControlKind, Header, Interpolation, Knot, MAX_KNOTS, Mode, StateMsg,

@@ -2,6 +2,11 @@
 //! lines on the state and command paths, and how far each slice reaches.
 
 use vic_core::latency::Latency;
+use vic_core::policy::Strategy;
+
+/// The rates the central controller may tick at [Hz], slowest first: each period a whole number
+/// of the board's 1 ms ticks. 50 Hz is the paper's iCub central layer.
+pub const PLANNER_RATES_HZ: [u64; 3] = [50, 100, 250];
 
 /// Timing of the central controller.
 #[derive(Debug, Clone, Copy)]
@@ -38,6 +43,29 @@ impl Timing {
         )
     }
 
+    /// The rate at which the central controller runs `strategy` at `latency` so that the
+    /// strategy means what it means in the offline Monte Carlo: the slowest of
+    /// [`PLANNER_RATES_HZ`] whose own delay fits in the latency. A knot is computed up to one
+    /// and a half lookaheads (three periods) before it acts ([`DelayLines::split`]), so at
+    /// 50 Hz a latency below 60 ms would feed back states older than the `k − D` the plan
+    /// assumes: at 0 ms the gains of an undelayed plan on states 40–60 ms old, which diverge.
+    /// Below the fastest rate's 12 ms the fastest is taken: there knot `k` feeds back the state
+    /// of `k − 1` (the state of knot `k` does not exist before the knot acts; counted as stale).
+    /// The open-loop plan reads no state and the replanner re-solves once a 20 ms central period
+    /// by definition, as offline: both at 50 Hz.
+    pub fn planner_rate_hz(strategy: Strategy, latency: Latency) -> u64 {
+        match strategy {
+            Strategy::Stiffness | Strategy::Replan => PLANNER_RATES_HZ[0],
+            Strategy::NaiveDelayed | Strategy::Predictor | Strategy::StiffnessPredictor => {
+                let own_delay_ms = |hz: u64| 1.5 * Self::lookahead_ms(1_000_000_000 / hz);
+                PLANNER_RATES_HZ
+                    .into_iter()
+                    .find(|&hz| own_delay_ms(hz) <= latency.ms() + 1e-9)
+                    .unwrap_or(PLANNER_RATES_HZ[PLANNER_RATES_HZ.len() - 1])
+            }
+        }
+    }
+
     /// How far past its arrival a slice reaches [ms]: two planner periods.
     pub fn lookahead_ms(planner_period_ns: u64) -> f64 {
         2.0 * planner_period_ns as f64 * 1e-6
@@ -60,6 +88,48 @@ impl DelayLines {
         DelayLines {
             sensor_ms: rest / 2.0,
             command_ms: rest / 2.0,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_planner_ticks_fast_enough_for_its_own_delay_to_fit_in_the_latency() {
+        let at = |ms: f64| Latency::from_ms(ms, 0.01).expect("on the grid");
+        let rate = |s, ms| Timing::planner_rate_hz(s, at(ms));
+        for s in [
+            Strategy::NaiveDelayed,
+            Strategy::Predictor,
+            Strategy::StiffnessPredictor,
+        ] {
+            for ms in [0.0, 10.0, 20.0, 30.0, 50.0, 60.0, 100.0, 200.0] {
+                let hz = rate(s, ms);
+                let period_ns = 1_000_000_000 / hz;
+                let own = 1.5 * Timing::lookahead_ms(period_ns);
+                // Its own delay fits (or it is the fastest rate) ...
+                assert!(own <= ms || hz == 250, "{s:?} {ms} ms: {hz} Hz");
+                // ... and no slower rate would fit: the slowest that does.
+                let slower = PLANNER_RATES_HZ.iter().filter(|&&r| r < hz);
+                for &r in slower {
+                    assert!(1.5 * Timing::lookahead_ms(1_000_000_000 / r) > ms);
+                }
+                // The delay lines then take the rest of the latency: states of k − D exactly.
+                let lines = DelayLines::split(at(ms), period_ns);
+                if own <= ms {
+                    let total = lines.sensor_ms + lines.command_ms + own;
+                    assert!((total - ms).abs() < 1e-9, "{s:?} {ms} ms: {lines:?}");
+                }
+            }
+            assert_eq!(rate(s, 0.0), 250);
+            assert_eq!(rate(s, 30.0), 100);
+            assert_eq!(rate(s, 60.0), 50);
+        }
+        // The open-loop plan and the replanner keep the paper's 20 ms central period.
+        for s in [Strategy::Stiffness, Strategy::Replan] {
+            assert_eq!(rate(s, 0.0), 50);
         }
     }
 }
