@@ -206,6 +206,20 @@ class Plan:
         when it cannot be read, is not a plan, or its arrays do not fit together."""
         return cls(_vic.Plan.load(os.fspath(path)))
 
+    def predict_open_loop(self, scenario: Union[Scenario, PathLike]) -> Dict[str, Any]:
+        """The plan's commands executed open loop (gains ignored) on ``scenario``, predicted
+        without sampling by propagating the state's mean and covariance (the moments of the
+        Euler–Maruyama plant, Eq. 10): ``mean`` (N+1, n) the mean state at each knot,
+        ``final_covariance`` (n, n) and ``expected_cost`` (on the plan's own scenario, the
+        summary's ``open_loop_expected_cost``). Raises :class:`PlanError` when the plan does not
+        fit the scenario."""
+        out = self._p.predict_open_loop(_scenario(scenario))
+        return {
+            "mean": _array(out["mean"]),
+            "final_covariance": _array(out["final_covariance"]),
+            "expected_cost": out["expected_cost"],
+        }
+
     def with_arrays(self, u=None, x=None, gains=None) -> "Plan":
         """The same plan with ``u`` (N, m), ``x`` (N+1, n) or ``gains`` (N, m, n) replaced, e.g.
         the stiffness scaled to simulate what it buys. Each must have the shape of the array it

@@ -229,6 +229,41 @@ impl Plan {
         self.file.version
     }
 
+    /// The plan's commands executed open loop on `scenario`, predicted by mean and covariance
+    /// propagation (the moments of Eq. 10): the mean states at the knots `("<f8", (N+1, n), …)`,
+    /// the final covariance `(n, n)` and the expected cost.
+    fn predict_open_loop<'py>(
+        &self,
+        py: Python<'py>,
+        scenario: PyRef<'py, Scenario>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (s, file) = (&scenario.inner, &self.file);
+        let prediction = detached(py, move || {
+            let fail = |e: vic_plan::plan::PlanError| {
+                Failure::Plan(format!("the plan on {}: {e}", s.source.display()))
+            };
+            let setup = vic_plan::plan::setup(s).map_err(fail)?;
+            let policy = file.policy(&setup).map_err(fail)?;
+            Ok(vic_plan::plan::predict_open_loop(&setup, &policy.acting))
+        })?;
+        let nx = self.nx();
+        let mean: Vec<f64> = prediction
+            .mean
+            .iter()
+            .flat_map(|m| m.iter().copied())
+            .collect();
+        let cov: Vec<f64> = prediction
+            .final_covariance
+            .row_iter()
+            .flat_map(|r| r.iter().copied().collect::<Vec<_>>())
+            .collect();
+        let d = PyDict::new(py);
+        d.set_item("mean", array(py, &[prediction.mean.len(), nx], &mean)?)?;
+        d.set_item("final_covariance", array(py, &[nx, nx], &cov)?)?;
+        d.set_item("expected_cost", prediction.expected_cost)?;
+        Ok(d)
+    }
+
     /// The same plan with some arrays replaced (each `(shape, bytes)` of float64, the shape of
     /// the one it replaces, every entry finite); the summary stays the original's.
     #[pyo3(signature = (u = None, x = None, gains = None))]

@@ -464,3 +464,22 @@ def test_the_examples_compute_without_matplotlib(monkeypatch, tmp_path):
     assert list(sw["latency_ms"]) == [0.0, 50.0]
     # The open-loop plan sees no latency: the same trials at every latency.
     assert sw["final_error_mean"][0] == sw["final_error_mean"][1]
+
+
+def test_the_open_loop_prediction_is_the_plans_and_the_trials_mean():
+    """The predicted open-loop moments: on the plan's own scenario the expected cost and final
+    covariance are the plan summary's (computed alike when planning), and the predicted mean is
+    the mean of 400 trials executed open loop within 4 standard errors at every knot."""
+    s = vic.Scenario.load(CONFIG / "single_joint_delay.toml", set={"task.duration": 1.0})
+    p = vic.plan(s, method="sooc")
+    pred = p.predict_open_loop(s)
+    assert pred["expected_cost"] == p.open_loop_expected_cost
+    assert np.array_equal(pred["final_covariance"], p.open_loop_final_covariance)
+    sim = vic.simulate(s, p, policy="open-loop", trials=400, seed=5)
+    mc_mean = sim.x.mean(axis=0)
+    se = sim.x.std(axis=0, ddof=1) / np.sqrt(400)
+    assert pred["mean"].shape == mc_mean.shape
+    assert (np.abs(mc_mean - pred["mean"]) <= 4 * se + 1e-9).all()
+    # and the sample covariance of the final state agrees with the predicted one to 20 %
+    final = sim.x[:, -1, :2]
+    assert np.allclose(np.cov(final.T), pred["final_covariance"][:2, :2], rtol=0.2)
