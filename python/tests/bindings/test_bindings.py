@@ -483,3 +483,18 @@ def test_the_open_loop_prediction_is_the_plans_and_the_trials_mean():
     # and the sample covariance of the final state agrees with the predicted one to 20 %
     final = sim.x[:, -1, :2]
     assert np.allclose(np.cov(final.T), pred["final_covariance"][:2, :2], rtol=0.2)
+
+
+def test_the_wheel_holds_the_live_client_as_vic_live():
+    """vic.live is the client of python/vic_client, shipped in the same installed package (not
+    taken from the checkout: no PYTHONPATH)."""
+    pytest.importorskip("iceoryx2")
+    import vic.live
+    import vic_client
+
+    assert vic.live.Board is vic_client.Board
+    installed = Path(vic.__file__).parent.parent
+    assert Path(vic_client.__file__).parent.parent == installed
+    assert (installed / "vic_client" / "protocol.py").read_text() == (
+        ROOT / "python/vic_client/protocol.py").read_text()
+    assert vic.live.MAX_JOINTS == vic_client.MAX_JOINTS
