@@ -85,6 +85,14 @@ def _array_in(name: str, a: Any):
     return (list(arr.shape), arr.tobytes())
 
 
+def _seed(seed: Any) -> int:
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
+        raise TypeError(f"seed must be a whole number, not {type(seed).__name__}")
+    if not 0 <= int(seed) < 2**64:
+        raise ValueError(f"seed={seed}: 0 to 2**64 - 1")
+    return int(seed)
+
+
 def _scenario(scenario: Any) -> Scenario:
     if isinstance(scenario, Scenario):
         return scenario
@@ -322,7 +330,7 @@ def simulate(
         plan._p,
         policy,
         int(trials),
-        seed,
+        _seed(seed),
         None if latency_ms is None else float(latency_ms),
         None if divergence is None else float(divergence),
     )
@@ -378,7 +386,7 @@ def sweep_latency(
         [float(v) for v in latencies_ms],
         [str(s) for s in strategies],
         int(trials),
-        seed,
+        _seed(seed),
         None if divergence is None else float(divergence),
         None if pulse is None else [float(t) for t in pulse],
         float(pulse_at_ms),

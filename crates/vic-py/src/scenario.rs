@@ -8,7 +8,10 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 use std::path::{Path, PathBuf};
 
-/// A validated scenario (the private class under `vic.Scenario`).
+/// A scenario: the plant, actuator, field, noise, cost and task of a TOML file (config/),
+/// validated, with its overrides. `Scenario.load(path, set={"noise.sigma": 0.02})` reads one;
+/// `dof`, `nx`, `nu`, `dt` [s], `steps`, `duration` [s], `delay_ms` [ms], `method` and `config`
+/// (the configuration after the overrides) describe it.
 #[pyclass(frozen, module = "vic._vic", name = "Scenario")]
 pub(crate) struct Scenario {
     pub(crate) inner: vic_plan::scenario::Scenario,
@@ -59,7 +62,11 @@ fn overrides(set: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<String>> {
 
 #[pymethods]
 impl Scenario {
-    /// Loads and validates a scenario file, with `set` overrides.
+    /// Loads and validates the scenario file at `path` (a missing `config/NAME.toml` is the
+    /// built-in copy), with `set` overrides `{"section.key": value}` (`vic plan --set
+    /// section.key=value`): a bool, int, finite float, list of those, or a str read as the
+    /// command line reads the text after `=`. Raises `ScenarioReadError`, `ScenarioSyntaxError`,
+    /// `ScenarioKeyError` (naming the file and `[section] key`) or `OverrideError`.
     #[staticmethod]
     #[pyo3(signature = (path, set = None))]
     fn load(py: Python<'_>, path: PathBuf, set: Option<&Bound<'_, PyAny>>) -> PyResult<Scenario> {
@@ -96,42 +103,52 @@ impl Scenario {
         })
     }
 
+    /// The file, as given.
     #[getter]
     fn path(&self) -> String {
         self.path.display().to_string()
     }
+    /// The overrides as `section.key=value`, as `--set` takes them.
     #[getter]
     fn overrides(&self) -> Vec<String> {
         self.overrides.clone()
     }
+    /// Joints: 1 (single joint) or 2 (two-link arm).
     #[getter]
     fn dof(&self) -> usize {
         self.inner.model.dof()
     }
+    /// State dimension n: angles and velocities (and a VSA's motor angles and speeds).
     #[getter]
     fn nx(&self) -> usize {
         self.inner.model.nx()
     }
+    /// Control dimension m: torques (and stiffnesses).
     #[getter]
     fn nu(&self) -> usize {
         self.inner.model.nu()
     }
+    /// Time step Δ of the plan [s].
     #[getter]
     fn dt(&self) -> f64 {
         self.inner.task.dt
     }
+    /// Steps N = duration / Δ.
     #[getter]
     fn steps(&self) -> usize {
         self.inner.task.steps
     }
+    /// Movement duration [s].
     #[getter]
     fn duration(&self) -> f64 {
         self.inner.task.duration
     }
+    /// The central feedback delay an ILQG plan is made for [ms].
     #[getter]
     fn delay_ms(&self) -> f64 {
         self.inner.task.delay_ms
     }
+    /// The `[solver] method`: "ilqg" or "sooc".
     #[getter]
     fn method(&self) -> &'static str {
         self.inner.solver.method.name()

@@ -365,6 +365,8 @@ def test_bad_arguments_of_plan_and_simulate():
         vic.simulate(s, p, trials=1)
     with raises(TypeError, "trials"):
         vic.simulate(s, p, trials="3")
+    with raises(ValueError, "seed=-1"):
+        vic.simulate(s, p, seed=-1)
     with raises(ValueError, "policy", "open-loop"):
         vic.simulate(s, p, policy="closed")
     with raises(TypeError, "plan must be a vic.Plan"):
