@@ -191,7 +191,7 @@ def test_an_edited_plan_simulates_what_it_holds():
 
 def test_the_solver_runs_without_the_gil():
     """While a plan is solved in one thread, the main thread keeps running Python: the longest
-    pause between its steps inside the solve is a small part of the solve (with the GIL held
+    pause between its steps inside the solve is a part of the solve (with the GIL held
     for the whole solve, it would not run at all until the solve ends: one pause as long as the
     solve)."""
     s = vic.Scenario.load(CONFIG / "two_link_divergent.toml")
@@ -213,7 +213,8 @@ def test_the_solver_runs_without_the_gil():
     inside = [t for t in stamps if t0 < t < t1]
     pauses = np.diff([t0, *inside, t1])
     assert t1 - t0 > 0.05, "a solve long enough to tell"
-    assert pauses.max() < 0.5 * (t1 - t0), (pauses.max(), t1 - t0, len(inside))
+    # Held, the pause is the whole solve; three quarters leave room for a loaded machine.
+    assert pauses.max() < 0.75 * (t1 - t0), (pauses.max(), t1 - t0, len(inside))
 
 
 # -- MCAP --------------------------------------------------------------------------------------
