@@ -37,6 +37,16 @@ needs_cli = pytest.mark.skipif(
 )
 
 
+def test_the_installed_package_is_this_checkouts():
+    """The tests run against the installed wheel: one built from another checkout would test
+    other code (rebuild it: python/README.md)."""
+    installed = Path(vic.__file__).parent
+    assert installed != ROOT / "python/vic", "the checkout's python/vic has no extension module"
+    for name in ("__init__.py", "live.py", "_vic.pyi"):
+        assert (installed / name).read_text() == (ROOT / "python/vic" / name).read_text(), (
+            f"the installed vic/{name} is not this checkout's: rebuild and reinstall the wheel")
+
+
 def cli(*args):
     """Runs `vic ARGS`, returns stdout; a failure fails the test with vic's message."""
     out = subprocess.run([VIC_BIN, *map(str, args)], capture_output=True, text=True, timeout=600)
