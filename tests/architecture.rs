@@ -147,13 +147,14 @@ fn graph(src: &Path) -> Graph {
     g
 }
 
-/// Every crate's `src/`: the layers' and the application's.
+/// Every crate's `src/`: the layers', the application's and the Python bindings'.
 fn source_dirs() -> Vec<PathBuf> {
     let mut dirs: Vec<PathBuf> = LAYERS
         .iter()
         .map(|(n, _)| root().join("crates").join(n).join("src"))
         .collect();
     dirs.push(root().join("src"));
+    dirs.push(root().join("crates/vic-py/src"));
     dirs
 }
 

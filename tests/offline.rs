@@ -35,6 +35,7 @@ mod plot;
 mod predicted_cost;
 mod predictor;
 mod protocol;
+mod python_bindings;
 mod readme;
 mod record_format;
 mod replan;

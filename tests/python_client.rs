@@ -10,7 +10,9 @@
 //!   back, every torque the hold law of the previous state; the telemetry agrees; an oversized
 //!   pulse is counted as rejected, not acknowledged;
 //! - `compare`, after the board stopped: every state the client received equals the board's own
-//!   record of that tick (its MCAP file, and the CSV `vic convert` made of it); a plan file loads.
+//!   record of that tick (its MCAP file, and the CSV `vic convert` made of it); a plan file loads;
+//!   with the wheel of the package `vic` installed, `vic.read_mcap` reads that MCAP file to the
+//!   client's values.
 //!
 //! Without `VIC_PYTHON` the test says why it skips (outside CI only).
 
@@ -131,7 +133,43 @@ fn the_python_client_follows_the_protocol_and_matches_the_boards_record() {
         &[Path::new("compare"), &states, &mcap, &csv, &sooc_plan()],
         Duration::from_secs(120),
     );
+    board_recording_through_the_package(&python, &mcap);
     for f in [&mcap, &csv, &states] {
         std::fs::remove_file(f).unwrap();
     }
+}
+
+/// The board's recording read by the package `vic` (`vic.read_mcap`, its own MCAP reader in
+/// crates/vic-py) equals the client's reading of it: python/tests/bindings/board_recording.py,
+/// run without PYTHONPATH so that the installed wheel is imported (CI installs it; elsewhere a
+/// Python without it skips this part, saying so).
+fn board_recording_through_the_package(python: &str, mcap: &Path) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let run = |args: &[&std::ffi::OsStr]| {
+        Command::new(python)
+            .args(args)
+            .env_remove("PYTHONPATH")
+            .current_dir(std::env::temp_dir())
+            .output()
+            .unwrap()
+    };
+    let probe = run(&["-c".as_ref(), "import vic._vic".as_ref()]);
+    if !probe.status.success() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI's {python} has no vic wheel: {}",
+            String::from_utf8_lossy(&probe.stderr)
+        );
+        eprintln!("{python} has no vic wheel: vic.read_mcap of the board's record is not checked");
+        return;
+    }
+    let script = root.join("python/tests/bindings/board_recording.py");
+    let out = run(&[script.as_os_str(), mcap.as_os_str()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("board_recording.py:\n{stdout}");
+    assert!(
+        out.status.success() && stdout.contains(" passed, 0 failed"),
+        "board_recording.py failed:\n{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
