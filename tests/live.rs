@@ -31,6 +31,7 @@ mod protocol_doc;
 mod python_client;
 mod realtime;
 mod record;
+mod record_crash;
 mod record_mcap;
 mod relay_alloc;
 mod status_nodes;
