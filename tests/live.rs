@@ -34,4 +34,5 @@ mod record;
 mod record_crash;
 mod record_mcap;
 mod relay_alloc;
+mod status_counts;
 mod status_nodes;
