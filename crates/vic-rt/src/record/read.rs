@@ -458,7 +458,7 @@ mod tests {
         assert!(bytes.len() as u64 >= *ends.last().unwrap());
         let cut = temp("cut-part");
         let mut last = 0;
-        for k in (ends[0] as usize..=bytes.len()).step_by(11) {
+        for k in (ends[0] as usize..=bytes.len()).step_by(29) {
             std::fs::write(&cut, &bytes[..k]).unwrap();
             let rec = read_recording(&cut).unwrap_or_else(|e| panic!("cut at {k}: {e}"));
             let n = numbers(&rec);
