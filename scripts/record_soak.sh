@@ -19,9 +19,9 @@ cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 
 trap cleanup EXIT
 "$T/vic" plan --config $CFG --method sooc --set $SET --out "$O/plan.json" >/dev/null
 "$T/vic-board" --config $CFG --set $SET --namespace "$ns" --duration-s "$SECS" --json \
-  --record "$O/board.mcap" >"$O/board.json" 2>"$O/board.err" &
+  --record "$O/board.mcap" --record-force >"$O/board.json" 2>"$O/board.err" &
 bp=$!; pids+=("$bp"); sleep 0.3
-"$T/vic" record --namespace "$ns" --out "$O/ext.mcap" --plan "$O/plan.json" --json >"$O/ext.json" 2>"$O/ext.err" &
+"$T/vic" record --namespace "$ns" --out "$O/ext.mcap" --force --plan "$O/plan.json" --json >"$O/ext.json" 2>"$O/ext.err" &
 rp=$!; pids+=("$rp")
 "$T/vic-planner" --config $CFG --set $SET --namespace "$ns" --plan "$O/plan.json" \
   --strategy stiffness --latency-ms 200 --trials 1000000 --json >/dev/null 2>&1 &

@@ -31,6 +31,8 @@ mod protocol_doc;
 mod python_client;
 mod realtime;
 mod record;
+mod record_crash;
 mod record_mcap;
 mod relay_alloc;
+mod status_counts;
 mod status_nodes;

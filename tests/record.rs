@@ -31,6 +31,8 @@ fn building_and_pushing_a_sample_does_not_allocate_even_when_the_queue_is_full()
             capacity: 256,
             joints: 2,
             start_paused: true,
+            // A file left by an interrupted earlier run is replaced.
+            replace: true,
             ..Default::default()
         },
     )

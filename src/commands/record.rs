@@ -15,9 +15,15 @@ use vic_rt::record::{
 pub(crate) struct Args {
     #[command(flatten)]
     namespace: NamespaceArgs,
-    /// The MCAP file to write (truncated if it exists).
+    /// The MCAP file to write: a new file (an existing one is refused without --force; a
+    /// symbolic link is never followed). It is written under a temporary name in the same
+    /// directory and takes this name once the board's first state arrived.
     #[arg(long, value_name = "FILE.mcap")]
     out: PathBuf,
+    /// Replace an existing --out (once the board's first state arrived: a recording that finds
+    /// no board leaves it as it was). A symbolic link is replaced, not followed.
+    #[arg(long)]
+    force: bool,
     /// Stop this many seconds after the board's first state (0: at Ctrl-C / SIGTERM).
     /// [range: 0 to 604800]
     #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = real(0.0, MAX_RUN_S))]
@@ -76,6 +82,7 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
         duration_ns: duration.as_nanos() as u64,
         wait_for_board_ms: wait.as_millis() as u64,
         metadata,
+        replace: a.force,
     };
     let summary = record_namespace(namespace, &a.out, &opts, &stop).map_err(classify)?;
     if a.json.json {
@@ -86,10 +93,11 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
     }
 }
 
-/// A file the user named is their input; a board that is missing or a failed write is the run's.
+/// A file the user named is their input (also one that exists already); a board that is missing
+/// or a failed write (a full disk) is the run's.
 fn classify(e: RecordError) -> anyhow::Error {
     match e {
-        RecordError::Format { .. } => input_error(e),
+        RecordError::Format { .. } | RecordError::Exists { .. } => input_error(e),
         e => anyhow::anyhow!("{e}"),
     }
 }

@@ -52,9 +52,16 @@ pub struct BoardOptions {
     /// Record every tick (state, command in use, disturbances) from a thread outside the loop:
     /// FILE.csv is the log `vic identify --log` reads, FILE.mcap opens in Foxglove and
     /// PlotJuggler (and `vic convert` turns it into the CSV). Gaps (queue full) are marked in
-    /// the file and counted in the statistics.
+    /// the file and counted in the statistics. A new file: an existing one is refused without
+    /// --record-force, a symbolic link never followed. What was written is handed to the
+    /// kernel every 50 ms, so a board killed with SIGKILL leaves a file that `vic convert`
+    /// reads, less its last 50 ms; a full disk is reported at once, the file kept readable,
+    /// and the board runs on.
     #[arg(long, value_name = "FILE.csv|FILE.mcap")]
     pub(crate) record: Option<PathBuf>,
+    /// Replace an existing --record file (a symbolic link is replaced, not followed).
+    #[arg(long, requires = "record")]
+    pub(crate) record_force: bool,
     /// Capacity of the recording queue [ticks]; it is locked in memory with the rest of the
     /// board (the largest, 131072, is 131 s at 1 kHz and about 48 MB). [range: 1 to 131072]
     #[arg(long, value_name = "TICKS", default_value_t = vic_rt::record::DEFAULT_CAPACITY,
@@ -238,10 +245,24 @@ fn start_recorder(
         .map(|(k, v)| (k.to_string(), v))
         .collect(),
         period_ns: 1_000_000_000 / o.rate_hz,
+        replace: o.record_force,
+        report: Some(report_record_error),
     };
     Recorder::start(path, &options)
-        .map_err(|e| format!("--record: {e}"))
+        .map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => format!(
+                "--record {}: it exists already; choose another name, or pass --record-force to \
+                 replace it (a symbolic link is replaced, not followed)",
+                path.display()
+            ),
+            _ => format!("--record: {e}"),
+        })
         .input()
+}
+
+/// Logs a recording that stopped (a full disk) when it happens, from the writer thread.
+fn report_record_error(message: &str) {
+    tracing::error!("--record {message}; the board runs on");
 }
 
 /// Applies the real-time settings to the calling thread (the loop's) and logs what is in force

@@ -20,6 +20,17 @@ use vic_rt::transport::{
 pub(crate) enum OperatorError {
     #[error("no board in namespace \"{0}\" (start one with vic-board --namespace {0})")]
     NoBoard(String),
+    /// A board process is alive but published no telemetry in time.
+    #[error(
+        "namespace \"{namespace}\": the board (vic-board pid {pid}) is not responding: no \
+         telemetry within {waited_ms} ms; {why}"
+    )]
+    NotResponding {
+        namespace: String,
+        pid: u32,
+        waited_ms: u128,
+        why: String,
+    },
     #[error("namespace \"{namespace}\": the board rejected the disturbance ({reason}){hint}")]
     Rejected {
         namespace: String,
@@ -233,6 +244,8 @@ pub(crate) struct Status {
     pub(crate) missed_periods: u64,
     pub(crate) rejected_messages: u64,
     pub(crate) rejected_by_reason: BTreeMap<String, u64>,
+    /// Messages lost before the board saw them (gaps in a sender's sequence numbers).
+    pub(crate) dropped_messages: u64,
     pub(crate) safe_hold_ticks: u64,
     pub(crate) watchdog_trips: u64,
     /// Distance of the joints to the commanded equilibrium [rad].
@@ -266,6 +279,7 @@ impl Status {
             missed_periods: t.missed_periods,
             rejected_messages: t.rejected_messages,
             rejected_by_reason: vic_rt::board::live::rejections_by_name(&t.rejected_by_reason),
+            dropped_messages: t.dropped_messages,
             safe_hold_ticks: t.safe_hold_ticks,
             watchdog_trips: t.watchdog_trips,
             tracking_error: t.tracking_error,
@@ -309,7 +323,8 @@ impl Status {
              command age          {age} µs\n\
              tracking error       {err:.4} rad; stiffness {k:?} N m/rad\n\
              disturbances         τ_ext {tau:?} N m, field β {beta} N/m, noise ×{noise}\n\
-             rejected messages    {rej}{rejected}; safe-hold ticks {hold}, watchdog trips {trips}\
+             rejected messages    {rej}{rejected}; safe-hold ticks {hold}, watchdog trips {trips}\n\
+             dropped messages     {dropped} (lost before the board saw them: sequence gaps)\
              {nodes}",
             ns = self.namespace,
             mode = self.mode,
@@ -327,6 +342,7 @@ impl Status {
             beta = self.field_beta,
             noise = self.noise_factor,
             rej = self.rejected_messages,
+            dropped = self.dropped_messages,
             hold = self.safe_hold_ticks,
             trips = self.watchdog_trips,
         )
@@ -337,7 +353,7 @@ impl Status {
         format!(
             "mode={} tick={} rate_hz={:.1} jitter_p50_us={:.1} jitter_p99_us={:.1} \
              jitter_max_us={:.1} command_age_p50_us={:.0} tracking_error_rad={:.4} \
-             stiffness={:?} tau_ext={:?} rejected={} safe_hold_ticks={}",
+             stiffness={:?} tau_ext={:?} rejected={} dropped={} safe_hold_ticks={}",
             self.mode,
             self.tick,
             self.tick_rate_hz,
@@ -349,6 +365,7 @@ impl Status {
             self.stiffness,
             self.tau_ext,
             self.rejected_messages,
+            self.dropped_messages,
             self.safe_hold_ticks
         )
     }
@@ -403,11 +420,49 @@ pub(crate) fn status(namespace: &str, timeout: Duration) -> Result<Status, Opera
             s.nodes = now;
             Ok(s)
         }
-        Err(e) => Err(OperatorError::WithNodes {
-            namespace: namespace.into(),
-            source: Box::new(e),
-            nodes: describe_nodes(&nodes),
-        }),
+        Err(e) => {
+            // A board process that is alive but silent is not "no board": say what it is.
+            let e = match (e, alive_board(&nodes)) {
+                (OperatorError::NoBoard(_), Some(pid)) => OperatorError::NotResponding {
+                    namespace: namespace.into(),
+                    pid,
+                    waited_ms: timeout.as_millis(),
+                    why: process_state(pid),
+                },
+                (e, _) => e,
+            };
+            Err(OperatorError::WithNodes {
+                namespace: namespace.into(),
+                source: Box::new(e),
+                nodes: describe_nodes(&nodes),
+            })
+        }
+    }
+}
+
+/// The pid of a live `vic-board` node among `nodes`.
+fn alive_board(nodes: &[NodeInfo]) -> Option<u32> {
+    nodes
+        .iter()
+        .find(|n| n.name == "vic-board" && n.state == NodeLiveness::Alive && n.pid != 0)
+        .map(|n| n.pid)
+}
+
+/// What the kernel says process `pid` is doing (the state field of `/proc/PID/stat`).
+fn process_state(pid: u32) -> String {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    // The state follows the command name in parentheses, which may itself hold ") ".
+    let state = stat
+        .rfind(')')
+        .and_then(|i| stat[i + 1..].split_whitespace().next())
+        .unwrap_or("");
+    match state {
+        "T" => format!("it is stopped (SIGSTOP or Ctrl-Z: kill -CONT {pid} resumes it)"),
+        "t" => "it is stopped by a debugger".into(),
+        "Z" => "it has exited (a zombie its parent has not reaped)".into(),
+        "D" => "it is blocked in the kernel (uninterruptible I/O)".into(),
+        "" => "it may have just exited".into(),
+        s => format!("it runs (state {s}) but publishes nothing: hung, or starved of CPU time"),
     }
 }
 

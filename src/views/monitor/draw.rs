@@ -210,12 +210,20 @@ fn draw_loop(frame: &mut Frame, area: Rect, app: &App) {
 
 fn draw_rejections(frame: &mut Frame, area: Rect, app: &App) {
     let total = app.status.as_ref().map_or(0, |s| s.rejected_messages);
-    let rows: Vec<Row> = app
+    let dropped = app.status.as_ref().map_or(0, |s| s.dropped_messages);
+    let mut rows: Vec<Row> = app
         .status
         .iter()
         .flat_map(|s| s.rejected_by_reason.iter())
         .map(|(reason, n)| Row::new([reason.clone(), n.to_string()]))
         .collect();
+    // Messages lost before the board saw them (not rejections: sequence gaps), under the reasons.
+    if dropped > 0 {
+        rows.push(
+            Row::new(["dropped (sequence gaps)".to_string(), dropped.to_string()])
+                .style(Style::new().add_modifier(Modifier::ITALIC)),
+        );
+    }
     let empty = rows.is_empty();
     let table = Table::new(rows, [Constraint::Fill(1), Constraint::Length(8)])
         .header(Row::new(["reason", "count"]).style(Style::new().add_modifier(Modifier::BOLD)))

@@ -130,6 +130,7 @@ fn the_rejections_table_lists_each_reason_with_its_count() {
     t.rejected_by_reason[Rejection::Stale as usize] = 3;
     t.rejected_by_reason[Rejection::TorqueOutOfBounds as usize] = 117;
     t.rejected_messages = 120;
+    t.dropped_messages = 45;
     app.on_telemetry(&t);
     let rows = screen(&app, 120, 40);
     let row_of = |name: &str| {
@@ -143,6 +144,8 @@ fn the_rejections_table_lists_each_reason_with_its_count() {
     let torque = row_of(Rejection::TorqueOutOfBounds.name());
     assert!(torque.contains(" 117 "), "{torque}");
     assert!(row_of("rejected messages: 120").contains("120"));
+    let dropped = row_of("dropped (sequence gaps)");
+    assert!(dropped.contains(" 45 "), "{dropped}");
     // Reasons with no rejection are not listed.
     assert!(!rows.iter().any(|r| r.contains(Rejection::Faulted.name())));
 }

@@ -3,11 +3,15 @@
 
 use super::{RecordOptions, Sample, Sink};
 use std::fmt::Write as _;
-use std::io::{self, Write};
+use std::io::{self, Seek, Write};
 
 /// The CSV file of a recording: a banner, the header, one row per tick, comments for gaps.
 pub(super) struct CsvSink {
-    out: io::BufWriter<std::fs::File>,
+    out: Option<io::BufWriter<std::fs::File>>,
+    /// A duplicate of the file's descriptor (same offset), to cut the file after an error.
+    file: std::fs::File,
+    /// The file's length after the last flush (whole lines only).
+    safe_end: u64,
     line: String,
     joints: usize,
 }
@@ -15,6 +19,7 @@ pub(super) struct CsvSink {
 impl CsvSink {
     /// Writes the banner and the header to `file`.
     pub(super) fn start(file: std::fs::File, opts: &RecordOptions) -> io::Result<CsvSink> {
+        let dup = file.try_clone()?;
         let mut out = io::BufWriter::with_capacity(1 << 16, file);
         writeln!(
             out,
@@ -27,11 +32,22 @@ impl CsvSink {
         out.write_all(header(opts.joints).as_bytes())?;
         out.write_all(b"\n")?;
         out.flush()?;
+        let safe_end = out.get_ref().stream_position()?;
         Ok(CsvSink {
-            out,
+            out: Some(out),
+            file: dup,
+            safe_end,
             line: String::with_capacity(1024),
             joints: opts.joints,
         })
+    }
+}
+
+impl CsvSink {
+    fn out(&mut self) -> io::Result<&mut io::BufWriter<std::fs::File>> {
+        self.out
+            .as_mut()
+            .ok_or_else(|| io::Error::other("the CSV file is already closed"))
     }
 }
 
@@ -43,17 +59,34 @@ impl Sink for CsvSink {
         }
         format_row(&mut self.line, s, t0_ns, self.joints);
         self.line.push('\n');
-        self.out.write_all(self.line.as_bytes())
+        let out = self
+            .out
+            .as_mut()
+            .ok_or_else(|| io::Error::other("the CSV file is already closed"))?;
+        out.write_all(self.line.as_bytes())
     }
     fn gap(&mut self, n: u64, first: u64, _log_time_ns: u64) -> io::Result<()> {
-        gap_line(&mut self.out, n, first)
+        gap_line(self.out()?, n, first)
     }
     fn flush(&mut self) -> io::Result<()> {
-        self.out.flush()
+        let out = self.out()?;
+        out.flush()?;
+        self.safe_end = out.get_ref().stream_position()?;
+        Ok(())
     }
     fn finish(&mut self) -> io::Result<()> {
-        self.out.flush()?;
-        self.out.get_ref().sync_data()
+        self.flush()?;
+        self.out()?.get_ref().sync_data()
+    }
+    /// Cuts the file back to the last flush: whole lines only.
+    fn salvage(&mut self) -> io::Result<u64> {
+        if let Some(out) = self.out.take() {
+            let (file, _buffered) = out.into_parts();
+            drop(file);
+        }
+        self.file.set_len(self.safe_end)?;
+        let _ = self.file.sync_data();
+        Ok(self.safe_end)
     }
 }
 

@@ -23,6 +23,22 @@ pub enum RecordError {
     /// The file is not what was expected (extension, channels, a message that does not decode).
     #[error("{}: {message}", path.display())]
     Format { path: PathBuf, message: String },
+    /// The output exists (a recording never replaces a file without being asked to, and never
+    /// writes through a symbolic link).
+    #[error("{}: {kind} is there already; {}", path.display(), if *replaceable {
+        "choose another name, or pass --force to replace it (a link is replaced, not followed)"
+    } else {
+        "choose another name"
+    })]
+    Exists {
+        path: PathBuf,
+        kind: &'static str,
+        replaceable: bool,
+    },
+    /// Writing stopped (a full disk, an I/O error): what was written up to then was kept and
+    /// the file closed so that it reads back.
+    #[error("{}: {message}", path.display())]
+    Write { path: PathBuf, message: String },
     /// The transport failed (opening the namespace's services).
     #[error(transparent)]
     Transport(#[from] TransportError),

@@ -19,7 +19,8 @@ use mcap::records::{MessageHeader, Metadata};
 use mcap::{Compression, WriteOptions, Writer};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::io::{self, BufWriter};
+use std::fs::File;
+use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 
 /// Topic of the board's per-tick messages.
 pub const TICK_TOPIC: &str = "/board/tick";
@@ -121,42 +122,109 @@ impl<'a> TickMsg<&'a [f64]> {
 }
 
 /// An MCAP file being written: registered channels and a reused message buffer.
+///
+/// Crash safety: [`McapOut::flush`] (every [`FLUSH_INTERVAL`]) closes the chunk in progress and
+/// hands it to the kernel, so a process killed with SIGKILL leaves every chunk up to the last
+/// flush whole; readers recover them from a file without summary or footer
+/// ([`super::read_recording`]). On a write error (a full disk) [`McapOut::salvage`] cuts the
+/// file back to the last flush and closes it with a data-end record, a footer without summary
+/// and the end magic: a valid MCAP that every reader opens.
 pub(crate) struct McapOut {
-    writer: Writer<BufWriter<std::fs::File>>,
+    writer: Option<Writer<BufWriter<File>>>,
+    /// A duplicate of the file's descriptor (the same offset): the end of the last flush, and
+    /// the file to cut and close after a write error.
+    file: File,
+    /// The file's length after the last successful flush.
+    safe_end: u64,
     buf: Vec<u8>,
     sequence: BTreeMap<u16, u32>,
 }
 
+/// How often a recording hands what it wrote to the kernel (a chunk of the MCAP file, the lines
+/// of the CSV): the data a SIGKILL can lose is what was written since (plus what was still
+/// queued, a few milliseconds while the writer keeps up).
+pub const FLUSH_INTERVAL: std::time::Duration = std::time::Duration::from_millis(50);
+
+/// The records that close a data section without a summary: a data-end record (no CRC), a
+/// footer whose summary offsets are 0 (none) and the end magic.
+fn closing_records() -> Vec<u8> {
+    let mut v = Vec::with_capacity(13 + 29 + 8);
+    v.push(0x0F); // data end
+    v.extend_from_slice(&4u64.to_le_bytes());
+    v.extend_from_slice(&0u32.to_le_bytes());
+    v.push(0x02); // footer
+    v.extend_from_slice(&20u64.to_le_bytes());
+    v.extend_from_slice(&0u64.to_le_bytes());
+    v.extend_from_slice(&0u64.to_le_bytes());
+    v.extend_from_slice(&0u32.to_le_bytes());
+    v.extend_from_slice(mcap::MAGIC);
+    v
+}
+
 impl McapOut {
-    /// Starts an MCAP file on `file` with lz4-compressed chunks and writes `metadata`.
-    pub fn start(
-        file: std::fs::File,
-        metadata: &BTreeMap<String, String>,
-    ) -> mcap::McapResult<McapOut> {
+    /// Starts an MCAP file on `file` with lz4-compressed chunks, writes `metadata` and flushes.
+    pub fn start(file: File, metadata: &BTreeMap<String, String>) -> mcap::McapResult<McapOut> {
+        let dup = file.try_clone()?;
         let writer = WriteOptions::new()
             .compression(Some(Compression::Lz4))
             .profile(PROFILE)
             .library(format!("vic {} (mcap crate)", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::with_capacity(1 << 16, file))?;
         let mut out = McapOut {
-            writer,
+            writer: Some(writer),
+            file: dup,
+            safe_end: 0,
             buf: Vec::with_capacity(4096),
             sequence: BTreeMap::new(),
         };
-        out.writer.write_metadata(&Metadata {
+        out.writer()?.write_metadata(&Metadata {
             name: METADATA_NAME.into(),
             metadata: metadata.clone(),
         })?;
+        out.flush()?;
         Ok(out)
+    }
+
+    fn writer(&mut self) -> mcap::McapResult<&mut Writer<BufWriter<File>>> {
+        self.writer
+            .as_mut()
+            .ok_or_else(|| mcap::McapError::Io(io::Error::other("the MCAP file is already closed")))
+    }
+
+    /// Closes the chunk in progress and writes everything to the file (not synced to disk:
+    /// what a killed process leaves, not what a power cut leaves).
+    pub fn flush(&mut self) -> mcap::McapResult<()> {
+        self.writer()?.flush()?;
+        self.safe_end = self.file.stream_position()?;
+        Ok(())
+    }
+
+    /// After a write error: drops what was written since the last flush, closes the file as a
+    /// valid MCAP without summary (see [`McapOut`]) and syncs it. Returns the bytes kept. If
+    /// even the closing records do not fit, the file ends at the last flush, which the readers
+    /// of [`super::read_recording`] still read.
+    pub fn salvage(&mut self) -> io::Result<u64> {
+        if let Some(w) = self.writer.take() {
+            // Discards the buffered bytes; nothing more is written through the writer.
+            let (file, _buffered) = w.into_inner().into_parts();
+            drop(file);
+        }
+        self.file.set_len(self.safe_end)?;
+        self.file.seek(SeekFrom::Start(self.safe_end))?;
+        let closing = closing_records();
+        if let Err(e) = self.file.write_all(&closing) {
+            let _ = self.file.set_len(self.safe_end);
+            return Err(e);
+        }
+        let _ = self.file.sync_data();
+        Ok(self.safe_end + closing.len() as u64)
     }
 
     /// Registers the schema and channel of `spec`; returns the channel id.
     pub fn channel(&mut self, spec: &ChannelSpec) -> mcap::McapResult<u16> {
-        let schema = self
-            .writer
-            .add_schema(spec.schema, "jsonschema", &spec.json_schema())?;
-        self.writer
-            .add_channel(schema, spec.topic, "json", &BTreeMap::new())
+        let writer = self.writer()?;
+        let schema = writer.add_schema(spec.schema, "jsonschema", &spec.json_schema())?;
+        writer.add_channel(schema, spec.topic, "json", &BTreeMap::new())
     }
 
     /// Writes `value` as JSON on `channel` at `log_time_ns` (published at `publish_time_ns`).
@@ -178,24 +246,34 @@ impl McapOut {
             log_time: log_time_ns,
             publish_time: publish_time_ns,
         };
-        self.writer.write_to_known_channel(&header, &self.buf)
+        let writer = self.writer.as_mut().ok_or_else(|| {
+            mcap::McapError::Io(io::Error::other("the MCAP file is already closed"))
+        })?;
+        writer.write_to_known_channel(&header, &self.buf)
     }
 
     /// Writes a second metadata record (a summary at the end of a recording).
     pub fn metadata(&mut self, name: &str, m: BTreeMap<String, String>) -> mcap::McapResult<()> {
-        self.writer.write_metadata(&Metadata {
+        self.writer()?.write_metadata(&Metadata {
             name: name.into(),
             metadata: m,
         })
     }
 
     /// Writes the summary and the footer, flushes and syncs the file.
-    pub fn finish(mut self) -> mcap::McapResult<()> {
-        self.writer.finish()?;
-        let out = self.writer.into_inner();
-        let file = out.into_inner().map_err(|e| e.into_error())?;
-        file.sync_data()?;
+    pub fn finish(&mut self) -> mcap::McapResult<()> {
+        self.writer()?.finish()?;
+        if let Some(w) = self.writer.take() {
+            let file = w.into_inner().into_inner().map_err(|e| e.into_error())?;
+            file.sync_data()?;
+        }
         Ok(())
+    }
+
+    /// The file's length after the last flush.
+    #[cfg(test)]
+    pub fn flushed_bytes(&self) -> u64 {
+        self.safe_end
     }
 }
 
@@ -219,6 +297,7 @@ impl McapSink {
         let mut out = McapOut::start(file, &metadata)?;
         let tick = out.channel(&TICK)?;
         let gap = out.channel(&GAP)?;
+        out.flush()?;
         Ok(McapSink {
             out: Some(out),
             tick,
@@ -233,30 +312,41 @@ impl McapSink {
     }
 }
 
+/// An MCAP error as an I/O error, the OS error (ENOSPC, …) kept when there is one.
+pub(crate) fn to_io(e: mcap::McapError) -> io::Error {
+    match e {
+        mcap::McapError::Io(e) => e,
+        e => io::Error::other(e),
+    }
+}
+
 impl Sink for McapSink {
     fn sample(&mut self, s: &Sample, t0_ns: u64) -> io::Result<()> {
         let (channel, joints) = (self.tick, self.joints);
         let msg = TickMsg::of(s, t0_ns, joints);
         self.out()?
             .write(channel, s.deadline_ns, s.deadline_ns, &msg)
-            .map_err(io::Error::other)
+            .map_err(to_io)
     }
     fn gap(&mut self, n: u64, first: u64, log_time_ns: u64) -> io::Result<()> {
         let channel = self.gap;
         let msg = gap_json(first, n, "recording queue full");
         self.out()?
             .write(channel, log_time_ns, log_time_ns, &msg)
-            .map_err(io::Error::other)
+            .map_err(to_io)
     }
-    /// Chunks close by size (the library's default, under a megabyte): closing one every
-    /// 100 ms would cost compression for little.
+    /// Closes the chunk in progress: one small chunk per flush interval (about 50 ticks at
+    /// 1 kHz), so that a killed board leaves all but the last interval readable.
     fn flush(&mut self) -> io::Result<()> {
-        Ok(())
+        self.out()?.flush().map_err(to_io)
     }
     fn finish(&mut self) -> io::Result<()> {
-        match self.out.take() {
-            Some(out) => out.finish().map_err(io::Error::other),
+        match self.out.as_mut() {
+            Some(out) => out.finish().map_err(to_io),
             None => Ok(()),
         }
+    }
+    fn salvage(&mut self) -> io::Result<u64> {
+        self.out()?.salvage()
     }
 }

@@ -8,6 +8,13 @@
 //! counted, never silently: the file marks the gap (see below), and [`Recorder::finish`] returns
 //! the ticks written and dropped.
 //!
+//! The writer hands what it wrote to the kernel every [`FLUSH_INTERVAL`] (50 ms: the MCAP chunk
+//! in progress is closed, the CSV lines written out), so a process killed with SIGKILL leaves a
+//! file that [`read_recording`] (and `vic convert`) reads, less the last interval. A write error
+//! (a full disk) cuts the file back to the last flush and closes it readable, is reported at
+//! once ([`RecordOptions::report`]) and leaves the loop undisturbed. The file is created new
+//! ([`file::create_new`]: never over an existing file unless asked to, never through a link).
+//!
 //! # File format
 //!
 //! The log format that `vic identify`'s reader reads (so `vic identify --log FILE.csv`
@@ -39,6 +46,7 @@
 mod csv;
 mod error;
 mod external;
+pub mod file;
 pub(crate) mod mcap_file;
 mod read;
 mod schema;
@@ -46,8 +54,11 @@ mod schema;
 pub use csv::{EXTRA_COLUMN_PREFIX, LOG_COLUMNS, LOG_HEADER, header};
 pub use error::RecordError;
 pub use external::{ExternalOptions, ExternalSummary, TopicCount, record_namespace};
-pub use mcap_file::{GAP_TOPIC, TICK_TOPIC};
-pub use read::{BoardRecording, read_board_mcap, write_csv};
+pub use mcap_file::{FLUSH_INTERVAL, GAP_TOPIC, TICK_TOPIC};
+pub use read::{
+    BoardRecording, Recording, StatesCsv, board_recording, read_board_mcap, read_recording,
+    write_csv, write_states_csv,
+};
 
 use crate::transport::MAX_JOINTS;
 use csv::CsvSink;
@@ -185,6 +196,12 @@ pub struct RecordOptions {
     pub metadata: std::collections::BTreeMap<String, String>,
     /// The tick period [ns] (the MCAP file's metadata, and the log time of a trailing gap).
     pub period_ns: u64,
+    /// Replace an existing file (the entry: a symbolic link is replaced, never followed);
+    /// without it an existing file is an error and stays untouched.
+    pub replace: bool,
+    /// Called once from the writer thread when writing fails (a full disk), with the message
+    /// that names the file, the error and what the file keeps; the loop is not disturbed.
+    pub report: Option<fn(&str)>,
 }
 
 impl Default for RecordOptions {
@@ -196,6 +213,8 @@ impl Default for RecordOptions {
             start_paused: false,
             metadata: Default::default(),
             period_ns: 1_000_000,
+            replace: false,
+            report: None,
         }
     }
 }
@@ -232,7 +251,8 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Creates `path` (truncating it) in the format of its extension ([`RecordFormat`]), writes
+    /// Creates `path` (a new file: an existing one is refused unless [`RecordOptions::replace`]; a
+    /// symbolic link is never followed) in the format of its extension ([`RecordFormat`]), writes
     /// the file's header (the CSV's banner and column names, the MCAP's schemas, channels and
     /// metadata), and starts the writer thread. The queue is allocated here, once.
     pub fn start(path: &Path, opts: &RecordOptions) -> io::Result<Recorder> {
@@ -248,8 +268,14 @@ impl Recorder {
         }
         let format = RecordFormat::from_path(path)
             .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
-        let file = std::fs::File::create(path)
-            .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
+        let file = file::create_new(path, opts.replace).map_err(|e| {
+            let kind = match &e {
+                RecordError::Io { source, .. } => source.kind(),
+                RecordError::Exists { .. } => io::ErrorKind::AlreadyExists,
+                _ => io::ErrorKind::Other,
+            };
+            io::Error::new(kind, e.to_string())
+        })?;
         let sink: Box<dyn Sink> = match format {
             RecordFormat::Csv => Box::new(CsvSink::start(file, opts)?),
             RecordFormat::Mcap => Box::new(McapSink::start(file, opts).map_err(io::Error::other)?),
@@ -263,9 +289,10 @@ impl Recorder {
         });
         let writer = {
             let shared = shared.clone();
+            let (path, report) = (path.to_path_buf(), opts.report);
             std::thread::Builder::new()
                 .name("vic-record".into())
-                .spawn(move || write_loop(rx, sink, &shared))?
+                .spawn(move || write_loop(rx, sink, &shared, &path, report))?
         };
         Ok(Recorder {
             producer: RecordProducer {
@@ -335,19 +362,84 @@ trait Sink: Send {
     fn sample(&mut self, s: &Sample, t0_ns: u64) -> io::Result<()>;
     /// Marks `n` ticks lost from tick `first` on, noticed at `log_time_ns`.
     fn gap(&mut self, n: u64, first: u64, log_time_ns: u64) -> io::Result<()>;
-    /// Makes what was written so far readable (called every 100 ms).
+    /// Hands what was written so far to the kernel, readable as it is (every
+    /// [`FLUSH_INTERVAL`]).
     fn flush(&mut self) -> io::Result<()>;
     /// Completes the file and syncs it to disk.
     fn finish(&mut self) -> io::Result<()>;
+    /// After a write error: cuts the file back to the last flush and closes it readable;
+    /// returns its length.
+    fn salvage(&mut self) -> io::Result<u64>;
 }
 
-/// The writer thread: pops samples, writes them, marks gaps, flushes every 100 ms.
+/// The writer thread's progress, kept across an error.
+#[derive(Default)]
+struct Progress {
+    summary: RecordSummary,
+    /// The last tick written before the last successful flush (what a salvaged file keeps).
+    flushed_tick: u64,
+}
+
+/// The writer thread: pops samples, writes them, marks gaps, flushes every [`FLUSH_INTERVAL`].
+/// A write error (a full disk) stops the writing, not the loop: the file is cut back to the
+/// last flush and closed readable, the error is reported at once through `report`, and the
+/// queue is emptied (the samples discarded) until [`Recorder::finish`], which returns the error.
 fn write_loop(
     mut rx: rtrb::Consumer<Sample>,
     mut sink: Box<dyn Sink>,
     shared: &Shared,
+    path: &Path,
+    report: Option<fn(&str)>,
 ) -> io::Result<RecordSummary> {
-    let mut summary = RecordSummary::default();
+    let mut p = Progress::default();
+    let Err(e) = write_all(&mut rx, sink.as_mut(), shared, &mut p) else {
+        return Ok(p.summary);
+    };
+    let kept = sink.salvage();
+    let (first, last) = (p.summary.first_tick, p.flushed_tick);
+    let detail = format!(
+        "{}: recording stopped at tick {}; {}",
+        file::describe(&e),
+        p.summary.last_tick + 1,
+        match kept {
+            Ok(_) if last >= first && last > 0 => format!(
+                "the file keeps ticks {first} to {last} and is closed readable (vic convert reads it)"
+            ),
+            Ok(_) => "the file holds no tick and is closed readable".into(),
+            Err(e2) => format!(
+                "closing the file failed too ({}): it keeps the ticks up to {last}, which vic convert recovers",
+                file::describe(&e2)
+            ),
+        }
+    );
+    if let Some(report) = report {
+        report(&format!("{}: {detail}", path.display()));
+    }
+    // Keep the queue empty so that the loop's pushes stay cheap; nothing more is written.
+    let mut discarded = 0u64;
+    loop {
+        let done = shared.done.load(Ordering::Acquire);
+        while rx.pop().is_ok() {
+            discarded += 1;
+        }
+        if done {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    Err(io::Error::new(
+        e.kind(),
+        format!("{detail}; {discarded} later tick(s) were not recorded"),
+    ))
+}
+
+fn write_all(
+    rx: &mut rtrb::Consumer<Sample>,
+    sink: &mut dyn Sink,
+    shared: &Shared,
+    p: &mut Progress,
+) -> io::Result<()> {
+    let summary = &mut p.summary;
     let mut t0_ns = None;
     let mut last_deadline_ns = 0;
     let mut last_flush = std::time::Instant::now();
@@ -383,8 +475,11 @@ fn write_loop(
             summary.written += 1;
             summary.last_tick = s.tick;
             last_deadline_ns = s.deadline_ns;
+            if last_flush.elapsed() >= FLUSH_INTERVAL {
+                break;
+            }
         }
-        if done {
+        if done && rx.is_empty() {
             let trailing = shared.trailing_drops.load(Ordering::Relaxed);
             if trailing > 0 {
                 sink.gap(trailing, summary.last_tick + 1, last_deadline_ns)?;
@@ -392,10 +487,12 @@ fn write_loop(
                 summary.gaps += 1;
             }
             sink.finish()?;
-            return Ok(summary);
+            p.flushed_tick = summary.last_tick;
+            return Ok(());
         }
-        if last_flush.elapsed() >= Duration::from_millis(100) {
+        if last_flush.elapsed() >= FLUSH_INTERVAL {
             sink.flush()?;
+            p.flushed_tick = summary.last_tick;
             last_flush = std::time::Instant::now();
         }
         if popped == 0 {
