@@ -265,3 +265,44 @@ fn a_late_board_tick_is_counted_and_leaves_the_open_loop_plant_where_it_was() {
     assert_eq!(on_time.u[..30], late.u[..30]);
     assert_ne!(on_time.u[30..], late.u[30..]);
 }
+
+#[test]
+fn at_its_own_rate_the_planner_feeds_back_the_state_of_k_minus_d_at_every_latency() {
+    // The planner's default rate (`Timing::planner_rate_hz`) leaves every knot's feedback on the
+    // state of k − D (at 0 ms the knot before: the freshest that exists), so no knot counts as
+    // stale; at 50 Hz below 60 ms the states are older, and counted.
+    let (s, set, p) = joint(0.0);
+    let stale = |strategy, latency_ms: f64, rate_hz: u64| -> usize {
+        let track = Track::new(
+            p.policy(&set).expect("policy"),
+            set.dynamics.clone(),
+            set.cost.clone(),
+            &set.x0,
+        )
+        .unwrap();
+        let latency = Latency::from_ms(latency_ms, s.task.dt).expect("whole steps");
+        let period_ns = 1_000_000_000 / rate_hz;
+        let mut central = Central::new(track, strategy, Timing::split(latency, period_ns));
+        let cfg = vic::daemons::launch::board_config(&s, 1_000_000);
+        let mut board = Board::new(s.model.clone(), cfg, &set.x0).expect("board");
+        let recs = lockstep(&mut board, &mut central, 1_000_000, period_ns, 1, 3);
+        recs[0].stale_feedback
+    };
+    for strategy in [Strategy::NaiveDelayed, Strategy::Predictor] {
+        for ms in [0.0, 10.0, 20.0, 30.0, 50.0, 60.0, 100.0] {
+            let latency = Latency::from_ms(ms, s.task.dt).unwrap();
+            let hz = Timing::planner_rate_hz(strategy, latency);
+            assert_eq!(
+                stale(strategy, ms, hz),
+                0,
+                "{strategy:?} at {ms} ms, {hz} Hz"
+            );
+        }
+        for ms in [0.0, 30.0] {
+            assert!(
+                stale(strategy, ms, 50) > 10,
+                "{strategy:?} at {ms} ms, 50 Hz"
+            );
+        }
+    }
+}

@@ -124,7 +124,8 @@ pub struct TrialRecord {
     pub x: Vec<DVector<f64>>,
     /// Commands sent per knot.
     pub u: Vec<DVector<f64>>,
-    /// Knots whose feedback used a state older than the latency.
+    /// Knots whose feedback used a state older than the latency (at 0 ms: older than the knot
+    /// before, the freshest state that can exist when a knot is computed).
     pub stale_feedback: usize,
     /// Knots with no state recorded.
     pub missing_states: usize,
@@ -363,14 +364,25 @@ impl Controller {
     /// sensor line, else the freshest older one (counted in `stale_feedback`); none before `D`.
     fn seen_for(&mut self, k: usize) -> Option<(usize, [f64; MAX_NX])> {
         let j = self.feedback().seen_knot(k)?;
+        // Without latency the state of knot `k` cannot exist before the knot is computed: the
+        // state of `k − 1` is the freshest any controller can have, and using it is not stale.
+        let possible = match self.timing.latency_steps {
+            0 => j.checked_sub(1),
+            _ => Some(j),
+        };
+        let stale = |used: Option<usize>| match (used, possible) {
+            (_, None) => false,
+            (None, Some(_)) => true,
+            (Some(l), Some(p)) => l < p,
+        };
         match (self.seen[j], self.latest_seen) {
             (Some(x), _) => Some((j, x)),
             (None, Some(l)) if l < j => {
-                self.stale_feedback += 1;
+                self.stale_feedback += usize::from(stale(Some(l)));
                 self.seen[l].map(|x| (l, x))
             }
             _ => {
-                self.stale_feedback += 1;
+                self.stale_feedback += usize::from(stale(None));
                 None
             }
         }
