@@ -38,7 +38,7 @@ enum Dial<'a> {
 }
 
 /// A foreign peer: a Zenoh session dialling `endpoint` (retrying all along), subscribed to
-/// everything on the link, answering the clock probes 10 s ahead, and putting commands and
+/// everything on the link (counting what it did not put itself), answering the clock probes 10 s ahead, and putting commands and
 /// resets until dropped.
 struct Foreign {
     session: zenoh::Session,
@@ -81,8 +81,12 @@ impl Foreign {
             .declare_subscriber(format!("vic/{link}/**"))
             .callback({
                 let samples = samples.clone();
-                move |_| {
-                    samples.fetch_add(1, Ordering::Relaxed);
+                // Not its own puts (Zenoh delivers those to local subscribers too).
+                let own = [key::<CommandSlice>(link), key::<Control>(link)];
+                move |sample| {
+                    if !own.iter().any(|k| k == sample.key_expr().as_str()) {
+                        samples.fetch_add(1, Ordering::Relaxed);
+                    }
                 }
             })
             .wait()
