@@ -19,7 +19,7 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
         unique_namespace("brc"),
     );
     let link = unique_namespace("link");
-    let endpoint = format!("tcp/127.0.0.1:{}", port(0));
+    let endpoint = format!("tls/127.0.0.1:{}", port(0));
     let mut d = Daemons::default();
     // The board's telemetry reaches host B through the two bridges.
     let board_side = two_hosts(&mut d, [&host_a, &host_b], &link, &endpoint, [&[], &[]]);
@@ -106,6 +106,7 @@ fn messages_cross_promptly_without_a_poll_and_stop_is_prompt() {
             link_name: link_name.clone(),
             side,
             link,
+            security: bridge::Security::PlainLoopback,
             safety_interval: safety,
             stamps: vic_rt::bridge::Stamps::Keep,
             clock_skew_ns: 0,

@@ -23,7 +23,7 @@ fn a_trial_between_hosts_whose_clocks_differ_by_5_s_ends_as_on_one_host() {
         unique_namespace("ckc"),
     );
     let link = unique_namespace("clk");
-    let endpoint = format!("tcp/127.0.0.1:{}", port(1));
+    let endpoint = format!("tls/127.0.0.1:{}", port(1));
     let mut d = Daemons::default();
     let skew = ["--clock-skew-ms", "5000"];
     let board_side = two_hosts(&mut d, [&host_a, &host_b], &link, &endpoint, [&[], &skew]);
@@ -76,7 +76,7 @@ fn without_the_translation_the_board_rejects_the_skewed_host_as_from_the_future(
     let sooc = sooc_plan();
     let (host_a, host_b) = (unique_namespace("cna"), unique_namespace("cnb"));
     let link = unique_namespace("cln");
-    let endpoint = format!("tcp/127.0.0.1:{}", port(2));
+    let endpoint = format!("tls/127.0.0.1:{}", port(2));
     let mut d = Daemons::default();
     let (keep, skew) = (["--stamps", "keep"], ["--clock-skew-ms", "5000"]);
     two_hosts(&mut d, [&host_a, &host_b], &link, &endpoint, [&keep, &skew]);

@@ -32,6 +32,7 @@ fn spawn(
         link_name: link_name.to_string(),
         side,
         link: Link::Listen(endpoint.to_string()),
+        security: bridge::Security::PlainLoopback,
         safety_interval: bridge::DEFAULT_SAFETY_INTERVAL,
         stamps: bridge::Stamps::Keep,
         clock_skew_ns: 0,

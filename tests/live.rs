@@ -14,6 +14,7 @@ mod board_alloc;
 mod board_limits;
 mod board_lost;
 mod bridge;
+mod bridge_auth;
 mod bridge_clock;
 mod bridge_hostile;
 mod central_refusal;

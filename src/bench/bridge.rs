@@ -284,6 +284,7 @@ fn through_bridges(o: &Options) -> Result<(Histogram<u64>, Option<Vec<HopPoint>>
             link_name: format!("bench{}", std::process::id()),
             side,
             link,
+            security: bridge::Security::PlainLoopback,
             safety_interval: bridge::DEFAULT_SAFETY_INTERVAL,
             stamps: bridge::Stamps::Keep,
             clock_skew_ns: 0,

@@ -3,13 +3,19 @@
 //! a summary at the end (`--json`: one object). The board side's line ends with the offset
 //! between the hosts' clocks (board − central), its uncertainty (± half the best probe's round
 //! trip), that round trip and the drift; the central side's with the probes it answered.
+//!
+//! `vic bridge keygen --out DIR [--name HOST]...` makes a pair's keys ([`vic_rt::bridge::keys`]);
+//! the bridges then run with `--keys DIR` on `tls/` endpoints. Plain `tcp/` needs
+//! `--insecure-plain-tcp` and a loopback address.
 
 use crate::cli::{Classify, JsonArg, NamespaceArgs, input_error, print_json, stop_on_signal};
 use crate::ranges::{MAX_RUN_S, real, seconds, whole};
+use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 use vic_rt::bridge::clock::ClockStats;
-use vic_rt::bridge::{self, BridgeError, BridgeOptions, BridgeStats, Link, Side, Stamps};
+use vic_rt::bridge::keys::{self, KeyFiles};
+use vic_rt::bridge::{self, BridgeError, BridgeOptions, BridgeStats, Link, Security, Side, Stamps};
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum SideArg {
@@ -29,21 +35,58 @@ enum StampsArg {
     Keep,
 }
 
+#[derive(clap::Subcommand)]
+enum Sub {
+    /// Make the keys of one pair of bridges in DIR: a private authority's certificate (ca.pem;
+    /// its private key is never written, so it signs nothing else) and a certificate and key per
+    /// side (board.pem/board.key, central.pem/central.key), all owner-only. Copy ca.pem and the
+    /// side's two files to each host (e.g. with scp) and pass --keys DIR to its bridge.
+    ///
+    /// Example: vic bridge keygen --out lab1-keys --name robot.local --name 192.168.1.20
+    Keygen {
+        /// The directory to write (created 0700; existing key files are never overwritten).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// A host name or address under which the listening bridge is reached (the connecting
+        /// bridge checks the certificate against the name it dials); repeatable.
+        /// localhost, 127.0.0.1 and ::1 are always included.
+        #[arg(long, value_name = "HOST")]
+        name: Vec<String>,
+    },
+}
+
 #[derive(clap::Args)]
 #[command(mut_arg("json", |a| a.help("Print the final counts as one JSON object")))]
 #[command(group(clap::ArgGroup::new("endpoint").required(true).args(["listen", "connect"])))]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub(crate) struct Args {
+    #[command(subcommand)]
+    sub: Option<Sub>,
     /// Which daemon this bridge stands beside.
-    #[arg(long, value_enum)]
-    side: SideArg,
+    #[arg(long, value_enum, required = true)]
+    side: Option<SideArg>,
     #[command(flatten)]
     namespace: NamespaceArgs,
-    /// Wait for the other bridge on this Zenoh endpoint, e.g. tcp/0.0.0.0:7447.
+    /// Wait for the other bridge on this Zenoh endpoint, e.g. tls/0.0.0.0:7447.
     #[arg(long, value_name = "ENDPOINT")]
     listen: Option<String>,
-    /// Connect to the other bridge, e.g. tcp/robot.local:7447 (retried until it answers).
+    /// Connect to the other bridge, e.g. tls/robot.local:7447 (retried until it answers).
     #[arg(long, value_name = "ENDPOINT")]
     connect: Option<String>,
+    /// The pair's key directory (from `vic bridge keygen`): ca.pem and this side's certificate
+    /// and key. The link is then mutual TLS (tls/ endpoints): a peer without the other side's
+    /// key fails the handshake.
+    #[arg(
+        long,
+        value_name = "DIR",
+        required_unless_present = "insecure_plain_tcp"
+    )]
+    keys: Option<PathBuf>,
+    /// INSECURE: a plain TCP link (tcp/ endpoints) with no authentication, so that any process
+    /// reaching the port can read the board and drive it. Accepted on a loopback address only
+    /// (both bridges on one machine).
+    #[arg(long, conflicts_with = "keys")]
+    insecure_plain_tcp: bool,
     /// The name both bridges share (key expressions vic/NAME/...); default: the namespace.
     #[arg(long)]
     link_name: Option<String>,
@@ -73,9 +116,13 @@ pub(crate) struct Args {
 
 /// Runs the bridge until a signal or `--duration-s`.
 pub(crate) fn run(a: Args) -> anyhow::Result<()> {
+    if let Some(Sub::Keygen { out, name }) = a.sub {
+        return keygen(&out, &name);
+    }
+    let side = a.side.expect("clap requires --side without a subcommand");
     let namespace = a.namespace.validated()?.to_string();
     let duration = seconds(a.duration_s);
-    if a.clock_skew_ms != 0 && !matches!(a.side, SideArg::Central) {
+    if a.clock_skew_ms != 0 && !matches!(side, SideArg::Central) {
         return Err(input_error("--clock-skew-ms: only with --side central"));
     }
     let clock_skew_ns = a
@@ -87,14 +134,24 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
         (None, Some(e)) => Link::Connect(e),
         _ => unreachable!("clap requires exactly one of --listen and --connect"),
     };
+    let side = match side {
+        SideArg::Board => Side::Board,
+        SideArg::Central => Side::Central,
+    };
+    let security = match a.keys {
+        Some(dir) => Security::MutualTls(KeyFiles::of(&dir, side).map_err(input_error)?),
+        None => Security::PlainLoopback,
+    };
+    let endpoint = match &link {
+        Link::Listen(e) | Link::Connect(e) => e,
+    };
+    bridge::check_endpoint(endpoint, &security).map_err(input_error)?;
     let options = BridgeOptions {
         link_name: a.link_name.unwrap_or_else(|| namespace.clone()),
         namespace,
-        side: match a.side {
-            SideArg::Board => Side::Board,
-            SideArg::Central => Side::Central,
-        },
+        side,
         link,
+        security,
         safety_interval: Duration::from_millis(a.safety_interval_ms),
         stamps: match a.stamps {
             StampsArg::Translate => Stamps::Translate,
@@ -113,13 +170,23 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
         });
     }
     let start = Instant::now();
+    if o.security == Security::PlainLoopback {
+        eprintln!(
+            "vic bridge: WARNING: plain TCP without authentication (--insecure-plain-tcp): \
+             any process on this machine can join the link, read the board and drive it"
+        );
+    }
     eprintln!(
-        "vic bridge: namespace {} as the {:?} side of link \"{}\" ({:?}), woken by events \
+        "vic bridge: namespace {} as the {:?} side of link \"{}\" ({:?}, {}), woken by events \
          (safety interval {} ms){}",
         o.namespace,
         o.side,
         o.link_name,
         o.link,
+        match o.security {
+            Security::MutualTls(_) => "mutual TLS",
+            Security::PlainLoopback => "plain TCP, loopback only",
+        },
         o.safety_interval.as_millis(),
         match (o.side, o.stamps) {
             (Side::Board, Stamps::Translate) => ", stamps translated into this host's clock",
@@ -133,7 +200,9 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
         }
     });
     let stats = match result {
-        Err(e @ BridgeError::LinkName(_)) => return Err(e).input(),
+        Err(e @ (BridgeError::LinkName(_) | BridgeError::Endpoint { .. })) => {
+            return Err(e).input();
+        }
         other => other.runtime()?,
     };
     if json {
@@ -147,6 +216,20 @@ pub(crate) fn run(a: Args) -> anyhow::Result<()> {
     } else {
         println!("{}{}", line(&stats), clock_line(o.side, &stats.clock));
     }
+    Ok(())
+}
+
+/// `vic bridge keygen`: writes the pair's keys and says where each file goes.
+fn keygen(out: &std::path::Path, names: &[String]) -> anyhow::Result<()> {
+    let written = keys::generate(out, names).map_err(input_error)?;
+    for path in &written {
+        println!("{}", path.display());
+    }
+    eprintln!(
+        "vic bridge keygen: the board's host needs ca.pem, board.pem and board.key; the central \
+         host ca.pem, central.pem and central.key (keep the .key files owner-only); then run \
+         each bridge with --keys DIR on tls/ endpoints"
+    );
     Ok(())
 }
 

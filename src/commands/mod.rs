@@ -98,7 +98,9 @@ enum Command {
     /// (`--side board`) or beside the central process (`--side central`). Messages cross as
     /// their wire bytes with the sender's session, sequence number and time stamp.
     ///
-    /// Example: vic bridge --side board --namespace lab1 --listen tcp/0.0.0.0:7447
+    /// The link is mutual TLS with the pair's keys (`vic bridge keygen --out DIR`).
+    ///
+    /// Example: vic bridge --side board --namespace lab1 --listen tls/0.0.0.0:7447 --keys DIR
     #[cfg(feature = "zenoh")]
     Bridge(bridge::Args),
     /// Record a running namespace to MCAP from outside the board: states (1 kHz), command

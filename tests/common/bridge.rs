@@ -1,8 +1,35 @@
 //! Two "hosts" joined by `vic bridge` on loopback: the bridges, and `vic status` on either side.
 
 use super::daemons::Daemons;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
+
+/// Makes a pair's keys with `vic bridge keygen --out DIR` in a new directory under the tests'
+/// temporary directory (`tag` and the pid make it unique).
+pub fn keygen(tag: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("bridge-keys-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_vic"))
+        .args(["bridge", "keygen", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "vic bridge keygen failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    dir
+}
+
+/// The keys of this test run's bridges (made once).
+pub fn keys() -> &'static Path {
+    static KEYS: OnceLock<PathBuf> = OnceLock::new();
+    KEYS.get_or_init(|| keygen("pair"))
+}
 
 /// A loopback port no other test run picks (derived from the pid), `k` apart for a test's
 /// several links.
@@ -11,7 +38,8 @@ pub fn port(k: u16) -> u16 {
 }
 
 /// Starts `vic bridge --json` for `ns` on `side` with `endpoint` (`--listen` or `--connect` and
-/// the endpoint) and `extra` flags; its stdout (the final counts) is piped.
+/// the endpoint) and `extra` flags; its stdout (the final counts) is piped. A `tls/` endpoint
+/// gets `--keys` ([`keys`]), a `tcp/` one `--insecure-plain-tcp`, unless `extra` says otherwise.
 pub fn bridge(
     d: &mut Daemons,
     side: &str,
@@ -35,6 +63,7 @@ pub fn bridge(
         ])
         .args(endpoint)
         .args(extra)
+        .args(security_flags(endpoint[1], extra))
         .args(["--json"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
@@ -42,6 +71,18 @@ pub fn bridge(
         .unwrap();
     d.children.push(child);
     d.children.len() - 1
+}
+
+fn security_flags(endpoint: &str, extra: &[&str]) -> Vec<String> {
+    let chosen = extra
+        .iter()
+        .any(|a| *a == "--keys" || *a == "--insecure-plain-tcp");
+    match endpoint.split('/').next() {
+        _ if chosen => vec![],
+        Some("tls") => vec!["--keys".into(), keys().to_string_lossy().into_owned()],
+        Some("tcp") => vec!["--insecure-plain-tcp".into()],
+        _ => vec![],
+    }
 }
 
 /// Stops bridge `i` (SIGTERM) and returns the counts it printed.

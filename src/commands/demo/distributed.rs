@@ -87,6 +87,7 @@ mod link {
                     link_name: board_ns.to_string(),
                     side,
                     link,
+                    security: bridge::Security::PlainLoopback,
                     safety_interval: bridge::DEFAULT_SAFETY_INTERVAL,
                     stamps: Stamps::Translate,
                     clock_skew_ns: 0,

@@ -359,7 +359,7 @@ impl ProberShared {
 
 /// The central side's clock: answers the board side's probes, on its own clock plus a skew
 /// (0 but in tests, which pretend the hosts' clocks differ).
-pub(crate) struct Responder {
+pub struct Responder {
     answered: Arc<AtomicU64>,
     malformed: Arc<AtomicU64>,
     _probes: zenoh::pubsub::Subscriber<()>,

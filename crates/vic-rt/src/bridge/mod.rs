@@ -34,9 +34,17 @@
 //! slow safety interval (`safety_interval`, default 100 ms) drains the local side anyway, so a
 //! message from a client that does not notify is late, not lost.
 //!
+//! **The link is authenticated.** A `tls/` endpoint (the default way) runs Zenoh's TLS with
+//! mutual authentication: each bridge presents its side's certificate and accepts only a peer
+//! whose certificate the pair's private authority signed ([`keys`]; `vic bridge keygen`). Any
+//! other Zenoh peer fails the handshake before a message, a subscription or a clock answer
+//! crosses. Plain `tcp/` ([`Security::PlainLoopback`]) has no authentication at all (any process
+//! that reaches the port drives the board) and is accepted on a loopback address only.
+//!
 //! [`trace`] marks each hop's time for `vic bench bridge --trace` (off otherwise).
 
 pub mod clock;
+pub mod keys;
 mod looper;
 pub mod trace;
 pub mod wire;
@@ -74,6 +82,16 @@ pub enum Link {
     Connect(String),
 }
 
+/// How the link between the two bridges is secured.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Security {
+    /// Mutual TLS with the pair's keys: `tls/` endpoints only.
+    MutualTls(keys::KeyFiles),
+    /// Plain TCP without any authentication: `tcp/` endpoints on a loopback address only (one
+    /// machine; every local process can join the link).
+    PlainLoopback,
+}
+
 /// What a bridge is asked for.
 #[derive(Debug, Clone)]
 pub struct BridgeOptions {
@@ -83,6 +101,8 @@ pub struct BridgeOptions {
     pub link_name: String,
     pub side: Side,
     pub link: Link,
+    /// How the link is secured (which endpoints are accepted).
+    pub security: Security,
     /// The longest the bridge sleeps before draining the local subscribers without having been
     /// notified (messages are forwarded as they are notified; this only bounds the delay of one
     /// whose notification was missed).
@@ -140,6 +160,10 @@ pub enum BridgeError {
     Zenoh { what: String, message: String },
     #[error("--link-name {0:?}: use 1–32 characters of [A-Za-z0-9_-]")]
     LinkName(String),
+    /// An endpoint this bridge will not use (wrong scheme for the security asked, plain TCP
+    /// off loopback, Zenoh endpoint metadata).
+    #[error("endpoint {endpoint:?}: {why}")]
+    Endpoint { endpoint: String, why: String },
     /// The bridge thread's wait set could not be set up.
     #[error("waiting for messages: {0}")]
     Wait(String),
@@ -214,14 +238,68 @@ fn check_link_name(name: &str) -> Result<(), BridgeError> {
     Ok(())
 }
 
+/// Whether `host` (an endpoint's address without the port) names this machine's loopback.
+fn is_loopback(host: &str) -> bool {
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
+/// Checks `endpoint` against `security`: `tls/HOST:PORT` with keys, `tcp/HOST:PORT` only on a
+/// loopback host and only when plain TCP was asked for; no Zenoh metadata (`?`, `#`: it could
+/// change the link's configuration behind the bridge's back).
+pub fn check_endpoint(endpoint: &str, security: &Security) -> Result<(), BridgeError> {
+    let refuse = |why: &str| {
+        Err(BridgeError::Endpoint {
+            endpoint: endpoint.to_string(),
+            why: why.to_string(),
+        })
+    };
+    if endpoint.len() > 300
+        || endpoint.contains(['?', '#'])
+        || endpoint.contains(char::is_whitespace)
+    {
+        return refuse("use PROTOCOL/HOST:PORT (at most 300 characters, no ?, # or spaces)");
+    }
+    let Some((scheme, address)) = endpoint.split_once('/') else {
+        return refuse("use tls/HOST:PORT (or tcp/127.0.0.1:PORT with --insecure-plain-tcp)");
+    };
+    let Some((host, port)) = address.rsplit_once(':') else {
+        return refuse("no port: use PROTOCOL/HOST:PORT");
+    };
+    if host.is_empty() || port.parse::<u16>().is_err() {
+        return refuse("use PROTOCOL/HOST:PORT with a port of 0 to 65535");
+    }
+    match (scheme, security) {
+        ("tls", Security::MutualTls(_)) => Ok(()),
+        ("tls", Security::PlainLoopback) => {
+            refuse("tls/ needs the pair's keys (--keys DIR, made by `vic bridge keygen`)")
+        }
+        ("tcp", Security::PlainLoopback) if is_loopback(host) => Ok(()),
+        ("tcp", Security::PlainLoopback) => refuse(
+            "plain TCP has no authentication (whoever reaches the port drives the board): \
+             it is accepted on a loopback address only; between machines use tls/ with --keys",
+        ),
+        ("tcp", Security::MutualTls(_)) => refuse(
+            "plain TCP has no authentication; with --keys use tls/HOST:PORT \
+             (plain TCP only with --insecure-plain-tcp, on loopback)",
+        ),
+        _ => refuse("the protocol must be tls (or tcp on loopback with --insecure-plain-tcp)"),
+    }
+}
+
 /// A Zenoh session for one end of the link: peer mode, no multicast scouting (the two bridges
-/// find each other by the endpoint they are given, nothing else on the network joins).
-fn open_session(link: &Link) -> Result<zenoh::Session, BridgeError> {
+/// find each other by the endpoint they are given, nothing else on the network joins); with
+/// [`Security::MutualTls`] TLS 1.3 with client certificates, trusting the pair's authority.
+fn open_session(link: &Link, security: &Security) -> Result<zenoh::Session, BridgeError> {
     let mut config = zenoh::Config::default();
     let (key, endpoint) = match link {
         Link::Listen(e) => ("listen/endpoints", e),
         Link::Connect(e) => ("connect/endpoints", e),
     };
+    check_endpoint(endpoint, security)?;
     let set = |config: &mut zenoh::Config, k: &str, v: &str| {
         config
             .insert_json5(k, v)
@@ -229,6 +307,29 @@ fn open_session(link: &Link) -> Result<zenoh::Session, BridgeError> {
     };
     set(&mut config, key, &serde_json::json!([endpoint]).to_string())?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
+    // Learn no other peers' addresses from the one peer (only the given endpoint is dialled).
+    set(&mut config, "scouting/gossip/enabled", "false")?;
+    if let Security::MutualTls(k) = security {
+        let path = |p: &std::path::Path| serde_json::json!(p.to_string_lossy()).to_string();
+        let tls = "transport/link/tls";
+        set(
+            &mut config,
+            &format!("{tls}/root_ca_certificate"),
+            &path(&k.ca),
+        )?;
+        for role in ["listen", "connect"] {
+            let cert = path(&k.certificate);
+            set(&mut config, &format!("{tls}/{role}_certificate"), &cert)?;
+            let key = path(&k.private_key);
+            set(&mut config, &format!("{tls}/{role}_private_key"), &key)?;
+        }
+        set(&mut config, &format!("{tls}/enable_mtls"), "true")?;
+        set(
+            &mut config,
+            &format!("{tls}/verify_name_on_connect"),
+            "true",
+        )?;
+    }
     if matches!(link, Link::Connect(_)) {
         // Keep retrying a link that is not up yet or was cut: the bridge outlives its peer.
         set(&mut config, "connect/timeout_ms", "-1")?;
@@ -258,7 +359,7 @@ pub fn run(
     mut report: impl FnMut(&BridgeStats),
 ) -> Result<BridgeStats, BridgeError> {
     check_link_name(&o.link_name)?;
-    let session = open_session(&o.link)?;
+    let session = open_session(&o.link, &o.security)?;
     let counts = Arc::new(LinkCounts::default());
     let mut stats = BridgeStats::default();
     let mut next_report = Instant::now() + Duration::from_secs(1);
