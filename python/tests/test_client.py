@@ -434,6 +434,28 @@ def compare_checks(states_file, mcap_file, csv_file, plan_file):
             assert rec["x_mode"][i] == s["mode"]
         print(f"     {seen['values']} CSV values equal to the client's, to the last bit")
 
+    def a_truncated_recording_reads_up_to_the_cut():
+        # A board killed with SIGKILL leaves a file cut mid-record, without a summary: the
+        # reader keeps every message before the cut, equal to the whole file's first ones.
+        import os
+        import tempfile
+
+        whole = vc.load_mcap(mcap_file)
+        assert whole["_complete"] is True
+        data = open(mcap_file, "rb").read()
+        with tempfile.TemporaryDirectory() as d:
+            cut = os.path.join(d, "cut.mcap")
+            with open(cut, "wb") as f:
+                f.write(data[: len(data) * 6 // 10 + 7])
+            part = vc.load_mcap(cut)
+        assert part["_complete"] is False
+        full, got = whole["/board/tick"], part["/board/tick"]
+        n = len(got["tick"])
+        assert 0 < n < len(full["tick"]), (n, len(full["tick"]))
+        for k in ("tick", "q", "tau", "_log_time_ns"):
+            assert np.array_equal(got[k], full[k][:n]), k
+        print(f"     {n} of {len(full['tick'])} states read from the first 60 % of the file")
+
     def plan_loads():
         p = vc.load_plan(plan_file)
         raw = json.load(open(plan_file))
@@ -443,7 +465,12 @@ def compare_checks(states_file, mcap_file, csv_file, plan_file):
         assert np.array_equal(p.column("k1"), [u[p.control_names.index("k1")] for u in raw["u"]])
         assert p.column("q1")[0] == raw["x"][0][0]
 
-    for c in (mcap_record_matches, csv_record_matches, plan_loads):
+    for c in (
+        mcap_record_matches,
+        csv_record_matches,
+        a_truncated_recording_reads_up_to_the_cut,
+        plan_loads,
+    ):
         check(c)
 
 
