@@ -78,3 +78,67 @@ fn vic_simulate_runs_a_plan_stopped_at_its_iteration_limit() {
     let report: serde_json::Value = serde_json::from_slice(&simulated.stdout).unwrap();
     assert_eq!(report["trials"], 2);
 }
+
+/// A plan file whose arrays have the wrong shape (one gains row short, one state row short) is
+/// refused on load by `vic simulate` with exit code 2 and a message naming the file and the row
+/// (it panicked with an index out of bounds, exit 101).
+#[test]
+fn vic_simulate_refuses_a_plan_file_of_the_wrong_shape() {
+    let dir = std::env::temp_dir().join(format!("vic-plan-shape-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenario = config("two_link_divergent.toml");
+    let overrides = ["solver.max_iterations=1".to_string()];
+    let s = Scenario::load(&scenario, &overrides).expect("loads");
+    let written = plan(&s, Method::Sooc, None).expect("plans");
+    let good = serde_json::to_value(&written).unwrap();
+    type Spoil = fn(&mut serde_json::Value);
+    let cases: [(&str, Spoil, &str); 3] = [
+        (
+            "gains",
+            |v| {
+                v["gains"][5][1].as_array_mut().unwrap().pop();
+            },
+            "gains[5] row 1 has",
+        ),
+        (
+            "x",
+            |v| {
+                v["x"][3].as_array_mut().unwrap().pop();
+            },
+            "x[3] has",
+        ),
+        (
+            "u",
+            |v| {
+                v["u"].as_array_mut().unwrap().pop();
+            },
+            "x needs one more",
+        ),
+    ];
+    for (name, spoil, expected) in cases {
+        let mut v = good.clone();
+        spoil(&mut v);
+        let file = dir.join(format!("{name}.json"));
+        std::fs::write(&file, serde_json::to_string(&v).unwrap()).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_vic"))
+            .args(["simulate", "--trials", "2", "--json"])
+            .arg("--config")
+            .arg(&scenario)
+            .arg("--plan")
+            .arg(&file)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{name}: {stderr}");
+        assert!(
+            stderr.contains(&file.display().to_string()) && stderr.contains(expected),
+            "{name}: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{name}: {stderr}");
+    }
+    // The unspoilt plan still loads.
+    let file = dir.join("good.json");
+    std::fs::write(&file, serde_json::to_string(&good).unwrap()).unwrap();
+    PlanFile::read(&file).expect("a plan as written reads back");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -18,7 +18,10 @@ Its files' readers are there too: ``load_plan``, ``load_mcap`` (needs ``mcap``) 
 
 from vic_client import (  # noqa: F401 (re-exported)
     Board,
+    LostStatesWarning,
+    Rejected,
     StateRing,
+    StatesLost,
     VicError,
     config,
     load_csv_record,

@@ -14,6 +14,7 @@ import os
 import secrets
 import stat
 import time
+import warnings
 
 import iceoryx2 as iox2
 import numpy as np
@@ -33,8 +34,11 @@ from .protocol import (
     DisturbanceKind,
     Header,
     Mode,
+    Rejection,
     StateMsg,
     Telemetry,
+    name_of,
+    rejections_by_name,
 )
 
 NODE_NAME = "vic-python"
@@ -53,6 +57,33 @@ SERVICES = {
 
 class VicError(Exception):
     """A namespace, a board or a request the client cannot use; the message says why."""
+
+
+class Rejected(VicError):
+    """The board rejected a request: ``reasons`` are the names of the rejection counters that
+    rose after it was sent (docs/PROTOCOL.md, "Rejections"), e.g. ``["disturbance-out-of-bounds"]``,
+    and ``seq`` is the request's sequence number."""
+
+    def __init__(self, message, reasons, seq):
+        super().__init__(message)
+        self.reasons = reasons
+        self.seq = seq
+
+
+class StatesLost(VicError):
+    """States the board published were not received (the client polled too rarely: the
+    subscriber's buffer holds 128 ms). ``count`` is how many; raised with ``on_loss="raise"``."""
+
+    def __init__(self, message, count):
+        super().__init__(message)
+        self.count = count
+
+
+class LostStatesWarning(UserWarning):
+    """States were lost (see :class:`StatesLost`); issued with ``on_loss="warn"``, the default."""
+
+
+ON_LOSS = ("warn", "raise", "ignore")
 
 
 def validate_namespace(ns):
@@ -182,11 +213,18 @@ class Board:
     for the board's services, then subscribes to its states and telemetry and can send
     disturbances and trial controls (as ``vic inject`` and a central process do).
 
+    States the client did not receive in time (it must poll at least every 128 ms) are counted
+    in ``lost`` and, by ``on_loss``, reported: ``"warn"`` (a :class:`LostStatesWarning`, the
+    default), ``"raise"`` (:class:`StatesLost` from the call that found them) or ``"ignore"``.
+
     Use it as a context manager (or call :meth:`close`) so its ports are released at once.
     """
 
-    def __init__(self, namespace="vic", timeout=5.0, ring=10_000):
+    def __init__(self, namespace="vic", timeout=5.0, ring=10_000, on_loss="warn"):
         self.namespace = validate_namespace(namespace)
+        if on_loss not in ON_LOSS:
+            raise VicError(f"on_loss={on_loss!r}: one of {', '.join(ON_LOSS)}")
+        self.on_loss = on_loss
         iox2.set_log_level(iox2.LogLevel.Error)
         ensure_root_dir()
         check_namespace_owner(namespace)
@@ -206,7 +244,9 @@ class Board:
         self._control_pub = None
         self._disturbance_pub = None
         self.session = secrets.randbelow(2**32 - 1) + 1
-        self._seq = 0
+        # The last seq sent of each kind: the board numbers (and counts gaps in) each kind of
+        # message apart, so each kind has its own counter.
+        self.seq = {"control": 0, "disturbance": 0}
         self.ring = StateRing(ring)
         self.latest = None
         self.lost = 0
@@ -245,22 +285,34 @@ class Board:
         """Moves every state waiting in the subscriber's buffer into the ring; returns how many.
 
         The buffer holds 128 states (128 ms at 1 kHz): poll at least that often to miss none.
-        Missed ticks are counted in ``lost``.
+        Missed ticks are counted in ``lost`` and reported as ``on_loss`` says.
         """
-        n = 0
+        n = gap = 0
         size = ctypes.sizeof(StateMsg)
         while True:
             sample = self._state_sub.receive()
             if sample is None:
-                return n
+                break
             raw = _bytes_of(sample, size)
             sample.delete()
             record = np.frombuffer(raw, dtype=STATE_DTYPE)[0]
             if self.latest is not None and record["tick"] > self.latest["tick"] + 1:
-                self.lost += int(record["tick"] - self.latest["tick"] - 1)
+                gap += int(record["tick"] - self.latest["tick"] - 1)
             self.ring.push(raw)
             self.latest = record.copy()
             n += 1
+        if gap:
+            self.lost += gap
+            if self.on_loss != "ignore":
+                msg = (
+                    f"namespace {self.namespace!r}: {gap} states lost before tick "
+                    f"{int(self.latest['tick'])} ({self.lost} in all): poll at least every "
+                    "128 ms, or pass on_loss='ignore'"
+                )
+                if self.on_loss == "raise":
+                    raise StatesLost(msg, gap)
+                warnings.warn(msg, LostStatesWarning, stacklevel=2)
+        return n
 
     def states(self, timeout=None, batch=False):
         """Iterates over the states from now on, oldest first, each a numpy record of
@@ -296,9 +348,7 @@ class Board:
                 return s
         raise VicError(f"namespace {self.namespace!r}: no matching state within {timeout} s")
 
-    def telemetry(self):
-        """The newest telemetry (a :class:`Telemetry` ctypes copy; ``.to_dict()`` for a dict),
-        or None when the board has published none yet."""
+    def _drain_telemetry(self):
         size = ctypes.sizeof(Telemetry)
         while True:
             sample = self._telemetry_sub.receive()
@@ -307,17 +357,50 @@ class Board:
             self._telemetry = Telemetry.from_buffer_copy(_bytes_of(sample, size))
             sample.delete()
 
+    def telemetry(self, timeout=2.0):
+        """The newest telemetry (a :class:`Telemetry` ctypes copy; ``.to_dict()`` for a dict,
+        ``.rejections()`` for the rejection counts by name). Right after connecting it waits up
+        to ``timeout`` seconds for the board's first one (the board publishes one every 100
+        ticks), polling the states meanwhile, and raises :class:`VicError` if none came."""
+        deadline = time.monotonic() + timeout
+        while self._drain_telemetry() is None:
+            if time.monotonic() >= deadline:
+                raise VicError(
+                    f"namespace {self.namespace!r}: no telemetry from the board within {timeout} s"
+                )
+            self.poll()
+            time.sleep(0.002)
+        return self._telemetry
+
+    def rejections(self):
+        """The board's rejection counts by reason name (``{"disturbance-out-of-bounds": 1}``),
+        from the newest telemetry; reasons that never occurred are left out."""
+        return rejections_by_name(self.telemetry().rejected_by_reason)
+
+    @property
+    def joints(self):
+        """The number of joints of the board's plant."""
+        self.poll()
+        if self.latest is not None:
+            return int(self.latest["joints"])
+        return int(self.telemetry().joints)
+
     # -- sending -----------------------------------------------------------------------------
 
-    def _header(self):
-        self._seq += 1
-        return Header(PROTOCOL_VERSION, self.session, self._seq, time.monotonic_ns())
+    def _header(self, kind):
+        self.seq[kind] += 1
+        return Header(PROTOCOL_VERSION, self.session, self.seq[kind], time.monotonic_ns())
 
-    @staticmethod
-    def _joints(values):
+    def _joints(self, values, what):
+        """``values`` as a message's joint array, refused unless there is one per joint of the
+        board."""
         values = [float(v) for v in np.atleast_1d(values)]
-        if len(values) > MAX_JOINTS:
-            raise VicError(f"{len(values)} joint values: a message carries at most {MAX_JOINTS}")
+        joints = self.joints
+        if len(values) != joints:
+            raise VicError(
+                f"namespace {self.namespace!r}: {what} has {len(values)} values, the board has "
+                f"{joints} joint{'s' if joints != 1 else ''}"
+            )
         return (ctypes.c_double * MAX_JOINTS)(*values, *[0.0] * (MAX_JOINTS - len(values)))
 
     def _publisher(self, service):
@@ -329,30 +412,60 @@ class Board:
             setattr(self, attr, pub)
         return pub
 
-    def _disturb(self, kind, torque=(), duration_ns=0, value=0.0, wait=2.0):
+    def _disturb(self, kind, torque=None, duration_ns=0, value=0.0, wait=2.0):
+        torque = self._joints(np.zeros(self.joints) if torque is None else torque, "the torque")
+        header = self._header("disturbance")
         msg = Disturbance(
-            header=self._header(),
-            kind=kind,
-            torque=self._joints(torque),
-            duration_ns=duration_ns,
-            value=value,
+            header=header, kind=kind, torque=torque, duration_ns=duration_ns, value=value
         )
-        self.poll()
-        self._publisher("disturbance").send_copy(msg)
-        return self._ack(msg.header.seq, "disturbance_seq", wait)
+        return self._send("disturbance", msg, "disturbance_seq", wait)
 
-    def _ack(self, seq, field, wait):
-        """The state that acknowledges request ``seq`` (its ``field`` equals it), or just the seq
-        when ``wait`` is None."""
+    def _send(self, service, msg, field, wait):
+        """Sends ``msg`` and, unless ``wait`` is None, waits up to ``wait`` seconds for the state
+        that acknowledges it (its ``field`` equals the message's seq) and returns that state.
+
+        The board publishes no answer to a rejected message; it counts it in the telemetry by
+        reason. So while waiting, every telemetry published after the send is compared with the
+        one before it: when a rejection counter rose, :class:`Rejected` is raised at once, with
+        the reasons named (within about 100 ms, the telemetry's period). A message of another
+        sender rejected in the same moment would be named too.
+        """
         if wait is None:
-            return seq
-        try:
-            return self.wait_state(lambda s: s[field] == seq, wait)
-        except VicError:
-            raise VicError(
-                f"namespace {self.namespace!r}: request {seq} not acknowledged within {wait} s "
-                "(rejected? see telemetry().rejected_by_reason)"
-            ) from None
+            self.poll()
+            self._publisher(service).send_copy(msg)
+            return msg.header.seq
+        before = list(self.telemetry().rejected_by_reason)
+        seq, sent_ns = msg.header.seq, msg.header.time_ns
+        self.poll()
+        position = self.ring.count
+        self._publisher(service).send_copy(msg)
+        deadline = time.monotonic() + wait
+        while True:
+            self.poll()
+            new, position = self.ring.since(position)
+            hit = new[new[field] == seq]
+            if len(hit):
+                return hit[0]
+            tel = self._drain_telemetry()
+            if tel.header.time_ns > sent_ns:
+                rose = [
+                    name_of(r)
+                    for r in Rejection
+                    if tel.rejected_by_reason[r] > before[r]
+                ]
+                if rose:
+                    raise Rejected(
+                        f"namespace {self.namespace!r}: the board rejected {service} request "
+                        f"{seq} ({', '.join(rose)}; docs/PROTOCOL.md, Rejections)",
+                        rose,
+                        seq,
+                    )
+            if time.monotonic() >= deadline:
+                raise VicError(
+                    f"namespace {self.namespace!r}: {service} request {seq} neither acknowledged "
+                    f"nor counted as rejected within {wait} s"
+                )
+            time.sleep(0.001)
 
     def inject_pulse(self, torque, duration_s=0.05, wait=2.0):
         """A torque pulse [N m per joint] for ``duration_s``. Returns the state that acknowledges
@@ -372,28 +485,32 @@ class Board:
         """Multiplies the plant noise by ``factor``."""
         return self._disturb(DisturbanceKind.NOISE, value=factor, wait=wait)
 
-    def reset(self, q0, qd0=(0.0, 0.0), trial=1, seed=0, start_in_s=0.05, wait=2.0):
+    def reset(self, q0, qd0=None, trial=1, seed=0, start_in_s=0.05, wait=2.0):
         """Puts the plant at ``q0``, ``qd0`` and starts trial ``trial`` ``start_in_s`` from now
         (the noise reseeded from ``(seed, trial)``). With no central process sending commands,
         the board's watchdog then ramps into the safe hold: the arm holds ``q0`` with the hold
-        stiffness, and a pulse moves it and it springs back. Returns the acknowledging state."""
-        header = self._header()
+        stiffness, and a pulse moves it and it springs back. ``q0`` [rad] and ``qd0`` [rad/s]
+        (default zeros) have one value per joint of the board, or :class:`VicError` is raised
+        before anything is sent. Returns the acknowledging state; :class:`Rejected` names the
+        reason when the board refuses it."""
+        q0 = self._joints(q0, "the posture q0")
+        qd0 = self._joints(np.zeros(self.joints) if qd0 is None else qd0, "the velocity qd0")
+        header = self._header("control")
         msg = Control(
             header=header,
             kind=ControlKind.RESET,
             trial=trial,
             seed=seed,
             start_ns=header.time_ns + int(start_in_s * 1e9),
-            q0=self._joints(q0),
-            qd0=self._joints(qd0),
+            q0=q0,
+            qd0=qd0,
         )
-        self.poll()
-        self._publisher("control").send_copy(msg)
-        return self._ack(header.seq, "reset_seq", wait)
+        return self._send("control", msg, "reset_seq", wait)
 
     def stop(self):
         """Ends the trial: the board goes idle, holding the arm at its posture, until the next reset."""
-        self._publisher("control").send_copy(Control(header=self._header(), kind=ControlKind.STOP))
+        msg = Control(header=self._header("control"), kind=ControlKind.STOP)
+        self._publisher("control").send_copy(msg)
 
     # -- lifetime ----------------------------------------------------------------------------
 

@@ -60,28 +60,55 @@ def _columns(messages):
     return out
 
 
+def _read_records(path, topics):
+    """The messages and metadata of an MCAP file read front to back, stopping where the file
+    ends early: a recording whose writer was killed (SIGKILL, power loss) has no summary and
+    ends in the middle of a record, which the seeking reader refuses. Returns
+    ``(by_topic, times, metadata, complete)``."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Metadata
+    from mcap.stream_reader import StreamReader
+
+    by_topic, times, metadata, channels = {}, {}, {}, {}
+    complete = True
+    with open(path, "rb") as f:
+        records = StreamReader(f, validate_crcs=True).records
+        while True:
+            try:
+                r = next(records)
+            except StopIteration:
+                break
+            except (McapError, ValueError, EOFError):  # truncated: keep what came before
+                complete = False
+                break
+            if isinstance(r, Channel):
+                channels[r.id] = r
+            elif isinstance(r, Metadata):
+                metadata[r.name] = dict(r.metadata)
+            elif isinstance(r, Message):
+                channel = channels[r.channel_id]
+                if topics is not None and channel.topic not in topics:
+                    continue
+                if channel.message_encoding != "json":
+                    raise ValueError(f"{path}: {channel.topic} is {channel.message_encoding}, not json")
+                by_topic.setdefault(channel.topic, []).append(json.loads(r.data))
+                times.setdefault(channel.topic, []).append(r.log_time)
+    return by_topic, times, metadata, complete
+
+
 def load_mcap(path, topics=None):
     """An MCAP recording as ``{topic: {key: array}}`` plus ``"_log_time_ns"`` per topic (the
-    message log times) and the metadata records under ``"_metadata"``. Needs the ``mcap``
-    package (``pip install mcap``)."""
-    from mcap.reader import make_reader
-
-    by_topic, times = {}, {}
-    with open(path, "rb") as f:
-        reader = make_reader(f)
-        for schema, channel, message in reader.iter_messages(topics=topics):
-            if channel.message_encoding != "json":
-                raise ValueError(f"{path}: {channel.topic} is {channel.message_encoding}, not json")
-            by_topic.setdefault(channel.topic, []).append(json.loads(message.data))
-            times.setdefault(channel.topic, []).append(message.log_time)
-        f.seek(0)
-        metadata = {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
+    message log times) and the metadata records under ``"_metadata"``. A recording cut short
+    (its writer killed) is read up to the last whole chunk, and ``"_complete"`` is False then.
+    Needs the ``mcap`` package (``pip install mcap``)."""
+    by_topic, times, metadata, complete = _read_records(path, topics)
     out = {}
     for topic, msgs in by_topic.items():
         cols = _columns(msgs)
         cols["_log_time_ns"] = np.asarray(times[topic], dtype=np.uint64)
         out[topic] = cols
     out["_metadata"] = metadata
+    out["_complete"] = complete
     return out
 
 

@@ -91,6 +91,18 @@ class BoardEvent(enum.IntEnum):
     APPLIED = 2
 
 
+def name_of(member):
+    """The wire name of an enumeration member, as docs/PROTOCOL.md and the Rust side spell it
+    (``Rejection.DISTURBANCE_OUT_OF_BOUNDS`` → ``"disturbance-out-of-bounds"``)."""
+    return member.name.lower().replace("_", "-")
+
+
+def rejections_by_name(counts):
+    """Rejection counts (``Telemetry.rejected_by_reason``, indexed by :class:`Rejection`) as a
+    dict reason name → count, leaving out reasons that never occurred (as ``vic status``)."""
+    return {name_of(r): int(counts[r]) for r in Rejection if counts[r]}
+
+
 ENUMS = {
     "Mode": Mode,
     "Interpolation": Interpolation,
@@ -228,6 +240,11 @@ class Telemetry(_Payload):
         ("disturbance_tick", U64),
         ("dropped_messages", U64),
     ]
+
+    def rejections(self):
+        """The rejection counts by reason name (``{"disturbance-out-of-bounds": 1}``), leaving
+        out reasons that never occurred; ``rejected_by_reason`` holds the raw array."""
+        return rejections_by_name(self.rejected_by_reason)
 
 
 PAYLOADS = {

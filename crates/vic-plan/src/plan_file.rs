@@ -119,6 +119,8 @@ pub enum PlanFileError {
         path: PathBuf,
         source: serde_json::Error,
     },
+    #[error("{}: {what}", path.display())]
+    Shape { path: PathBuf, what: String },
     #[error("cannot write {}: {source}", path.display())]
     Write {
         path: PathBuf,
@@ -136,10 +138,78 @@ impl PlanFile {
                 source,
             }
         })?;
-        serde_json::from_str(&text).map_err(|source| PlanFileError::Parse {
+        let plan: PlanFile =
+            serde_json::from_str(&text).map_err(|source| PlanFileError::Parse {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        plan.check_shape().map_err(|what| PlanFileError::Shape {
             path: path.to_path_buf(),
-            source,
-        })
+            what,
+        })?;
+        Ok(plan)
+    }
+
+    /// The arrays' shapes agree: `time` and `x` have one row more than `u` (when `time` is
+    /// given), every row of `x` has one value per state name and every row of `u` one per
+    /// control name, and the gains are empty or one m×n matrix per step with every row of
+    /// the same length. The message names the first array and row that is wrong.
+    fn check_shape(&self) -> Result<(), String> {
+        let (nx, nu, steps) = (
+            self.state_names.len(),
+            self.control_names.len(),
+            self.u.len(),
+        );
+        if self.x.len() != steps + 1 {
+            return Err(format!(
+                "x has {} rows, u has {steps}: x needs one more",
+                self.x.len()
+            ));
+        }
+        if !self.time.is_empty() && self.time.len() != self.x.len() {
+            return Err(format!(
+                "time has {} values, x has {} rows",
+                self.time.len(),
+                self.x.len()
+            ));
+        }
+        for (name, rows, width, names) in [
+            ("x", &self.x, nx, "state_names"),
+            ("u", &self.u, nu, "control_names"),
+        ] {
+            if let Some((k, row)) = rows.iter().enumerate().find(|(_, r)| r.len() != width) {
+                return Err(format!(
+                    "{name}[{k}] has {} values, {names} has {width}",
+                    row.len()
+                ));
+            }
+        }
+        if self.gains.is_empty() {
+            return Ok(());
+        }
+        if self.gains.len() != steps {
+            return Err(format!(
+                "gains has {} matrices, u has {steps} rows: one per step",
+                self.gains.len()
+            ));
+        }
+        let rows = self.gains[0].len();
+        let cols = self.gains[0].first().map_or(0, |r| r.len());
+        for (k, g) in self.gains.iter().enumerate() {
+            if g.len() != rows {
+                return Err(format!(
+                    "gains[{k}] has {} rows, gains[0] has {rows}",
+                    g.len()
+                ));
+            }
+            if let Some((r, row)) = g.iter().enumerate().find(|(_, r)| r.len() != cols) {
+                return Err(format!(
+                    "gains[{k}] row {r} has {} values, every gain row has {cols} (gains[0] row 0)",
+                    row.len()
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Writes the plan as JSON to `path`.

@@ -423,7 +423,7 @@ def test_bad_plan_files_and_recordings(tmp_path):
     raw["x"][4] = raw["x"][4][:-1]
     ragged = tmp_path / "ragged.json"
     ragged.write_text(json.dumps(raw))
-    with raises(vic.PlanFileError, "ragged.json", "`x` row 4 has 3 entries, not 4"):
+    with raises(vic.PlanFileError, "ragged.json", "x[4] has 3 values, state_names has 4"):
         vic.Plan.load(ragged)
     with raises(vic.PlanFileError, "cannot write"):
         vic.Plan.load(good).save(tmp_path / "no" / "such" / "dir.json")
