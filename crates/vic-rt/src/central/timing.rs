@@ -57,13 +57,18 @@ impl Timing {
         match strategy {
             Strategy::Stiffness | Strategy::Replan => PLANNER_RATES_HZ[0],
             Strategy::NaiveDelayed | Strategy::Predictor | Strategy::StiffnessPredictor => {
-                let own_delay_ms = |hz: u64| 1.5 * Self::lookahead_ms(1_000_000_000 / hz);
                 PLANNER_RATES_HZ
                     .into_iter()
-                    .find(|&hz| own_delay_ms(hz) <= latency.ms() + 1e-9)
+                    .find(|&hz| Self::own_delay_ms(1_000_000_000 / hz) <= latency.ms() + 1e-9)
                     .unwrap_or(PLANNER_RATES_HZ[PLANNER_RATES_HZ.len() - 1])
             }
         }
+    }
+
+    /// The planner's own delay [ms]: a knot is computed at the planner's first tick inside the
+    /// lookahead, up to one and a half lookaheads (three periods) before it acts.
+    pub fn own_delay_ms(planner_period_ns: u64) -> f64 {
+        1.5 * Self::lookahead_ms(planner_period_ns)
     }
 
     /// How far past its arrival a slice reaches [ms]: two planner periods.
@@ -84,7 +89,7 @@ impl DelayLines {
     /// what remains after the slice lookahead and one more planner period (the planner computes
     /// a knot at its first tick inside the lookahead), shared equally.
     pub fn split(latency: Latency, planner_period_ns: u64) -> DelayLines {
-        let rest = (latency.ms() - 1.5 * Timing::lookahead_ms(planner_period_ns)).max(0.0);
+        let rest = (latency.ms() - Timing::own_delay_ms(planner_period_ns)).max(0.0);
         DelayLines {
             sensor_ms: rest / 2.0,
             command_ms: rest / 2.0,
@@ -108,13 +113,13 @@ mod tests {
             for ms in [0.0, 10.0, 20.0, 30.0, 50.0, 60.0, 100.0, 200.0] {
                 let hz = rate(s, ms);
                 let period_ns = 1_000_000_000 / hz;
-                let own = 1.5 * Timing::lookahead_ms(period_ns);
+                let own = Timing::own_delay_ms(period_ns);
                 // Its own delay fits (or it is the fastest rate) ...
                 assert!(own <= ms || hz == 250, "{s:?} {ms} ms: {hz} Hz");
                 // ... and no slower rate would fit: the slowest that does.
                 let slower = PLANNER_RATES_HZ.iter().filter(|&&r| r < hz);
                 for &r in slower {
-                    assert!(1.5 * Timing::lookahead_ms(1_000_000_000 / r) > ms);
+                    assert!(Timing::own_delay_ms(1_000_000_000 / r) > ms);
                 }
                 // The delay lines then take the rest of the latency: states of k − D exactly.
                 let lines = DelayLines::split(at(ms), period_ns);
