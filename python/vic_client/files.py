@@ -2,6 +2,7 @@
 (``vic-board --record run.mcap`` or ``vic record``) and a CSV recording (``--record run.csv``)."""
 
 import json
+import struct
 from types import SimpleNamespace
 
 import numpy as np
@@ -78,7 +79,9 @@ def _read_records(path, topics):
                 r = next(records)
             except StopIteration:
                 break
-            except (McapError, ValueError, EOFError):  # truncated: keep what came before
+            # Truncated: keep what came before. Where the cut falls decides the error: inside
+            # a record's length prefix the reader's struct.unpack fails.
+            except (McapError, ValueError, EOFError, struct.error):
                 complete = False
                 break
             if isinstance(r, Channel):
