@@ -204,7 +204,9 @@ def live_checks(ns, out):
             assert ack["disturbance_seq"] == b.seq["disturbance"] and ack["disturbance_tick"] == ack["tick"]
 
     def reset_then_hold():
-        ack = b.reset(Q0, trial=7, seed=3, start_in_s=0.05)
+        # The acknowledging state is the first with this reset's seq; the trial starts 0.3 s
+        # later, so a poller preempted on a loaded machine still finds it idle at Q0.
+        ack = b.reset(Q0, trial=7, seed=3, start_in_s=0.3)
         assert ack["reset_seq"] == b.seq["control"] and ack["trial"] == 7
         assert ack["mode"] == vc.Mode.IDLE and list(ack["q"]) == Q0 and list(ack["qd"]) == [0, 0]
         running = b.wait_state(lambda s: s["mode"] == vc.Mode.RUNNING, 2.0)

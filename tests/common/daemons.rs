@@ -198,7 +198,15 @@ pub fn run_planner(
     if lockstep {
         c.arg("--lockstep");
     }
-    let out = c.stderr(Stdio::inherit()).output().unwrap();
-    assert!(out.status.success(), "vic-planner {strategy} failed");
+    // Its log is kept and repeated in the failure message, which the harness prints last:
+    // interleaved with the other tests' output it may be cut off.
+    let out = c.stderr(Stdio::piped()).output().unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    eprint!("{log}");
+    assert!(
+        out.status.success(),
+        "vic-planner {strategy} in namespace {ns} failed ({}):\n{log}",
+        out.status
+    );
     serde_json::from_slice(&out.stdout).unwrap()
 }
