@@ -23,6 +23,7 @@ mod daemon_logs;
 mod demo_distributed;
 mod faults;
 mod flood;
+mod foxglove_view;
 mod interleaved_senders;
 mod monitor_tui;
 mod namespaces;

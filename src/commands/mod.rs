@@ -19,6 +19,8 @@ mod results;
 mod simulate;
 mod status;
 mod sweep;
+#[cfg(feature = "foxglove")]
+mod view;
 
 use clap::{Parser, Subcommand};
 
@@ -109,6 +111,14 @@ enum Command {
     ///
     /// Example: vic record --namespace lab1 --out run.mcap --duration 60
     Record(record::Args),
+    /// Serve a running namespace live to Foxglove over its WebSocket protocol: the recording's
+    /// channels (the same topics and schemas as vic record's MCAP files), the plan the board
+    /// executes (/reference) and the hand path (/hand). Open ws://127.0.0.1:8765 in Foxglove
+    /// and import docs/foxglove-layout.json.
+    ///
+    /// Example: vic view --namespace lab1
+    #[cfg(feature = "foxglove")]
+    View(view::Args),
     /// Convert a board's MCAP recording (vic-board --record run.mcap) to the CSV log that
     /// vic identify reads (gaps marked as in the board's own CSV).
     ///
@@ -148,6 +158,8 @@ impl Cli {
             Command::Bridge(a) => bridge::run(a),
             Command::Identify(a) => identify::run(a),
             Command::Record(a) => record::run(a),
+            #[cfg(feature = "foxglove")]
+            Command::View(a) => view::run(a),
             Command::Convert(a) => convert::run(a),
             Command::Bench(a) => bench::run(a),
             Command::Sweep(a) => sweep::run(a),

@@ -42,6 +42,9 @@ pub enum RecordError {
     /// The transport failed (opening the namespace's services).
     #[error(transparent)]
     Transport(#[from] TransportError),
+    /// The live view's server could not start or make a channel.
+    #[error("vic view: {message}")]
+    View { message: String },
     /// No board published a state in the namespace within the wait.
     #[error("no board in namespace \"{namespace}\" (no state within {waited_ms} ms)")]
     NoBoard { namespace: String, waited_ms: u64 },

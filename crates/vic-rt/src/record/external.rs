@@ -8,7 +8,7 @@
 use super::error::RecordError;
 use super::file::Placement;
 use super::mcap_file::McapOut;
-use super::schema::{self, ChannelSpec, gap_json};
+use super::observe::{SPECS, STATE, StateTrack, drain};
 use crate::transport::RecorderPorts;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -59,31 +59,6 @@ pub struct ExternalSummary {
 struct Channels {
     ids: [u16; 6],
     counts: [u64; 6],
-}
-
-const SPECS: [&ChannelSpec; 6] = [
-    &schema::STATE,
-    &schema::COMMAND,
-    &schema::CONTROL,
-    &schema::DISTURBANCE,
-    &schema::TELEMETRY,
-    &schema::GAP,
-];
-const STATE: usize = 0;
-const COMMAND: usize = 1;
-const CONTROL: usize = 2;
-const DISTURBANCE: usize = 3;
-const TELEMETRY: usize = 4;
-const GAP: usize = 5;
-
-/// Loss accounting of the state stream.
-#[derive(Default)]
-struct StateTrack {
-    last_seq: u64,
-    first_tick: u64,
-    last_tick: u64,
-    lost: u64,
-    gaps: u64,
 }
 
 /// Records namespace `ns` into the MCAP file `path` until `stop` is set or the duration ends.
@@ -239,56 +214,12 @@ fn drain_once(
     track: &mut StateTrack,
 ) -> mcap::McapResult<()> {
     let mut result = Ok(());
-    let mut put =
-        |out: &mut McapOut, ch: &mut Channels, k: usize, t: u64, v: &serde_json::Value| {
-            if result.is_ok() {
-                result = out.write(ch.ids[k], t, t, v);
-                ch.counts[k] += 1;
-            }
-        };
-    ports.drain_states(|s| {
-        let t = s.header.time_ns;
-        // A board numbers its states 1, 2, …; a jump is states this recorder missed. A restart
-        // of the board (numbers going back) starts a new count.
-        if track.last_seq > 0 && s.header.seq > track.last_seq + 1 {
-            let missing = s.header.seq - track.last_seq - 1;
-            track.lost += missing;
-            track.gaps += 1;
-            let first = s.tick.saturating_sub(missing);
-            put(
-                out,
-                ch,
-                GAP,
-                t,
-                &gap_json(first, missing, "recorder missed states"),
-            );
+    drain(ports, track, |item| {
+        if result.is_ok() {
+            let (k, t) = (item.channel(), item.time_ns());
+            result = out.write(ch.ids[k], t, t, &item.json());
+            ch.counts[k] += 1;
         }
-        if ch.counts[STATE] == 0 {
-            track.first_tick = s.tick;
-        }
-        track.last_seq = s.header.seq;
-        track.last_tick = s.tick;
-        put(out, ch, STATE, t, &schema::state_json(s));
-    });
-    ports.drain_commands(|c| put(out, ch, COMMAND, c.header.time_ns, &schema::command_json(c)));
-    ports.drain_controls(|c| put(out, ch, CONTROL, c.header.time_ns, &schema::control_json(c)));
-    ports.drain_disturbances(|d| {
-        put(
-            out,
-            ch,
-            DISTURBANCE,
-            d.header.time_ns,
-            &schema::disturbance_json(d),
-        )
-    });
-    ports.drain_telemetry(|t| {
-        put(
-            out,
-            ch,
-            TELEMETRY,
-            t.header.time_ns,
-            &schema::telemetry_json(t),
-        )
     });
     result
 }

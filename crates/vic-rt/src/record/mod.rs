@@ -48,8 +48,11 @@ mod error;
 mod external;
 pub mod file;
 pub(crate) mod mcap_file;
+mod observe;
 mod read;
 mod schema;
+#[cfg(feature = "foxglove")]
+mod view;
 
 pub use csv::{EXTRA_COLUMN_PREFIX, LOG_COLUMNS, LOG_HEADER, header};
 pub use error::RecordError;
@@ -58,6 +61,10 @@ pub use mcap_file::{FLUSH_INTERVAL, GAP_TOPIC, TICK_TOPIC};
 pub use read::{
     BoardRecording, Recording, StatesCsv, board_recording, read_board_mcap, read_recording,
     write_csv, write_states_csv,
+};
+#[cfg(feature = "foxglove")]
+pub use view::{
+    HAND_TOPIC, Kinematics, REFERENCE_TOPIC, ViewOptions, ViewSummary, serve_namespace,
 };
 
 use crate::transport::MAX_JOINTS;

@@ -368,7 +368,11 @@ pub struct RecorderPorts {
 impl RecorderPorts {
     /// Connects a recorder to namespace `ns`.
     pub fn open(ns: &str) -> Result<RecorderPorts, TransportError> {
-        let session = Session::open(ns, "vic-recorder")?;
+        RecorderPorts::open_as(ns, "vic-recorder")
+    }
+    /// The same under another node name (`vic status` lists the observers by it).
+    pub fn open_as(ns: &str, node_name: &str) -> Result<RecorderPorts, TransportError> {
+        let session = Session::open(ns, node_name)?;
         Ok(RecorderPorts {
             states: session.subscriber_with_buffer(STATE_BUFFER)?,
             telemetry: session.subscriber_with_buffer(STATE_BUFFER)?,
