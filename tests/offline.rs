@@ -9,6 +9,7 @@ mod common;
 #[global_allocator]
 static GLOBAL: common::alloc::Counting = common::alloc::Counting;
 
+mod alternating_stiffness;
 mod architecture;
 mod board;
 mod central_overrun;
