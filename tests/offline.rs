@@ -40,6 +40,7 @@ mod python_bindings;
 mod readme;
 mod record_format;
 mod replan;
+mod report_text;
 mod sooc;
 mod sooc_newton;
 mod sooc_workspace;
