@@ -9,6 +9,7 @@ mod common;
 #[global_allocator]
 static GLOBAL: common::alloc::Counting = common::alloc::Counting;
 
+mod alternating_stiffness;
 mod architecture;
 mod board;
 mod central_overrun;
@@ -39,6 +40,7 @@ mod python_bindings;
 mod readme;
 mod record_format;
 mod replan;
+mod report_text;
 mod sooc;
 mod sooc_newton;
 mod sooc_workspace;

@@ -128,6 +128,7 @@ fn arm_column(title: &str, spread: f64, stiffness: bool, rng: &mut StdRng) -> Co
         reference_q,
         ellipse: Some((mean, [2.45 * sx, 2.45 * sy], 0.0)),
         dashed_ellipse: None,
+        diverged: Vec::new(),
     }
 }
 
@@ -145,6 +146,7 @@ fn arm_columns() -> Vec<ColumnPlot> {
         .enumerate()
         .map(|(k, p)| [p[0] + 0.05 * (k as f64 / 6.0).exp(), p[1]])
         .collect();
+    columns[1].diverged = vec![true];
     columns[1].hand[1][30] = [f64::NAN, 0.4];
     columns[1].q[1][30][0] = f64::INFINITY;
     let ellipse = columns[3].ellipse.unwrap();
@@ -209,6 +211,7 @@ fn joint_column(title: &str, noise: f64, stiffness: bool, rng: &mut StdRng) -> C
         reference_hand: Vec::new(),
         ellipse: None,
         dashed_ellipse: None,
+        diverged: Vec::new(),
     }
 }
 
@@ -270,7 +273,9 @@ fn arm_figure_renders_png_and_svg() {
     let (w, h) = png_size(&png);
     assert_eq!(w, 28 + 400 * 4);
     assert!((900..=1200).contains(&h), "height {h}");
-    let titles: Vec<&str> = columns.iter().map(|c| c.title.as_str()).collect();
+    let mut titles: Vec<&str> = columns.iter().map(|c| c.title.as_str()).collect();
+    // The diverging trial is counted under its column's title.
+    titles.push("1 of 20 trials diverged (dashed), ellipse of the other 19");
     check_svg(&svg, &titles);
     if let Ok(out) = std::env::var("VIC_PLOT_CHECK") {
         arm_figure(&columns, Path::new(&out), &dir.0.join("check.svg")).unwrap();

@@ -127,7 +127,7 @@ pub(crate) fn run(o: Args) -> anyhow::Result<()> {
         write_trials_csv(path, &plan, &trials)?;
     }
     if let Some(png) = &o.plot {
-        plot_trials(png, feedback, &plan, &scenario, &trials)?;
+        plot_trials(png, feedback, &plan, &scenario, &trials, divergence)?;
     }
     // The executed law's own prediction (closed-loop covariance propagation); for the naive
     // delayed law, the plan's (that of the augmented policy it was planned as).
@@ -151,10 +151,12 @@ fn plot_trials(
     plan: &PlanFile,
     scenario: &Scenario,
     trials: &[Trial],
+    divergence: f64,
 ) -> anyhow::Result<()> {
     // The figure names the execution in words ("delayed feedback (20 steps)").
     let title = feedback.to_string();
-    let column = crate::studies::experiment::column_plot(&title, plan, scenario, trials);
+    let column =
+        crate::studies::experiment::column_plot(&title, plan, scenario, trials, divergence);
     let svg = png.with_extension("svg");
     if scenario.model.dof() == 2 {
         crate::views::plot::arm_figure(&[column], png, &svg).runtime()

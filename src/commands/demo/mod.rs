@@ -28,6 +28,7 @@ use std::path::{Path, PathBuf};
 use vic_plan::plan::PlanFile;
 use vic_plan::scenario::Scenario;
 use vic_plan::strategy::{Latency, Strategy, StrategyPlan};
+use vic_plan::unit::Unit;
 use vic_rt::daemon::Children;
 
 /// What `vic demo` was asked for: its flags.
@@ -225,7 +226,14 @@ fn trajectories_figure(
             let traj: Trajectories = serde_json::from_str(&text)
                 .map_err(|e| anyhow!("{}: not trajectories: {e}", path.display()))?;
             let plan = PlanFile::read(r.plan).input()?;
-            Ok(column_plot(&r.label(), &plan, scenario, &traj.to_trials()))
+            let divergence = Unit::for_model(&scenario.model).default_divergence();
+            Ok(column_plot(
+                &r.label(),
+                &plan,
+                scenario,
+                &traj.to_trials(),
+                divergence,
+            ))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let png = o.out_dir.join("trajectories.png");
@@ -234,6 +242,9 @@ fn trajectories_figure(
     crate::views::plot::captioned_figure(&columns, &caption, &png, &svg)?;
     Ok([png, svg])
 }
+
+/// How a figure marks the trials that diverged.
+const DIVERGED_NOTE: &str = crate::studies::experiment::DIVERGED_NOTE;
 
 /// The figure's title and caption: what the columns are and how to read them.
 fn figure_caption(scenario: &Scenario, runs: &[StrategyRun], trials: u64) -> Caption {
@@ -255,6 +266,7 @@ fn figure_caption(scenario: &Scenario, runs: &[StrategyRun], trials: u64) -> Cap
         "Top: joint angle of every trial with the reference. Middle: velocity. Bottom: the \
          commands the board executed, torque and stiffness."
     };
+    let rows = format!("{rows} {DIVERGED_NOTE}");
     Caption {
         title: format!(
             "Delayed feedback against planned stiffness at {latency} ms of feedback latency \

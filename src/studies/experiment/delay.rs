@@ -114,7 +114,8 @@ pub(crate) fn delay_markdown(sweeps: &[DelaySweep], figure_dir: &str) -> String 
          predicted present; `replan` re-solves the SOOC plan every 20 ms (3 Newton steps, warm \
          started) from the present predicted from the delayed state, and plays it open loop \
          between re-solves. Final error: \
-         mean over the trials with the spread to the worst trial shaded; E[C] predicted is the \
+         mean over the trials that did not diverge, with a bar to the worst of them (hollow \
+         where some trials diverged, a cross where all did); E[C] predicted is the \
          executed policy's cost by closed-loop covariance propagation (not modelled for the naive \
          law).\n\n",
         sweeps.first().map_or(0, |s| s.sweep.trials),

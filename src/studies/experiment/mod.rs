@@ -58,6 +58,8 @@ enum Column {
 #[derive(Debug, Clone)]
 struct ColumnSpec {
     name: &'static str,
+    /// The column's title in the figure.
+    title: &'static str,
     what: &'static str,
     file: &'static str,
     column: Column,
@@ -65,8 +67,9 @@ struct ColumnSpec {
 
 fn columns(figure: Figure) -> Vec<ColumnSpec> {
     use Method::*;
-    let c = |name, what, file, column| ColumnSpec {
+    let c = |(name, title), what, file, column| ColumnSpec {
         name,
+        title,
         what,
         file,
         column,
@@ -74,31 +77,31 @@ fn columns(figure: Figure) -> Vec<ColumnSpec> {
     match figure {
         Figure::Fig1 => vec![
             c(
-                "deterministic",
+                ("deterministic", "deterministic (no noise)"),
                 "type 2, no noise",
                 "two_link_deterministic.toml",
                 Column::OpenLoop(Ilqg),
             ),
             c(
-                "torque",
+                ("torque", "torque only"),
                 "type 1 (torque only), noise",
                 "two_link_torque_divergent.toml",
                 Column::OpenLoop(Sooc),
             ),
             c(
-                "impedance",
+                ("impedance", "torque + impedance"),
                 "type 2 (torque + PD impedance), noise",
                 "two_link_divergent.toml",
                 Column::OpenLoop(Sooc),
             ),
             c(
-                "vsa",
+                ("vsa", "VSA"),
                 "type 3 (VSA), B = 2 kg m², noise",
                 "two_link_vsa_divergent.toml",
                 Column::OpenLoop(Sooc),
             ),
             c(
-                "vsa_b_over_10",
+                ("vsa_b_over_10", "VSA, motor inertia B/10"),
                 "type 3 (VSA), B/10, noise",
                 "two_link_vsa_light_divergent.toml",
                 Column::OpenLoop(Sooc),
@@ -106,26 +109,26 @@ fn columns(figure: Figure) -> Vec<ColumnSpec> {
         ],
         Figure::Fig2 => vec![
             c(
-                "feedforward",
+                ("feedforward", "torque + stiffness, no delay"),
                 "torque and stiffness, no delay, open loop",
                 "icub_elbow.toml",
                 Column::OpenLoop(Sooc),
             ),
             c(
-                "delayed_feedback",
+                ("delayed_feedback", "delayed feedback, no stiffness"),
                 "no stiffness, ILQG gains on the state seen 200 ms late (Eq. 13)",
                 "single_joint_delay.toml",
                 Column::Strategy(Strategy::NaiveDelayed, 200.0),
             ),
             c(
-                "stiffness_delayed",
+                ("stiffness_delayed", "torque + stiffness, 200 ms delay"),
                 "torque and stiffness, 200 ms delay, no feedback",
                 "single_joint_delay.toml",
                 Column::OpenLoop(Sooc),
             ),
         ],
         Figure::Icub => vec![c(
-            "icub_elbow",
+            ("icub_elbow", "iCub elbow, open loop"),
             "identified torque noise and damping law, open loop",
             "icub_experiment.toml",
             Column::OpenLoop(Sooc),
@@ -373,20 +376,64 @@ pub(crate) fn to_json(run: &ExperimentRun) -> serde_json::Value {
     v
 }
 
-/// The plot data of one column (hand paths for the arm, joint angles and commands for all).
+/// Per trial: whether it diverged, by the rule of the reports ([`summarize`]): its final
+/// position is further than `divergence` (mm of hand for the arm, degrees for a joint) from the
+/// plan's final reference, or is not finite.
+pub(crate) fn diverged_trials(
+    plan: &PlanFile,
+    scenario: &Scenario,
+    trials: &[Trial],
+    divergence: f64,
+) -> Vec<bool> {
+    let model = &scenario.model;
+    let scale = Unit::for_model(model).scale();
+    let Some(goal) = plan.reference.last() else {
+        return vec![false; trials.len()];
+    };
+    let mut x = nalgebra::DVector::zeros(model.nx());
+    for (xi, q) in x.iter_mut().zip(&goal.q_d[..model.dof()]) {
+        *xi = *q;
+    }
+    let target = vic_plan::montecarlo::position(model, &x);
+    trials
+        .iter()
+        .map(|t| {
+            let Some(last) = t.x.last() else {
+                return true;
+            };
+            let end = vic_plan::montecarlo::position(model, last);
+            let d = end
+                .iter()
+                .zip(&target)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                .sqrt()
+                * scale;
+            !d.is_finite() || d > divergence
+        })
+        .collect()
+}
+
+/// The plot data of one column (hand paths for the arm, joint angles and commands for all);
+/// a trial that ends further than `divergence` from the target (see [`diverged_trials`]) is
+/// marked diverged, and the 95 % ellipse is of the others.
 pub(crate) fn column_plot(
     title: &str,
     plan: &PlanFile,
     scenario: &Scenario,
     trials: &[Trial],
+    divergence: f64,
 ) -> crate::views::plot::ColumnPlot {
     let model = &scenario.model;
     let dof = model.dof();
     let hand = |x: &[f64]| -> [f64; 2] { model.plant.hand_position(&x[..2]) };
+    let diverged = diverged_trials(plan, scenario, trials, divergence);
     let finals: Vec<[f64; 2]> = if dof == 2 {
         trials
             .iter()
-            .map(|t| hand(t.x.last().expect("non-empty").as_slice()))
+            .zip(&diverged)
+            .filter(|(_, lost)| !**lost)
+            .map(|(t, _)| hand(t.x.last().expect("non-empty").as_slice()))
             .collect()
     } else {
         vec![]
@@ -435,6 +482,7 @@ pub(crate) fn column_plot(
             .collect(),
         ellipse: confidence_ellipse(&finals),
         dashed_ellipse: None,
+        diverged,
     }
 }
 
@@ -477,26 +525,81 @@ pub fn write_outputs(run: &ExperimentRun, dir: &Path) -> Result<Vec<PathBuf>, St
     let text = serde_json::to_string_pretty(&to_json(run)).map_err(|e| e.to_string())?;
     std::fs::write(&json_path, text)
         .map_err(|e| format!("cannot write {}: {e}", json_path.display()))?;
+    let specs = columns(run.figure);
     let mut plots: Vec<crate::views::plot::ColumnPlot> = run
         .columns
         .iter()
         .zip(&run.data)
-        .map(|(c, d)| column_plot(&c.name.replace('_', " "), &d.plan, &d.scenario, &d.trials))
+        .map(|(c, d)| {
+            let title = specs
+                .iter()
+                .find(|s| s.name == c.name)
+                .map_or_else(|| c.name.replace('_', " "), |s| s.title.to_string());
+            let divergence = Unit::for_model(&d.scenario.model).default_divergence();
+            column_plot(&title, &d.plan, &d.scenario, &d.trials, divergence)
+        })
         .collect();
     let png = dir.join(format!("{name}.png"));
     let svg = dir.join(format!("{name}.svg"));
-    match run.figure {
-        Figure::Fig1 => {
-            // As in the paper, the B/10 VSA shows as a dashed ellipse in the VSA column too.
-            if plots.len() == 5 {
-                let light = plots[4].ellipse;
-                plots[3].dashed_ellipse = light;
-            }
-            crate::views::plot::arm_figure(&plots, &png, &svg).map_err(|e| e.to_string())?;
-        }
-        Figure::Fig2 | Figure::Icub => {
-            crate::views::plot::joint_figure(&plots, &png, &svg).map_err(|e| e.to_string())?;
-        }
+    // As in the paper, the B/10 VSA shows as a dashed ellipse in the VSA column too.
+    if run.figure == Figure::Fig1 && plots.len() == 5 {
+        let light = plots[4].ellipse;
+        plots[3].dashed_ellipse = light;
     }
+    crate::views::plot::captioned_figure(&plots, &figure_caption(run), &png, &svg)
+        .map_err(|e| e.to_string())?;
     Ok(vec![json_path, png, svg])
+}
+
+/// What every column figure's caption says of the trials that diverged.
+pub(crate) const DIVERGED_NOTE: &str = "A trial that diverged (ended more than the divergence \
+     distance from the target, or blew up) is dashed, counted under its column's title and left \
+     out of the mean, the spread, the ellipse and the axis ranges.";
+
+/// The title and caption of an experiment's figure: what the columns are and how to read them.
+fn figure_caption(run: &ExperimentRun) -> crate::views::plot::Caption {
+    let trials = format!("{} trials per column, seed {}", run.trials, run.seed);
+    let (title, text) = match run.figure {
+        Figure::Fig1 => (
+            format!(
+                "Fig. 1: reaching in a divergent field with each actuator, open loop ({trials})"
+            ),
+            "Columns: the deterministic plan on the noise-free arm (ILQG), then SOOC plans of the \
+             noisy arm in the divergent field with torque only, torque with a PD impedance, and a \
+             variable-stiffness actuator (VSA) with motor inertia B and B/10, executed without \
+             feedback. Top: hand paths of every trial (grey), their mean (black), the spread \
+             across the path (blue), the reference (dashed) to the target (circle) and the 95 % \
+             ellipse of the final hand position (red; dashed in the VSA column: B/10's). Middle: \
+             joint angles and velocities, mean ± std, the reference dashed. Bottom: the commands \
+             per joint, torque τ (the VSA's: its motors') and stiffness K."
+                .to_string(),
+        ),
+        Figure::Fig2 => (
+            format!("Fig. 2: a single joint with 200 ms of feedback delay ({trials})"),
+            "Columns: a plan of torque and stiffness without delay, executed open loop; delayed \
+             feedback without stiffness (the gains of a plan made for the delay on the state seen \
+             200 ms late, Eq. 13); the plan of torque and stiffness with 200 ms of delay, which \
+             an open-loop plan does not see. Top: the joint angle of every trial and the \
+             reference (dashed). Middle: velocity. Bottom: the commands, torque τ₁ and \
+             stiffness K₁."
+                .to_string(),
+        ),
+        Figure::Icub => (
+            format!("The iCub elbow, −60° to −30° in 1.5 s, open loop ({trials})"),
+            "The open-loop SOOC plan of torque and stiffness for the identified torque noise \
+             e = (a + b q') η and damping law K_D = 0.075 K_P − 0.0015. Top: the elbow angle of \
+             every trial and the reference (dashed). Middle: velocity. Bottom: the plan, torque \
+             τ₁ and stiffness K₁. Near the start and the end, torque and stiffness alternate \
+             from knot to knot: the noise's amplitude is set by the velocity at each knot, and \
+             the plan meets the larger kicks with the stiffer (more damped) knots; averaging \
+             each pair of knots costs 5.6 % more (docs/GUIDE.md, \"Why the iCub plan \
+             alternates\")."
+                .to_string(),
+        ),
+    };
+    let text = match run.figure {
+        Figure::Icub => text,
+        _ => format!("{text} {DIVERGED_NOTE}"),
+    };
+    crate::views::plot::Caption { title, text }
 }

@@ -4,6 +4,7 @@
 use super::{Sweep, SweepError};
 use std::path::Path;
 use vic_plan::montecarlo::Pulse;
+use vic_plan::strategy::Strategy;
 
 /// The pulse of `--pulse T1[,T2] --pulse-at-ms MS --pulse-ms MS` (`None` without a torque; the
 /// second joint's torque is 0 when one is given).
@@ -107,14 +108,15 @@ impl Sweep {
     }
 }
 
-/// The sweep's figure: final error (mean, spread to the worst trial) against the latency, one line
-/// per strategy, PNG and SVG.
+/// The sweep's figure: final error (mean, bar to the worst trial) against the latency, one line
+/// per strategy, PNG and SVG, with a title and a caption that says what each strategy is.
 pub fn write_figure(
     sweep: &Sweep,
     png: &Path,
     svg: &Path,
 ) -> Result<(), crate::views::plot::PlotError> {
     let mut curves: Vec<crate::views::plot::Curve> = Vec::new();
+    let mut strategies = Vec::new();
     for p in &sweep.points {
         let name = p.strategy.name();
         let i = match curves.iter().position(|c| c.name == name) {
@@ -124,27 +126,55 @@ pub fn write_figure(
                     name: name.into(),
                     points: Vec::new(),
                 });
+                strategies.push(p.strategy);
                 curves.len() - 1
             }
         };
-        curves[i]
-            .points
-            .push((p.latency_ms, p.final_error_mean, p.final_error_max));
+        curves[i].points.push((
+            p.latency_ms,
+            p.final_error_mean,
+            p.final_error_max,
+            p.diverged_fraction,
+        ));
     }
     let unit = sweep.points.first().map_or("", |p| p.unit.name());
     crate::views::plot::curve_figure(
         &curves,
-        &format!(
-            "Delay versus stiffness: {} ({} trials)",
-            Path::new(&sweep.scenario)
-                .file_stem()
-                .map_or_else(|| sweep.scenario.clone(), |s| s.to_string_lossy().into()),
-            sweep.trials
-        ),
+        &figure_caption(sweep, &strategies),
         &format!("final error [{unit}]"),
         png,
         svg,
     )
+}
+
+/// The sweep figure's title (scenario, where the trials ran, how many) and caption (how to read
+/// it, what each strategy is).
+fn figure_caption(sweep: &Sweep, strategies: &[Strategy]) -> crate::views::plot::Caption {
+    let scenario = Path::new(&sweep.scenario)
+        .file_stem()
+        .map_or_else(|| sweep.scenario.clone(), |s| s.to_string_lossy().into());
+    let names: Vec<String> = strategies
+        .iter()
+        .map(|s| format!("{}: {}", s.name(), s.plain()))
+        .collect();
+    crate::views::plot::Caption {
+        title: format!(
+            "Delay versus stiffness: {scenario} ({}, {} trials per point, seed {})",
+            match sweep.execution {
+                super::Engine::Offline => "offline Monte Carlo",
+                super::Engine::Lockstep => "board and controller in lockstep",
+                super::Engine::Live => "live",
+            },
+            sweep.trials,
+            sweep.seed
+        ),
+        text: format!(
+            "Final distance to the target against the feedback latency: the mean over the trials \
+             that did not diverge (line), a bar up to the worst of them at each latency run \
+             (neighbouring strategies' bars side by side). {}.",
+            names.join("; ")
+        ),
+    }
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@ use super::*;
 /// Pixel heights of the arm figure's panels: hand path (with the title), angle, velocity,
 /// torque, stiffness (the last one only when some column has stiffness commands).
 pub(super) const ARM_HAND_HEIGHT: u32 = 400;
-pub(super) const ARM_TIME_HEIGHT: u32 = 165;
+pub(super) const ARM_TIME_HEIGHT: u32 = 185;
 
 pub(super) struct ArmFigure<'a> {
     pub(super) axes: ColumnAxes<'a>,
@@ -69,7 +69,7 @@ impl<'a> ArmFigure<'a> {
     ) -> DrawResult<(), DB> {
         let col = &self.axes.columns[c];
         let stats = &self.stats[c];
-        let area = titled(area, &col.title)?;
+        let area = column_titled(area, self.axes.columns, c, true)?;
         let (w, h) = hand_chart(&area, self.hand_view)?
             .plotting_area()
             .dim_in_pixel();
@@ -82,13 +82,17 @@ impl<'a> ArmFigure<'a> {
         if col.hand.is_empty() {
             return note(&mut chart, "no hand path");
         }
-        for trial in &col.hand {
+        for trial in col.kept(&col.hand) {
             lines(
                 &mut chart,
                 &view,
                 trial.iter().map(|p| (p[0], p[1])),
                 thin(&TRIAL_GREY),
             )?;
+        }
+        for trial in col.lost(&col.hand) {
+            let points: Vec<(f64, f64)> = trial.iter().map(|p| (p[0], p[1])).collect();
+            dashed(&mut chart, &view, &points, diverged_style())?;
         }
         for polygon in &stats.hand_band {
             fill(&mut chart, &view, polygon, BAND_BLUE.mix(0.3))?;
@@ -121,9 +125,11 @@ impl<'a> ArmFigure<'a> {
             if col.ellipse.is_some() || col.dashed_ellipse.is_some() {
                 legend_line(&mut chart, "95 % ellipse", ELLIPSE_RED.stroke_width(2))?;
             }
+            if self.axes.columns.iter().any(|c| c.n_diverged() > 0) {
+                legend_dashed(&mut chart, "diverged trial", diverged_style())?;
+            }
             let drawn: Vec<(f64, f64)> = col
-                .hand
-                .iter()
+                .kept(&col.hand)
                 .flatten()
                 .map(|p| (p[0], p[1]))
                 .chain(stats.hand_band.iter().flatten().copied())
@@ -148,8 +154,19 @@ impl<'a> ArmFigure<'a> {
             &self.stats[c].velocity
         };
         let mut drawn = Vec::new();
+        let trials = if angles { &col.q } else { &col.qd };
         for (j, (mean, sd)) in stats.iter().enumerate() {
             let colour = joint_colour(j);
+            // Diverged trials are left out of the mean and the band; each is drawn on its own.
+            for trial in col.lost(trials) {
+                let points = joint_degrees(&col.time, trial, j);
+                dashed(
+                    chart,
+                    &view,
+                    &points,
+                    colour.mix(DIVERGED_ALPHA).stroke_width(1),
+                )?;
+            }
             let upper: Vec<f64> = mean.iter().zip(sd).map(|(m, s)| m + s).collect();
             let lower: Vec<f64> = mean.iter().zip(sd).map(|(m, s)| m - s).collect();
             for polygon in band_polygons(
@@ -210,14 +227,17 @@ impl ColumnFigure for ArmFigure<'_> {
     }
 }
 
+/// The statistics of the trials of `col` that did not diverge.
 pub(super) fn arm_stats(col: &ColumnPlot) -> ArmStats {
     let knots = col.time.len();
     let joint = |data: &[Vec<Vec<f64>>]| -> Vec<MeanStd> {
+        let kept: Vec<Vec<Vec<f64>>> = col.kept(data).cloned().collect();
         (0..col.dof)
-            .map(|j| mean_std(data, knots, |knot| knot.get(j).map(|v| v * RAD_TO_DEG)))
+            .map(|j| mean_std(&kept, knots, |knot| knot.get(j).map(|v| v * RAD_TO_DEG)))
             .collect()
     };
-    let (hand_mean, hand_band) = hand_statistics(&col.hand, knots);
+    let hand: Vec<Vec<[f64; 2]>> = col.kept(&col.hand).cloned().collect();
+    let (hand_mean, hand_band) = hand_statistics(&hand, knots);
     ArmStats {
         angle: joint(&col.q),
         velocity: joint(&col.qd),
@@ -331,7 +351,7 @@ pub(super) fn hand_statistics(
 }
 
 /// The hand-path region: the reference paths of all columns, plus the spread of each column's
-/// trials (central 95 %) and its ellipses unless that column is an outlier (it spreads more than
+/// trials that did not diverge (central 95 %) and its ellipses unless that column is an outlier (it spreads more than
 /// twice as far as the reference path or the median column), plus a margin.
 pub(super) fn hand_view(columns: &[ColumnPlot], stats: &[ArmStats]) -> View {
     let reference = Bounds::of(
@@ -343,7 +363,7 @@ pub(super) fn hand_view(columns: &[ColumnPlot], stats: &[ArmStats]) -> View {
         .iter()
         .zip(stats)
         .map(|(c, s)| {
-            let points = c.hand.iter().flatten();
+            let points = c.kept(&c.hand).flatten();
             let xs = quantile_range(points.clone().map(|p| p[0]).collect(), HAND_TAIL);
             let ys = quantile_range(points.map(|p| p[1]).collect(), HAND_TAIL);
             let mut b = Bounds::default();
@@ -413,6 +433,11 @@ pub(super) fn hand_chart<'a, DB: DrawingBackend>(
         .x_label_area_size(X_LABEL_AREA_DESC)
         .y_label_area_size(Y_LABEL_AREA)
         .build_cartesian_2d(view.x0..view.x1, view.y0..view.y1)
+}
+
+/// A diverged trial's hand path: dashed, faded.
+pub(super) fn diverged_style() -> ShapeStyle {
+    DIVERGED.mix(DIVERGED_ALPHA).stroke_width(1)
 }
 
 pub(super) fn ellipse_points(centre: [f64; 2], axes: [f64; 2], angle: f64) -> Vec<(f64, f64)> {

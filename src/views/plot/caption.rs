@@ -13,13 +13,15 @@ pub struct Caption {
     pub text: String,
 }
 
-/// Height of the title strip [px].
-const TITLE_STRIP: u32 = 34;
+/// Height of a title line [px].
+const TITLE_LINE: u32 = 30;
+/// Average advance of a title character [px] (bold, [`TITLE_SIZE`] + 3), an over-estimate.
+const TITLE_CHAR_WIDTH: f64 = 14.0;
 /// Height of one caption line [px].
-const LINE: u32 = 18;
+const LINE: u32 = 22;
 /// Average advance of a caption character [px] at [`DESC_SIZE`] in DejaVu Sans (an
 /// over-estimate, so that a wrapped line never runs off the figure).
-const CHAR_WIDTH: f64 = 7.6;
+const CHAR_WIDTH: f64 = 8.8;
 const MARGIN: i32 = 14;
 
 pub(super) struct Captioned<'a, F> {
@@ -48,24 +50,45 @@ pub(super) fn wrap(text: &str, width: usize) -> Vec<String> {
 }
 
 impl<F: Figure> Captioned<'_, F> {
+    /// The caption's lines, wrapped to the figure's width.
     fn lines(&self) -> Vec<String> {
+        wrap(&self.caption.text, self.characters(CHAR_WIDTH))
+    }
+
+    /// The title's lines: a figure of one column is narrower than its title.
+    fn title_lines(&self) -> Vec<String> {
+        wrap(&self.caption.title, self.characters(TITLE_CHAR_WIDTH))
+    }
+
+    /// How many characters of `advance` px fit in a line.
+    fn characters(&self, advance: f64) -> usize {
         let width = self.figure.size().0 as f64 - 2.0 * MARGIN as f64;
-        wrap(&self.caption.text, (width / CHAR_WIDTH).max(20.0) as usize)
+        (width / advance).max(20.0) as usize
+    }
+
+    fn title_strip(&self) -> u32 {
+        10 + TITLE_LINE * self.title_lines().len() as u32
     }
 }
 
 impl<F: Figure> Figure for Captioned<'_, F> {
     fn size(&self) -> (u32, u32) {
         let (w, h) = self.figure.size();
-        (w, TITLE_STRIP + h + LINE * self.lines().len() as u32 + 12)
+        (
+            w,
+            self.title_strip() + h + LINE * self.lines().len() as u32 + 12,
+        )
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
         let (_, h) = self.figure.size();
-        let (title, rest) = root.split_vertically(TITLE_STRIP);
+        let (title, rest) = root.split_vertically(self.title_strip());
         let (body, caption) = rest.split_vertically(h);
         let bold = FontDesc::new(FontFamily::Name(FONT), TITLE_SIZE + 3.0, FontStyle::Bold);
-        title.draw_text(&self.caption.title, &TextStyle::from(bold), (MARGIN, 8))?;
+        let bold = TextStyle::from(bold);
+        for (i, line) in self.title_lines().iter().enumerate() {
+            title.draw_text(line, &bold, (MARGIN, 8 + (TITLE_LINE * i as u32) as i32))?;
+        }
         self.figure.draw(&body)?;
         let style = TextStyle::from(FontDesc::new(
             FontFamily::Name(FONT),

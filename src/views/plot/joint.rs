@@ -15,8 +15,7 @@ impl<'a> JointFigure<'a> {
             columns
                 .iter()
                 .map(|c| {
-                    data(c)
-                        .iter()
+                    c.kept(data(c))
                         .flatten()
                         .flat_map(|knot| knot.iter().take(c.dof).map(|v| v * RAD_TO_DEG))
                         .collect()
@@ -43,8 +42,17 @@ impl<'a> JointFigure<'a> {
         let mut drawn = Vec::new();
         for j in 0..col.dof {
             let colour = joint_colour(j);
-            for trial in data {
+            for (t, trial) in data.iter().enumerate() {
                 let points = joint_degrees(&col.time, trial, j);
+                if col.is_diverged(t) {
+                    dashed(
+                        chart,
+                        &view,
+                        &points,
+                        colour.mix(DIVERGED_ALPHA).stroke_width(1),
+                    )?;
+                    continue;
+                }
                 lines(
                     chart,
                     &view,
@@ -74,6 +82,13 @@ impl<'a> JointFigure<'a> {
             if !col.reference_q.is_empty() {
                 legend_dashed(chart, "reference", BLACK.stroke_width(2))?;
             }
+            if self.axes.columns.iter().any(|c| c.n_diverged() > 0) {
+                legend_dashed(
+                    chart,
+                    "diverged trial",
+                    joint_colour(0).mix(DIVERGED_ALPHA).stroke_width(1),
+                )?;
+            }
             legend(chart, quiet_corner(&view, &drawn))?;
         }
         Ok(())
@@ -100,7 +115,7 @@ impl ColumnFigure for JointFigure<'_> {
         panels: &[DrawingArea<DB, Shift>],
     ) -> DrawResult<(), DB> {
         let a = &self.axes;
-        let top = titled(&panels[0], &a.columns[c].title)?;
+        let top = column_titled(&panels[0], a.columns, c, false)?;
         let mut chart = time_chart(&top, a.time, a.angle, "angle [deg]", false)?;
         self.draw_trials(&mut chart, c, true)?;
         let mut chart = time_chart(&panels[1], a.time, a.velocity, "velocity [deg/s]", false)?;

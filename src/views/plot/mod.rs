@@ -66,6 +66,44 @@ pub struct ColumnPlot {
     /// column 4 shows B/10 dashed) may be given.
     pub ellipse: Option<([f64; 2], [f64; 2], f64)>,
     pub dashed_ellipse: Option<([f64; 2], [f64; 2], f64)>,
+    /// Per trial: whether it diverged (a trial without an entry did not). A diverged trial is
+    /// drawn dashed and faded, counted under the column's title, and left out of the means,
+    /// the spreads and every axis range: one trial that left the workspace would otherwise set
+    /// the scale of every panel. The ellipse, given by the caller, should be of the others.
+    pub diverged: Vec<bool>,
+}
+
+impl ColumnPlot {
+    /// Whether trial `i` diverged.
+    pub(super) fn is_diverged(&self, i: usize) -> bool {
+        self.diverged.get(i).copied().unwrap_or(false)
+    }
+
+    /// Number of trials (those with joint angles, or hand paths).
+    pub(super) fn trials(&self) -> usize {
+        self.q.len().max(self.hand.len()).max(self.u.len())
+    }
+
+    /// Number of trials that diverged.
+    pub(super) fn n_diverged(&self) -> usize {
+        (0..self.trials()).filter(|&i| self.is_diverged(i)).count()
+    }
+
+    /// The trials of `data` (one entry per trial) that did not diverge.
+    pub(super) fn kept<'a, T>(&'a self, data: &'a [T]) -> impl Iterator<Item = &'a T> + Clone + 'a {
+        data.iter()
+            .enumerate()
+            .filter(|(i, _)| !self.is_diverged(*i))
+            .map(|(_, t)| t)
+    }
+
+    /// The trials of `data` that diverged.
+    pub(super) fn lost<'a, T>(&'a self, data: &'a [T]) -> impl Iterator<Item = &'a T> + 'a {
+        data.iter()
+            .enumerate()
+            .filter(|(i, _)| self.is_diverged(*i))
+            .map(|(_, t)| t)
+    }
 }
 
 /// Why a figure could not be written.
@@ -91,7 +129,7 @@ pub enum PlotError {
 /// axis scale, metres), row B: joint angles and velocities vs time (mean ± std shaded, both
 /// joints, with the reference angles dashed), row C: the commands (torques, then stiffnesses
 /// when any column has them; every trial, held over each step). Writes both PNG and SVG, each
-/// `28 + 400 × columns` px wide and 1078 px tall (913 without stiffness commands).
+/// `28 + 400 × columns` px wide and 1162 px tall (977 without stiffness commands).
 ///
 /// `dashed_ellipse`, when given, is drawn dashed next to the solid 95 % ellipse. The legends sit
 /// in the first column, in the panel corner with the fewest data.
@@ -136,12 +174,14 @@ pub fn captioned_figure(
     }
 }
 
-/// Lines of an error (log scale) against the feedback latency, one per strategy, with the spread
-/// from the mean to the worst trial shaded; a latency where every trial diverged is a cross at
-/// the top. Writes PNG and SVG, 930 × 520 px (the legend in a strip on the right).
+/// Lines of an error (log scale) against the feedback latency, one per strategy, with a bar from
+/// the mean to the worst trial at each measured latency (neighbouring strategies' bars side by
+/// side); a point with diverged trials is hollow, a latency where every trial diverged is a
+/// cross at the top. The title above and the caption below. Writes PNG and SVG, 1070 px wide
+/// (the legend in a strip on the right).
 pub(crate) fn curve_figure(
     curves: &[Curve],
-    title: &str,
+    caption: &Caption,
     y_label: &str,
     png: &Path,
     svg: &Path,
@@ -152,11 +192,11 @@ pub(crate) fn curve_figure(
             reason: "no points".into(),
         });
     }
+    let figure = CurveFigure { curves, y_label };
     render(
-        &CurveFigure {
-            curves,
-            title,
-            y_label,
+        &Captioned {
+            figure: &figure,
+            caption,
         },
         png,
         svg,
@@ -166,8 +206,8 @@ pub(crate) fn curve_figure(
 /// Fig. 2 layout for a single joint: columns side by side; rows: angle [deg] of every trial with
 /// the reference, velocity [deg/s] of every trial, commands (torque, stiffness) of every trial.
 /// Rows share their y ranges across columns (the torques: each column its own); a second stiffness panel is added to row C when any
-/// column has stiffness commands. Writes both PNG and SVG, `28 + 400 × columns` px wide and 1003
-/// px tall (768 without stiffness commands).
+/// column has stiffness commands. Writes both PNG and SVG, `28 + 400 × columns` px wide and 1007
+/// px tall (772 without stiffness commands).
 pub fn joint_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<(), PlotError> {
     check_columns(columns, png)?;
     render(&JointFigure::new(columns), png, svg)
@@ -177,15 +217,19 @@ pub fn joint_figure(columns: &[ColumnPlot], png: &Path, svg: &Path) -> Result<()
 // Rendering to files
 
 pub(super) const FONT: &str = "sans-serif";
+// Text sizes [px] chosen for a slide: a figure of five columns (2028 px) shown 1280 px wide
+// keeps its tick labels at 9 px and its axis names at 10 px.
 pub(super) const COLUMN_WIDTH: u32 = 400;
 /// Left strip holding the row letters A, B, C.
 pub(super) const GUTTER: u32 = 28;
-pub(super) const TITLE_SIZE: f64 = 17.0;
-pub(super) const TICK_SIZE: f64 = 12.0;
-pub(super) const DESC_SIZE: f64 = 13.0;
-pub(super) const Y_LABEL_AREA: u32 = 62;
-pub(super) const X_LABEL_AREA: u32 = 24;
-pub(super) const X_LABEL_AREA_DESC: u32 = 42;
+/// Legend text [px].
+pub(super) const LEGEND_SIZE: f64 = 14.0;
+pub(super) const TITLE_SIZE: f64 = 20.0;
+pub(super) const TICK_SIZE: f64 = 15.0;
+pub(super) const DESC_SIZE: f64 = 16.0;
+pub(super) const Y_LABEL_AREA: u32 = 76;
+pub(super) const X_LABEL_AREA: u32 = 30;
+pub(super) const X_LABEL_AREA_DESC: u32 = 52;
 /// More points than this per curve are thinned (a panel is < 400 px wide).
 pub(super) const MAX_POINTS: usize = 1500;
 /// A column's spread larger than this many times the median column's is an outlier.
@@ -202,6 +246,10 @@ pub(super) const MEAN_GREY: RGBColor = RGBColor(40, 40, 40);
 pub(super) const BAND_BLUE: RGBColor = RGBColor(70, 130, 200);
 pub(super) const ELLIPSE_RED: RGBColor = RGBColor(200, 30, 45);
 pub(super) const GRID: RGBColor = RGBColor(228, 228, 228);
+/// Diverged trials: their count, and their lines in the hand panel.
+pub(super) const DIVERGED: RGBColor = RGBColor(215, 110, 0);
+/// Opacity of a diverged trial's dashed line.
+pub(super) const DIVERGED_ALPHA: f64 = 0.5;
 /// Per joint (torque and stiffness of joint i share joint i's colour).
 pub(super) const JOINT_COLOURS: [RGBColor; 4] = [
     RGBColor(31, 119, 180),
@@ -350,6 +398,109 @@ mod tests {
         let wild = vec![-100.0, 100.0];
         let (lo, hi) = shared_range(vec![calm.clone(), wild, calm], &[], false);
         assert!(lo > -1.0 && hi < 2.0, "{lo}..{hi}");
+    }
+
+    /// A single joint's column: per trial `(angle scale [rad], torque)`; trial `i`'s angle
+    /// rises linearly to its scale over 1 s, its torque is constant.
+    fn joint_column(trials: &[(f64, f64)], diverged: Vec<bool>) -> ColumnPlot {
+        let time: Vec<f64> = (0..=10).map(|k| 0.1 * k as f64).collect();
+        ColumnPlot {
+            title: "c".into(),
+            dof: 1,
+            q: trials
+                .iter()
+                .map(|(a, _)| time.iter().map(|t| vec![a * t]).collect())
+                .collect(),
+            qd: trials
+                .iter()
+                .map(|(a, _)| time.iter().map(|_| vec![*a]).collect())
+                .collect(),
+            u: trials
+                .iter()
+                .map(|(_, tau)| time[1..].iter().map(|_| vec![*tau]).collect())
+                .collect(),
+            control_names: vec!["tau1".into()],
+            reference_q: time.iter().map(|t| vec![*t]).collect(),
+            time,
+            diverged,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_diverged_trial_sets_no_axis_range() {
+        let trials = [(1.0, 0.5), (1.1, -0.4), (200.0, 5e4)];
+        let marked = [joint_column(&trials, vec![false, false, true])];
+        let f = JointFigure::new(&marked);
+        let deg = RAD_TO_DEG;
+        assert!(f.axes.angle.1 < 1.2 * deg, "{:?}", f.axes.angle);
+        assert!(f.axes.velocity.1 < 1.2 * deg, "{:?}", f.axes.velocity);
+        assert!(f.axes.torque[0].1 < 1.0, "{:?}", f.axes.torque);
+        // The same trials unmarked: the blow-up sets the ranges (the property above can fail).
+        let unmarked = [joint_column(&trials, vec![])];
+        let f = JointFigure::new(&unmarked);
+        assert!(f.axes.angle.1 > 100.0 * deg && f.axes.torque[0].1 >= 5e4);
+    }
+
+    #[test]
+    fn each_columns_torque_range_comes_from_its_own_trials() {
+        let columns = [
+            joint_column(&[(1.0, 0.3), (1.0, -0.2)], vec![]),
+            joint_column(&[(1.0, 80.0), (1.0, -10.0)], vec![]),
+            // Every trial diverged: the others' range, not its blow-up.
+            joint_column(&[(1.0, 1e6), (1.0, -1e6)], vec![true, true]),
+        ];
+        let t = JointFigure::new(&columns).axes.torque;
+        assert!(t[0].0 < -0.2 && t[0].1 > 0.3 && t[0].1 < 0.5, "{t:?}");
+        assert!(t[1].0 < -10.0 && t[1].1 > 80.0, "{t:?}");
+        assert!(
+            t[2].0 >= t[1].0 && t[2].1 <= t[1].1 && t[2].1 > 80.0,
+            "{t:?}"
+        );
+    }
+
+    #[test]
+    fn the_arm_leaves_diverged_trials_out_of_its_statistics_and_its_view() {
+        let time: Vec<f64> = (0..=10).map(|k| 0.1 * k as f64).collect();
+        let path = |dx: f64, far: f64| -> Vec<[f64; 2]> {
+            time.iter()
+                .map(|t| [dx + far * t * t, 0.3 + 0.25 * t])
+                .collect()
+        };
+        let col = ColumnPlot {
+            title: "arm".into(),
+            dof: 2,
+            hand: vec![path(-0.002, 0.0), path(0.002, 0.0), path(0.0, 3.0)],
+            reference_hand: path(0.0, 0.0),
+            diverged: vec![false, false, true],
+            time: time.clone(),
+            ..Default::default()
+        };
+        let stats = arm_stats(&col);
+        let end = stats.hand_mean.last().unwrap();
+        assert!(end.0.abs() < 1e-9, "mean of the two kept trials: {end:?}");
+        let view = hand_view(std::slice::from_ref(&col), &[stats]);
+        assert!(view.x1 < 0.2, "{view:?}");
+        let mut all = col.clone();
+        all.diverged.clear();
+        let stats = arm_stats(&all);
+        assert!(stats.hand_mean.last().unwrap().0 > 0.9);
+    }
+
+    #[test]
+    fn the_note_counts_the_diverged_trials_and_says_what_the_ellipse_is_of() {
+        let mut col = joint_column(&[(1.0, 0.0); 4], vec![false, true, false, true]);
+        assert_eq!(
+            divergence_note(&col, false).as_deref(),
+            Some("2 of 4 trials diverged (dashed)")
+        );
+        col.ellipse = Some(([0.0; 2], [0.01; 2], 0.0));
+        assert_eq!(
+            divergence_note(&col, true).as_deref(),
+            Some("2 of 4 trials diverged (dashed), ellipse of the other 2")
+        );
+        col.diverged.clear();
+        assert_eq!(divergence_note(&col, true), None);
     }
 
     #[test]

@@ -75,12 +75,13 @@ pub(super) fn symbol(name: &str) -> String {
     subscript(digits).map_or_else(|| name.to_string(), |d| format!("{letter}{d}"))
 }
 
+/// Per column, the commands of one kind of the trials that did not diverge.
 pub(super) fn command_values(columns: &[ColumnPlot], kind: Commands) -> Vec<Vec<f64>> {
     columns
         .iter()
         .map(|c| {
             let range = kind.indices(c);
-            c.u.iter()
+            c.kept(&c.u)
                 .flatten()
                 .flat_map(|step| step.get(range.clone()).unwrap_or_default().iter().copied())
                 .collect()
@@ -104,7 +105,7 @@ pub(super) fn draw_commands<'c, DB: DrawingBackend + 'c>(
     let mut drawn = Vec::new();
     for i in range.clone() {
         let colour = joint_colour(i - range.start);
-        for trial in &col.u {
+        for (t, trial) in col.u.iter().enumerate() {
             let mut points = Vec::with_capacity(2 * trial.len());
             for (k, step) in trial.iter().enumerate() {
                 let (Some(&t0), Some(&v)) = (col.time.get(k), step.get(i)) else {
@@ -120,6 +121,15 @@ pub(super) fn draw_commands<'c, DB: DrawingBackend + 'c>(
                 };
                 points.push((t0, v));
                 points.push((t1, v));
+            }
+            if col.is_diverged(t) {
+                dashed(
+                    chart,
+                    &view,
+                    &points,
+                    colour.mix(DIVERGED_ALPHA).stroke_width(1),
+                )?;
+                continue;
             }
             lines(
                 chart,
@@ -186,13 +196,59 @@ pub(super) fn titled<DB: DrawingBackend>(
     area.titled(title, style)
 }
 
+/// Draws a column's title on top of `area` and, when some of its trials diverged, a line
+/// under it that counts them (and, for the arm, says what the ellipse is of); returns the
+/// area below.
+/// The line is reserved in every column of `columns` when one has it, so that the panels
+/// below stay aligned.
+pub(super) fn column_titled<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    columns: &[ColumnPlot],
+    c: usize,
+    ellipse: bool,
+) -> DrawResult<DrawingArea<DB, Shift>, DB> {
+    let col = &columns[c];
+    let area = titled(area, &col.title)?;
+    if columns.iter().all(|c| c.n_diverged() == 0) {
+        return Ok(area);
+    }
+    if let Some(text) = divergence_note(col, ellipse) {
+        let style = TextStyle::from((FONT, DESC_SIZE).into_font())
+            .color(&DIVERGED)
+            .pos(Pos::new(HPos::Center, VPos::Top));
+        let (w, _) = area.dim_in_pixel();
+        area.draw_text(&text, &style, (w as i32 / 2, 0))?;
+    }
+    Ok(area.split_vertically(NOTE_HEIGHT).1)
+}
+
+/// Height of the line under a column title that counts its diverged trials [px].
+pub(super) const NOTE_HEIGHT: u32 = 20;
+
+/// "2 of 3 trials diverged (dashed)", and for the arm "; ellipse of the other 1" — `None` when
+/// no trial diverged.
+pub(super) fn divergence_note(col: &ColumnPlot, ellipse: bool) -> Option<String> {
+    let (lost, n) = (col.n_diverged(), col.trials());
+    if lost == 0 {
+        return None;
+    }
+    let mut text = format!("{lost} of {n} trials diverged (dashed)");
+    if ellipse {
+        match (n - lost, col.ellipse.is_some()) {
+            (_, false) => text.push_str(", no ellipse"),
+            (kept, true) => text.push_str(&format!(", ellipse of the other {kept}")),
+        }
+    }
+    Some(text)
+}
+
 /// Bold letters A, B, C in the left strip at the top of each row.
 pub(super) fn row_letters<DB: DrawingBackend>(
     gutter: &DrawingArea<DB, Shift>,
     starts: &[i32],
     offsets: &[i32],
 ) -> DrawResult<(), DB> {
-    let style = TextStyle::from(bold(20.0));
+    let style = TextStyle::from(bold(24.0));
     for ((letter, &y), &dy) in ["A", "B", "C"].iter().zip(starts).zip(offsets) {
         gutter.draw_text(letter, &style, (7, y + 4 + dy))?;
     }
@@ -487,10 +543,10 @@ pub(super) fn legend<'c, DB: DrawingBackend + 'c>(
         .configure_series_labels()
         .position(position)
         .margin(6)
-        .legend_area_size(24)
+        .legend_area_size(26)
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(180, 180, 180))
-        .label_font((FONT, 11.0))
+        .label_font((FONT, LEGEND_SIZE))
         .draw()
 }
 

@@ -147,13 +147,37 @@ pub(super) fn reference_degrees(columns: &[ColumnPlot]) -> Vec<f64> {
 /// Torques differ between columns by orders of magnitude (a feedback law's corrections against
 /// an open-loop plan's, a VSA's motor torques against a joint's): on one shared range the small
 /// ones are flat lines at 0, and the large ones a barcode of clipped steps. So each column has
-/// its own range, with 0 in it (a diverging column's spans its blow-up, in its own panel only).
+/// its own range, with 0 in it, from its trials that did not diverge. A column whose every
+/// trial diverged takes the range of the others' (its blow-up leaves the frame, as it would on
+/// the robot's torque limits), or its own when no column has a trial that did not diverge.
 /// Stiffnesses share one range: their bounds are the same and their levels are what the
 /// columns compare.
 pub(super) fn command_ranges(columns: &[ColumnPlot]) -> (Vec<Span>, Option<Span>) {
-    let torque = command_values(columns, Commands::Torque)
+    let own: Vec<Option<Span>> = command_values(columns, Commands::Torque)
         .into_iter()
-        .map(|v| match quantile_range(v, TAIL) {
+        .map(|v| quantile_range(v, TAIL))
+        .collect();
+    let others = own
+        .iter()
+        .flatten()
+        .fold(None, |acc: Option<Span>, &(lo, hi)| match acc {
+            Some((a, b)) => Some((a.min(lo), b.max(hi))),
+            None => Some((lo, hi)),
+        });
+    let everything = |c: &ColumnPlot| {
+        let range = Commands::Torque.indices(c);
+        let values = c.u.iter().flatten();
+        quantile_range(
+            values
+                .flat_map(|step| step.get(range.clone()).unwrap_or_default().iter().copied())
+                .collect(),
+            TAIL,
+        )
+    };
+    let torque = columns
+        .iter()
+        .zip(own)
+        .map(|(c, own)| match own.or(others).or_else(|| everything(c)) {
             Some((lo, hi)) => pad(lo.min(0.0), hi.max(0.0)),
             None => pad(0.0, 0.0),
         })
