@@ -245,6 +245,17 @@ fn linear_step(
             let g = (i + l / 2.0 + l2 / 6.0 + l3 / 24.0) * h;
             (m, g * Vector2::new(0.0, c0))
         }
+        // ROS2 on x' = L x + c, whose J is L itself (the single joint's spring and damper), in
+        // closed form: with W = I − γ h L, the two stages sum to
+        // x⁺ = x + h W⁻² (I + (1/2 − 2γ) h L) (L x + c), γ = 1 − 1/√2.
+        Integrator::Rosenbrock => {
+            let gamma = 1.0 - std::f64::consts::FRAC_1_SQRT_2;
+            let l = Matrix2::new(0.0, 1.0, aq, av);
+            let i = Matrix2::identity();
+            let w_inv = (i - l * (gamma * h)).try_inverse().expect("W invertible");
+            let g = w_inv * w_inv * (i + l * ((0.5 - 2.0 * gamma) * h)) * h;
+            (i + g * l, g * Vector2::new(0.0, c0))
+        }
     };
     let (mut a, mut off) = (Matrix2::identity(), Vector2::zeros());
     for _ in 0..substeps {
@@ -312,6 +323,18 @@ fn linear_cases() -> Vec<LinearCase> {
                 damping: Damping::Proportional { alpha: 0.2 },
             },
             integrator: Integrator::Rk4,
+            substeps: 1,
+        },
+        // One Rosenbrock step per knot, the spring and damper implicit.
+        LinearCase {
+            name: "impedance (K_D = 0.075 K + 0.01), Rosenbrock ×1",
+            actuator: Actuator::Impedance {
+                damping: Damping::Affine {
+                    slope: 0.075,
+                    offset: 0.01,
+                },
+            },
+            integrator: Integrator::Rosenbrock,
             substeps: 1,
         },
     ]
@@ -580,6 +603,36 @@ fn nonlinear_cases() -> Vec<NonlinearCase> {
             .expect("valid"),
             integrator: Integrator::Euler,
             substeps: 3,
+        },
+        // One Rosenbrock step per knot: the spring and damper enter the step through
+        // W = I − γ h J(q, K), so the flow's second derivatives run through its solves.
+        NonlinearCase {
+            name: "two-link impedance, divergent field, state noise, Rosenbrock ×1",
+            model: ArmModel::new(
+                Plant::TwoLink(two_link()),
+                Actuator::Impedance {
+                    damping: Damping::Proportional { alpha: 0.1 },
+                },
+                Field::Divergent { beta: 50.0 },
+                state_noise,
+            )
+            .expect("valid"),
+            integrator: Integrator::Rosenbrock,
+            substeps: 1,
+        },
+        NonlinearCase {
+            name: "two-link VSA, divergent field, state noise, Rosenbrock ×1",
+            model: ArmModel::new(
+                Plant::TwoLink(two_link()),
+                Actuator::Vsa {
+                    motor_inertia: vec![2.0, 0.2],
+                },
+                Field::Divergent { beta: 50.0 },
+                state_noise,
+            )
+            .expect("valid"),
+            integrator: Integrator::Rosenbrock,
+            substeps: 1,
         },
     ]
 }

@@ -229,7 +229,9 @@ pub trait Dynamics: Send + Sync {
 /// `substeps` steps of the chosen [`Integrator`] with the control and reference of knot `k` held.
 ///
 /// The noise enters once per control step as in Eq. 10; sub-steps only keep a stiff impedance
-/// (large `K_D / J`) numerically stable, which explicit Euler at Δ = 10 ms is not.
+/// (large `K_D / J`) numerically stable, which explicit Euler at Δ = 10 ms is not. The Rosenbrock
+/// step is stable with one step per knot, but a SOOC plan made on it costs 0.35–3 % more on the
+/// 1 ms plant than the optimum made there (`docs/BENCHMARKS.md`, "SOOC cost against the state").
 #[derive(Debug, Clone)]
 pub struct DiscreteDynamics {
     pub model: ArmModel,
@@ -425,9 +427,9 @@ impl DiscreteDynamics {
                 }
             };
         }
-        // The written-out chain rule covers the two Euler steps; a Runge–Kutta step is
-        // differentiated by dual numbers.
-        if self.integrator == Integrator::Rk4 {
+        // The written-out chain rule covers the two Euler steps; a Runge–Kutta or Rosenbrock
+        // step is differentiated by dual numbers.
+        if matches!(self.integrator, Integrator::Rk4 | Integrator::Rosenbrock) {
             return false;
         }
         by_size!((2, 3)(2, 4)(4, 6)(4, 8)(8, 12));
@@ -538,7 +540,9 @@ impl DiscreteDynamics {
                         }
                     }
                 }
-                Integrator::Rk4 => unreachable!("flow_jacobian_by_size leaves RK4 to dual numbers"),
+                Integrator::Rk4 | Integrator::Rosenbrock => {
+                    unreachable!("flow_jacobian_by_size leaves RK4 and ROS2 to dual numbers")
+                }
             }
         }
         for (col, column) in jac.iter().enumerate() {

@@ -163,6 +163,19 @@ impl ArmModel {
         self.drift(x, u, ex, xdot);
     }
 
+    /// [`ArmModel::f`], returning the mass matrix `M(q)` it solved with (the Rosenbrock step of
+    /// the integrator takes the impedance law's spring and damper implicitly through it).
+    #[inline(always)]
+    pub(crate) fn f_and_mass<S: Scalar>(
+        &self,
+        x: &[S],
+        u: &[S],
+        ex: &Exogenous,
+        xdot: &mut [S],
+    ) -> [[S; 2]; 2] {
+        self.drift(x, u, ex, xdot).1
+    }
+
     /// [`ArmModel::f`], returning what [`ArmModel::f_jacobian`] reuses: the configuration's
     /// angles and the mass matrix.
     #[inline(always)]

@@ -116,7 +116,7 @@ fn setting_a_sections_kind_starts_it_afresh() {
 
 /// The sub-step check for each integrator: at a stiff impedance (K_D = 0.2 · 200 N m s/rad on
 /// the forearm's inertia) the number of sub-steps the refusal asks for is accepted and one fewer is refused, and RK4's larger stability interval
-/// (2.78 against 2 for both Euler steps) asks for fewer.
+/// (2.78 against 2 for both Euler steps) asks for fewer; the Rosenbrock step needs one.
 #[test]
 fn sub_steps_are_refused_below_each_integrators_stability_limit() {
     let needed = |integrator: &str| -> usize {
@@ -157,4 +157,13 @@ fn sub_steps_are_refused_below_each_integrators_stability_limit() {
     // The counts scale as 1 / limit: 2 / 2.78 of the Euler count, to within one.
     let expect = euler as f64 * 2.0 / 2.78;
     assert!((rk4 as f64 - expect).abs() <= 1.0, "{rk4} vs {expect:.1}");
+    // The Rosenbrock step takes the spring and damper implicitly: one step per knot is accepted
+    // at the stiffness that asks the Euler steps for several.
+    assert!(euler > 1, "{euler}");
+    let one_step = load(&[
+        "actuator.stiffness_max=200",
+        "task.integrator=rosenbrock",
+        "task.substeps=1",
+    ]);
+    assert!(one_step.is_ok(), "{:?}", one_step.err());
 }

@@ -101,9 +101,10 @@ impl FlowPoint {
             *b = v.to_bits();
         }
         // Past the state and controls the slots of absent entries stay 0 in both points, so
-        // the tail can hold dt and the sub-steps at fixed places.
+        // the tail can hold dt and the sub-steps (with the integrator in the top bits) at fixed
+        // places.
         bits[FLOW_POINT_LEN - 2] = base.dt.to_bits();
-        bits[FLOW_POINT_LEN - 1] = base.substeps as u64;
+        bits[FLOW_POINT_LEN - 1] = base.substeps as u64 | (base.integrator as u64) << 48;
         FlowPoint(bits)
     }
 }
