@@ -42,6 +42,7 @@ mod replan;
 mod sooc;
 mod sooc_newton;
 mod sooc_workspace;
+mod stiffness_lag;
 mod strategy_plan;
 mod sweep;
 mod wide_vectors;
