@@ -455,3 +455,73 @@ fn the_stiffness_dynamics_keys_are_checked() {
     assert_eq!(s.model.actuator.name(), "impedance_lag");
     assert_eq!(s.model.nx(), 6);
 }
+
+/// `vic sweep stiffness-lag`: at τ_K = 0 its crossing is the latency sweep's on the ideal
+/// scenario (the same strategies, trials and seed), and at τ_K > 0 its stiffness is the plan's
+/// realised one, which starts where the mechanism rests and is never faster than the range over
+/// τ_K; a scenario whose actuator takes no lag is refused with exit code 2, naming the key.
+#[test]
+fn the_lag_study_agrees_with_the_latency_sweep_and_the_plans() {
+    use vic::studies::sweep::{Engine, Strategy, SweepOptions, sweep_latency, sweep_stiffness_lag};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/two_link_divergent.toml");
+    let opts = SweepOptions {
+        latencies_ms: vec![0.0, 50.0, 100.0, 200.0],
+        strategies: Vec::new(),
+        trials: 10,
+        seed: 5,
+        divergence: None,
+        pulse: None,
+        execution: Engine::Offline,
+    };
+    let study = sweep_stiffness_lag(&path, &[], &[0.0, 0.2], &opts, &|_| {}).expect("study");
+    let peer = sweep_latency(
+        &path,
+        &[],
+        &SweepOptions {
+            strategies: vec![Strategy::Predictor, Strategy::Stiffness],
+            ..opts.clone()
+        },
+        &|_| {},
+    )
+    .expect("sweep");
+    assert_eq!(study.points[0].crossing, peer.crossings[0].crossing);
+    let ideal = plan(
+        &scenario("two_link_divergent.toml", &[]),
+        Method::Sooc,
+        None,
+    )
+    .unwrap();
+    assert_eq!(study.points[0].stiffness[0], ideal.u[0][2..4].to_vec());
+    let s = scenario(
+        "two_link_divergent.toml",
+        &[
+            "actuator.stiffness_dynamics=first_order",
+            "actuator.stiffness_time_constant=0.2",
+        ],
+    );
+    let lagged = plan(&s, Method::Sooc, None).unwrap();
+    let k = &study.points[1].stiffness;
+    assert_eq!(k.len(), lagged.x.len());
+    for (a, x) in k.iter().zip(&lagged.x) {
+        assert_eq!(a[..], x[4..6]);
+    }
+    assert_eq!(k[0], vec![s.initial_stiffness; 2]);
+    for w in k.windows(2) {
+        for (a, b) in w[0].iter().zip(&w[1]) {
+            assert!((b - a).abs() / s.task.dt <= s.bounds.upper[2] / 0.2);
+        }
+    }
+    eprintln!("{}", study.table());
+    let out = common::cli::vic(&[
+        "sweep",
+        "stiffness-lag",
+        "--config",
+        "config/two_link_vsa_divergent.toml",
+        "--time-constants",
+        "0.1",
+        "--trials",
+        "2",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", common::cli::text(&out));
+    assert!(common::cli::text(&out).contains("stiffness_dynamics"));
+}
