@@ -150,7 +150,31 @@ pub fn write_lag_outputs(sweep: &LagSweep, dir: &Path) -> Result<(), SweepError>
         dir.join("stiffness_lag.svg"),
         dir.join("stiffness_lag.json"),
     );
-    crate::views::plot::lag_figure(sweep, &png, &svg)?;
+    let plot = crate::views::plot::LagPlot {
+        time: sweep.time.clone(),
+        stiffness: sweep
+            .points
+            .iter()
+            .map(|p| {
+                (
+                    p.time_constant_s,
+                    p.stiffness.iter().map(|k| k[0]).collect(),
+                )
+            })
+            .collect(),
+        crossing: sweep
+            .points
+            .iter()
+            .map(|p| {
+                let bracket = match p.crossing {
+                    Crossing::Between { below, above, .. } => Some((below, above)),
+                    _ => None,
+                };
+                (p.time_constant_s, sweep.crossing_ms(p.crossing), bracket)
+            })
+            .collect(),
+    };
+    crate::views::plot::lag_figure(&plot, &png, &svg)?;
     let text = serde_json::to_string_pretty(sweep).map_err(|e| failed(&json)(e.into()))?;
     std::fs::write(&json, text).map_err(|e| failed(&json)(e.into()))
 }

@@ -4,10 +4,23 @@
 //! against `τ_K`.
 
 use super::*;
-use crate::studies::sweep::LagSweep;
+
+/// `(τ_K [s], crossing latency [ms], the bracket of sweep latencies it lies in)`.
+pub type CrossingPoint = (f64, f64, Option<(f64, f64)>);
+
+/// What the figure draws, per time constant `τ_K` [s].
+#[derive(Debug, Clone, Default)]
+pub struct LagPlot {
+    /// Knot times [s].
+    pub time: Vec<f64>,
+    /// `(τ_K, the first joint's realised stiffness per knot [N m/rad])`.
+    pub stiffness: Vec<(f64, Vec<f64>)>,
+    /// Per time constant: where the predictor stops beating the planned stiffness.
+    pub crossing: Vec<CrossingPoint>,
+}
 
 pub(super) struct LagFigure<'a> {
-    pub(super) sweep: &'a LagSweep,
+    pub(super) plot: &'a LagPlot,
 }
 
 /// Light (small τ_K) to dark (large τ_K) blue.
@@ -27,12 +40,12 @@ impl Figure for LagFigure<'_> {
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<(), DB> {
-        let s = self.sweep;
+        let s = self.plot;
         let (left, right) = root.split_horizontally(620);
         let k_max = s
-            .points
+            .stiffness
             .iter()
-            .flat_map(|p| p.stiffness.iter().map(|k| k[0]))
+            .flat_map(|(_, k)| k.iter().copied())
             .filter(|v| v.is_finite())
             .fold(1.0, f64::max);
         let t_max = s.time.last().copied().unwrap_or(1.0);
@@ -53,19 +66,19 @@ impl Figure for LagFigure<'_> {
             .label_style((FONT, TICK_SIZE).into_font())
             .axis_desc_style((FONT, DESC_SIZE).into_font())
             .draw()?;
-        let n = s.points.len();
-        for (i, p) in s.points.iter().enumerate() {
+        let n = s.stiffness.len();
+        for (i, (tau, k)) in s.stiffness.iter().enumerate() {
             let colour = shade(i, n);
             let line: Vec<(f64, f64)> = s
                 .time
                 .iter()
-                .zip(&p.stiffness)
-                .map(|(t, k)| (*t, k[0]))
+                .zip(k)
+                .map(|(t, k)| (*t, *k))
                 .filter(|(_, k)| k.is_finite())
                 .collect();
             chart
                 .draw_series(LineSeries::new(line, colour.stroke_width(2)))?
-                .label(format!("τ_K = {} s", p.time_constant_s))
+                .label(format!("τ_K = {tau} s"))
                 .legend(move |(x, y)| {
                     PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
                 });
@@ -78,19 +91,12 @@ impl Figure for LagFigure<'_> {
             .label_font((FONT, TICK_SIZE).into_font())
             .draw()?;
 
-        let tau_max = s
-            .points
-            .iter()
-            .map(|p| p.time_constant_s)
-            .fold(0.1, f64::max);
-        // Up to the highest latency a crossing's bracket reaches (the sweep's last when none).
+        let tau_max = s.crossing.iter().map(|c| c.0).fold(0.1, f64::max);
+        // Up to the highest latency a crossing's bracket reaches.
         let l_max = s
-            .points
+            .crossing
             .iter()
-            .map(|p| match p.crossing {
-                crate::studies::sweep::Crossing::Between { above, .. } => above,
-                c => s.crossing_ms(c),
-            })
+            .map(|&(_, at, bracket)| bracket.map_or(at, |b| b.1))
             .fold(10.0, f64::max);
         let mut chart = ChartBuilder::on(&right)
             .caption("Delay crossing", (FONT, TITLE_SIZE).into_font())
@@ -106,23 +112,17 @@ impl Figure for LagFigure<'_> {
             .label_style((FONT, TICK_SIZE).into_font())
             .axis_desc_style((FONT, DESC_SIZE).into_font())
             .draw()?;
-        let crossing: Vec<(f64, f64)> = s
-            .points
-            .iter()
-            .map(|p| (p.time_constant_s, s.crossing_ms(p.crossing)))
-            .collect();
+        let crossing: Vec<(f64, f64)> = s.crossing.iter().map(|c| (c.0, c.1)).collect();
         let ink = RGBColor(200, 30, 45);
         chart.draw_series(LineSeries::new(crossing.clone(), ink.stroke_width(2)))?;
         chart.draw_series(crossing.iter().map(|&p| Circle::new(p, 4, ink.filled())))?;
         // The bracket of sweep latencies the crossing lies in.
-        chart.draw_series(s.points.iter().filter_map(|p| match p.crossing {
-            crate::studies::sweep::Crossing::Between { below, above, .. } => {
-                Some(PathElement::new(
-                    [(p.time_constant_s, below), (p.time_constant_s, above)],
-                    ink.mix(0.5).stroke_width(1),
-                ))
-            }
-            _ => None,
+        chart.draw_series(s.crossing.iter().filter_map(|&(tau, _, bracket)| {
+            let (below, above) = bracket?;
+            Some(PathElement::new(
+                [(tau, below), (tau, above)],
+                ink.mix(0.5).stroke_width(1),
+            ))
         }))?;
         Ok(())
     }
