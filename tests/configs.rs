@@ -11,13 +11,15 @@ use vic_plan::plan_file::{PlanSummary, Stop};
 use vic_plan::scenario::Scenario;
 
 /// The scenarios, as file stems of `config/*.toml`.
-const SCENARIOS: [&str; 10] = [
+const SCENARIOS: [&str; 12] = [
     "icub_elbow",
     "icub_experiment",
     "single_joint_delay",
     "two_link_curl",
     "two_link_deterministic",
     "two_link_divergent",
+    "two_link_divergent_fast_vsa",
+    "two_link_divergent_maccepa",
     "two_link_reach",
     "two_link_torque_divergent",
     "two_link_vsa_divergent",
@@ -153,6 +155,16 @@ fn two_link_deterministic() {
 #[test]
 fn two_link_divergent() {
     check("two_link_divergent");
+}
+
+#[test]
+fn two_link_divergent_fast_vsa() {
+    check("two_link_divergent_fast_vsa");
+}
+
+#[test]
+fn two_link_divergent_maccepa() {
+    check("two_link_divergent_maccepa");
 }
 
 #[test]

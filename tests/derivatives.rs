@@ -279,6 +279,8 @@ fn reference_drift(model: &ArmModel, x: &[f64], u: &[f64], ex: &Exogenous) -> Ve
                 u[i] - kp * (q[i] - ex.q_d[i]) - kd * (qd[i] - ex.qd_d[i])
             }
             Actuator::Vsa { .. } => u[n + i] * (x[2 * n + i] - q[i]),
+            // Checked in tests/stiffness_lag.rs against the ideal law at the realised stiffness.
+            Actuator::ImpedanceLag { .. } => unreachable!("not among all_models"),
         };
     }
     let hand_velocity = limb.jacobian * Vector2::from(qd);

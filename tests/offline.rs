@@ -44,6 +44,7 @@ mod report_text;
 mod sooc;
 mod sooc_newton;
 mod sooc_workspace;
+mod stiffness_lag;
 mod strategy_plan;
 mod sweep;
 mod wide_vectors;

@@ -210,7 +210,9 @@ fn linear_drift(actuator: &Actuator, u: &[f64], ex: &Exogenous) -> (f64, f64, f6
                 -kd / j,
             )
         }
-        Actuator::Vsa { .. } => unreachable!("not a linear one-joint plant"),
+        Actuator::Vsa { .. } | Actuator::ImpedanceLag { .. } => {
+            unreachable!("not a linear one-joint plant")
+        }
     }
 }
 

@@ -4,7 +4,8 @@
 use crate::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
 use crate::progress::Progress;
 use crate::studies::sweep::{
-    Engine, Strategy, SweepOptions, pulse_from_flags, sweep_latency, write_outputs,
+    Engine, Strategy, SweepOptions, pulse_from_flags, sweep_latency, sweep_stiffness_lag,
+    write_lag_outputs, write_outputs,
 };
 use std::path::PathBuf;
 
@@ -22,6 +23,78 @@ enum SweepWhat {
     /// Example: vic sweep latency --config config/single_joint_delay.toml --latencies 0,50,200
     /// --out-dir sweep
     Latency(LatencyArgs),
+    /// The stiffness mechanism's lag: for each time constant τ_K of a first-order stiffness
+    /// (0: the ideal actuator) the stiffness the SOOC plan realises and the latency up to which
+    /// the predictor beats the planned stiffness (offline Monte Carlo).
+    ///
+    /// Example: vic sweep stiffness-lag --config config/two_link_divergent.toml
+    /// --time-constants 0,0.1,0.2,0.3,0.5 --out-dir docs/figures
+    StiffnessLag(LagArgs),
+}
+
+#[derive(clap::Args)]
+struct LagArgs {
+    /// An impedance scenario (ideal stiffness; the study sets the lag).
+    #[command(flatten)]
+    scenario: ScenarioArgs,
+    /// Time constants τ_K [s] of the stiffness mechanism; 0 is the ideal actuator.
+    /// [range: 0 to 10]
+    #[arg(long, value_delimiter = ',', default_value = "0,0.05,0.1,0.2,0.3,0.5",
+          value_parser = crate::ranges::real(0.0, 10.0))]
+    time_constants: Vec<f64>,
+    /// Feedback latencies [ms] of each crossing's sweep. [range: 0 to 1000]
+    #[arg(long, value_delimiter = ',', default_value = "0,20,50,100,150,200,300",
+          value_parser = crate::ranges::real(0.0, crate::ranges::MAX_LATENCY_MS))]
+    latencies: Vec<f64>,
+    /// Monte Carlo trials per point. [range: 2 to 100000]
+    #[arg(long, default_value_t = 20, value_parser = crate::ranges::trials(2, "a spread needs two"))]
+    trials: u64,
+    #[command(flatten)]
+    seed: SeedArgs,
+    /// Write the figure (stiffness_lag.png, .svg) and the numbers (stiffness_lag.json) here.
+    #[arg(long, value_name = "DIR")]
+    out_dir: Option<PathBuf>,
+    #[command(flatten)]
+    json: JsonArg,
+}
+
+fn run_lag(a: LagArgs) -> anyhow::Result<()> {
+    let opts = SweepOptions {
+        latencies_ms: a.latencies,
+        strategies: Vec::new(),
+        trials: a.trials as usize,
+        seed: a.seed.seed,
+        divergence: None,
+        pulse: None,
+        execution: Engine::Offline,
+    };
+    let n = a.time_constants.len();
+    let progress = Progress::steps("stiffness lag", n as u64);
+    let done = std::cell::Cell::new(0);
+    let sweep = sweep_stiffness_lag(
+        &a.scenario.config,
+        &a.scenario.set.overrides,
+        &a.time_constants,
+        &opts,
+        &|p| {
+            progress.step(done.get(), n, p);
+            done.set(done.get() + 1);
+        },
+    )
+    .map_err(|e| match e.is_input() {
+        true => crate::cli::input_error(e),
+        false => anyhow::Error::new(e),
+    })?;
+    drop(progress);
+    if let Some(dir) = &a.out_dir {
+        write_lag_outputs(&sweep, dir)?;
+    }
+    if a.json.json {
+        println!("{}", serde_json::to_string(&sweep)?);
+    } else {
+        print!("{}", sweep.table());
+    }
+    Ok(())
 }
 
 #[derive(clap::Args)]
@@ -82,7 +155,10 @@ struct LatencyArgs {
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
-    let SweepWhat::Latency(a) = args.what;
+    let a = match args.what {
+        SweepWhat::Latency(a) => a,
+        SweepWhat::StiffnessLag(a) => return run_lag(a),
+    };
     let pulse = pulse_from_flags(&a.pulse, a.pulse_at_ms, a.pulse_ms).input()?;
     let opts = SweepOptions {
         latencies_ms: a.latencies,

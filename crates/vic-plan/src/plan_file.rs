@@ -426,7 +426,7 @@ pub fn commanded_stiffness<'a>(
 }
 
 /// Names of the plant state's components: `q`, `q_dot` (single joint) or `q1`, `q2`, `q1_dot`,
-/// … (arm), then the VSA's motor angles and speeds.
+/// … (arm), then the VSA's motor angles and speeds or a lagged stiffness's realised values.
 fn state_names(model: &ArmModel) -> Vec<String> {
     let dof = model.dof();
     let joints: Vec<String> = (1..=dof)
@@ -444,6 +444,10 @@ fn state_names(model: &ArmModel) -> Vec<String> {
         let motors: Vec<String> = (1..=dof).map(|i| format!("theta{i}")).collect();
         state_names.extend(motors.clone());
         state_names.extend(motors.iter().map(|m| format!("{m}_dot")));
+    }
+    if model.actuator.stiffness_state_offset(dof).is_some() {
+        // The realised stiffness; the controls k1… are its commands.
+        state_names.extend((1..=dof).map(|i| format!("k{i}_realised")));
     }
     state_names
 }

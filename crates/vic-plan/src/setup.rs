@@ -48,7 +48,8 @@ pub enum PlanError {
 pub struct Setup {
     pub dynamics: DiscreteDynamics,
     pub cost: TrackingCost,
-    /// Initial state x₀ (start posture at rest).
+    /// Initial state x₀ (start posture at rest; a lagged stiffness settled at the initial
+    /// stiffness).
     pub x0: Vec<f64>,
     /// Initial guess: inverse dynamics along the reference with the configured initial stiffness.
     pub u_init: Vec<DVector<f64>>,
@@ -281,11 +282,15 @@ fn warm_start(
     let model = &s.model;
     let (dof, nu, steps, dt) = (model.dof(), model.nu(), s.task.steps, s.task.dt);
     let k0 = s.initial_stiffness;
+    if let Some(off) = model.actuator.stiffness_state_offset(dof) {
+        // The mechanism has settled at the stiffness the plan starts from.
+        x0[off..off + dof].fill(k0);
+    }
     Ok(match &model.actuator {
         Actuator::Torque => (0..steps)
             .map(|k| DVector::from_column_slice(&tau[k][..dof]))
             .collect(),
-        Actuator::Impedance { .. } => (0..steps)
+        Actuator::Impedance { .. } | Actuator::ImpedanceLag { .. } => (0..steps)
             .map(|k| {
                 let mut u = DVector::from_element(nu, k0);
                 u.rows_mut(0, dof).copy_from_slice(&tau[k][..dof]);

@@ -20,9 +20,11 @@
 pub use vic_plan::strategy::Strategy;
 
 mod crossing;
+mod lag;
 mod output;
 pub use crossing::{Crossing, FinalErrorCrossing};
 pub(crate) use crossing::{crossing, final_error_crossings};
+pub use lag::{LagPoint, LagSweep, sweep_stiffness_lag, write_lag_outputs};
 pub use output::write_figure;
 pub(crate) use output::{pulse_from_flags, write_outputs};
 use serde::{Deserialize, Serialize};

@@ -27,6 +27,8 @@ mod caption;
 mod clip;
 mod curves;
 mod joint;
+mod lag;
+pub use lag::LagPlot;
 mod panels;
 mod ranges;
 
@@ -201,6 +203,19 @@ pub(crate) fn curve_figure(
         png,
         svg,
     )
+}
+
+/// The stiffness lag study (`vic sweep stiffness-lag`): the realised stiffness of each time
+/// constant's SOOC plan and the delay crossing against the time constant. PNG and SVG, 1100 ×
+/// 480 px.
+pub fn lag_figure(plot: &LagPlot, png: &Path, svg: &Path) -> Result<(), PlotError> {
+    if plot.stiffness.is_empty() || plot.time.is_empty() {
+        return Err(PlotError::NoData {
+            path: png.to_path_buf(),
+            reason: "no time constant".into(),
+        });
+    }
+    render(&lag::LagFigure { plot }, png, svg)
 }
 
 /// Fig. 2 layout for a single joint: columns side by side; rows: angle [deg] of every trial with

@@ -82,12 +82,17 @@ pub(super) fn flow_body<S: Scalar>(
             }
             Integrator::SemiImplicit => {
                 let dof = model.dof();
+                let blocks = model.second_order_states();
                 // Velocities are the second half of each (position, velocity) block.
-                for block in (0..nx).step_by(2 * dof) {
+                for block in (0..blocks).step_by(2 * dof) {
                     for i in 0..dof {
                         cur[block + dof + i] += xdot[block + dof + i] * h;
                         cur[block + i] += cur[block + dof + i] * h;
                     }
+                }
+                // First-order states (a lagged stiffness) have no velocity: explicit Euler.
+                for i in blocks..nx {
+                    cur[i] += xdot[i] * h;
                 }
             }
             Integrator::Rk4 => {

@@ -432,7 +432,7 @@ impl DiscreteDynamics {
         if matches!(self.integrator, Integrator::Rk4 | Integrator::Rosenbrock) {
             return false;
         }
-        by_size!((2, 3)(2, 4)(4, 6)(4, 8)(8, 12));
+        by_size!((2, 3)(2, 4)(3, 5)(4, 6)(4, 8)(6, 10)(8, 12));
         true
     }
 
@@ -528,7 +528,8 @@ impl DiscreteDynamics {
                 }
                 Integrator::SemiImplicit => {
                     let dof = self.model.dof();
-                    for block in (0..N).step_by(2 * dof) {
+                    let blocks = self.model.second_order_states();
+                    for block in (0..blocks).step_by(2 * dof) {
                         for i in 0..dof {
                             let (p, v) = (block + i, block + dof + i);
                             for (j_col, t_col) in jac.iter_mut().zip(total) {
@@ -538,6 +539,13 @@ impl DiscreteDynamics {
                             cur[v] += xdot[v] * h;
                             cur[p] += cur[v] * h;
                         }
+                    }
+                    // First-order states (a lagged stiffness): explicit Euler, as in `flow`.
+                    for i in blocks..N {
+                        for (j_col, t_col) in jac.iter_mut().zip(total) {
+                            j_col[i] += t_col[i] * h;
+                        }
+                        cur[i] += xdot[i] * h;
                     }
                 }
                 Integrator::Rk4 | Integrator::Rosenbrock => {

@@ -43,7 +43,7 @@ impl ArmModel {
                 }
             };
         }
-        by_size!((2, 3)(2, 4)(4, 6)(4, 8)(8, 12));
+        by_size!((2, 3)(2, 4)(3, 5)(4, 6)(4, 8)(6, 10)(8, 12));
     }
 
     /// [`ArmModel::f_jacobian`] into a fixed-size array of `C = n + m` columns of `N = n` rows
@@ -79,6 +79,14 @@ impl ArmModel {
                     row[n + i] = -damping.gain(k);
                     row[nx + i] = 1.0;
                     row[nx + n + i] = -(q[i] - ex.q_d[i]) - damping.slope() * (qd[i] - ex.qd_d[i]);
+                }
+                // The same law with the realised stiffness, a state.
+                Actuator::ImpedanceLag { damping, .. } => {
+                    let k = x[2 * n + i];
+                    row[i] = -k;
+                    row[n + i] = -damping.gain(k);
+                    row[nx + i] = 1.0;
+                    row[2 * n + i] = -(q[i] - ex.q_d[i]) - damping.slope() * (qd[i] - ex.qd_d[i]);
                 }
                 // Eq. 6: τ = K (θ − q).
                 Actuator::Vsa { .. } => {
@@ -140,6 +148,15 @@ impl ArmModel {
                 jac[2 * n + i][row] = -k / b;
                 jac[nx + i][row] = 1.0 / b;
                 jac[nx + n + i][row] = -(x[2 * n + i] - q[i]) / b;
+            }
+        }
+
+        // The stiffness lag: K' = (K_c − K) / τ_K.
+        if let Actuator::ImpedanceLag { time_constant, .. } = self.actuator {
+            for i in 0..n {
+                let row = 2 * n + i;
+                jac[row][row] = -1.0 / time_constant;
+                jac[nx + n + i][row] = 1.0 / time_constant;
             }
         }
     }

@@ -59,6 +59,8 @@ pub enum ModelError {
     FieldOnSingleJoint,
     #[error("noise component {component} is out of range for a {nx}-dimensional state")]
     NoiseComponent { component: usize, nx: usize },
+    #[error("the stiffness time constant must be positive and finite, got {0} s")]
+    StiffnessTimeConstant(f64),
 }
 
 impl ModelError {
@@ -70,6 +72,7 @@ impl ModelError {
             }
             Self::FieldOnSingleJoint => ("field", "kind"),
             Self::NoiseComponent { .. } => ("noise", "component"),
+            Self::StiffnessTimeConstant(_) => ("actuator", "stiffness_time_constant"),
         }
     }
 }
@@ -93,6 +96,11 @@ impl ArmModel {
             if motor_inertia.iter().any(|b| b.is_nan() || *b <= 0.0) {
                 return Err(ModelError::MotorInertiaNotPositive);
             }
+        }
+        if let Actuator::ImpedanceLag { time_constant, .. } = &actuator
+            && !(time_constant.is_finite() && *time_constant > 0.0)
+        {
+            return Err(ModelError::StiffnessTimeConstant(*time_constant));
         }
         if dof == 1 && !matches!(field, Field::None) {
             return Err(ModelError::FieldOnSingleJoint);
@@ -118,9 +126,25 @@ impl ArmModel {
     pub fn dof(&self) -> usize {
         self.plant.dof()
     }
-    /// State dimension `n`: `(q, q')`, or `(q, q', θ, θ')` with a VSA.
+    /// State dimension `n`: `(q, q')`, `(q, q', θ, θ')` with a VSA, `(q, q', K)` with a lagged
+    /// stiffness.
     pub fn nx(&self) -> usize {
         self.actuator.nx(self.dof())
+    }
+    /// The leading states that come in (position, velocity) blocks of `dof` each (the
+    /// semi-implicit step updates their velocities first); the states after them are of first
+    /// order (a lagged stiffness).
+    pub fn second_order_states(&self) -> usize {
+        match self.actuator {
+            Actuator::ImpedanceLag { .. } => 2 * self.dof(),
+            _ => self.nx(),
+        }
+    }
+    /// The states the noise drives: all of them, except a lagged stiffness (a mechanism's
+    /// position, not disturbed by the limb's noise), so that `τ_K → 0` leaves the paper's noise
+    /// model of the limb unchanged.
+    fn noisy_states(&self) -> usize {
+        self.second_order_states()
     }
     /// Control dimension `m`.
     pub fn nu(&self) -> usize {
@@ -128,7 +152,7 @@ impl ArmModel {
     }
     /// Number of noise channels `p`.
     pub fn nw(&self) -> usize {
-        self.noise.nw(self.nx(), self.dof())
+        self.noise.nw(self.noisy_states(), self.dof())
     }
 
     /// Joint torque produced by the actuator and the exogenous torque (Eq. 3, 4, 6).
@@ -143,6 +167,11 @@ impl ArmModel {
                     Actuator::Torque => u[i],
                     Actuator::Impedance { damping } => {
                         let k = u[n + i];
+                        u[i] - k * (q - ex.q_d[i]) - damping.gain(k) * (qd - ex.qd_d[i])
+                    }
+                    // Eq. 4 with the stiffness the mechanism has reached, not the one commanded.
+                    Actuator::ImpedanceLag { damping, .. } => {
+                        let k = x[2 * n + i];
                         u[i] - k * (q - ex.q_d[i]) - damping.gain(k) * (qd - ex.qd_d[i])
                     }
                     // The spring between motor and link: τ = K (θ − q).
@@ -224,6 +253,12 @@ impl ArmModel {
                 xdot[3 * n + i] = (u[i] - u[n + i] * (theta - q[i])) / motor_inertia[i];
             }
         }
+        if let Actuator::ImpedanceLag { time_constant, .. } = self.actuator {
+            // K' = (K_c − K) / τ_K: the realised stiffness follows its command.
+            for i in 0..n {
+                xdot[2 * n + i] = (u[n + i] - x[2 * n + i]) / time_constant;
+            }
+        }
         (angles, m)
     }
 
@@ -236,7 +271,7 @@ impl ArmModel {
             Noise::None => {}
             Noise::StateProportional { sigma, component } => {
                 let scale = x[component] * sigma;
-                for i in 0..nx {
+                for i in 0..nw {
                     out[i * nx + i] = scale;
                 }
             }

@@ -6,7 +6,7 @@ use crate::bounded_read::{MAX_SCENARIO_BYTES, read_text_at_most};
 use std::path::Path;
 
 /// `(file name, text)` of every scenario in `config/`.
-const BUILT_IN: [(&str, &str); 10] = [
+const BUILT_IN: [(&str, &str); 12] = [
     (
         "icub_elbow.toml",
         include_str!("../../../../config/icub_elbow.toml"),
@@ -30,6 +30,14 @@ const BUILT_IN: [(&str, &str); 10] = [
     (
         "two_link_divergent.toml",
         include_str!("../../../../config/two_link_divergent.toml"),
+    ),
+    (
+        "two_link_divergent_fast_vsa.toml",
+        include_str!("../../../../config/two_link_divergent_fast_vsa.toml"),
+    ),
+    (
+        "two_link_divergent_maccepa.toml",
+        include_str!("../../../../config/two_link_divergent_maccepa.toml"),
     ),
     (
         "two_link_reach.toml",

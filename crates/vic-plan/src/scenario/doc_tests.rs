@@ -267,9 +267,9 @@ fn config_md_lists_the_values_of_every_enum_key() {
         }
     }
     assert!(faults.is_empty(), "docs/CONFIG.md:\n{}", faults.join("\n"));
-    // The four tags, task.kind, task.integrator, actuator.damping, solver.method and
-    // solver.indefinite.
-    assert_eq!(checked, 9);
+    // The four tags, task.kind, task.integrator, actuator.damping,
+    // actuator.stiffness_dynamics, solver.method and solver.indefinite.
+    assert_eq!(checked, 10);
 }
 
 /// The row of `section.key` (of `variant` in a tagged section).

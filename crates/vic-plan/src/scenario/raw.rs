@@ -101,6 +101,11 @@ pub(super) enum RawActuator {
         stiffness_max: Option<f64>,
         /// Stiffness of the initial guess handed to the solver [N m/rad].
         initial_stiffness: Option<f64>,
+        /// How the realised stiffness follows its command.
+        #[serde(default)]
+        stiffness_dynamics: StiffnessDynamics,
+        /// `τ_K` [s], for `stiffness_dynamics = "first_order"`.
+        stiffness_time_constant: Option<f64>,
     },
     Vsa {
         motor_inertia: Vec<f64>,
@@ -157,6 +162,18 @@ pub(super) enum DampingLaw {
     #[default]
     Proportional,
     Affine,
+}
+
+/// `[actuator] stiffness_dynamics`: whether the impedance's stiffness acts at once or lags its
+/// command.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum StiffnessDynamics {
+    /// The stiffness is a control that acts at once (the paper's type 2).
+    #[default]
+    Ideal,
+    /// `K' = (K_c − K) / τ_K`.
+    FirstOrder,
 }
 
 /// `[field]`, by `kind`.

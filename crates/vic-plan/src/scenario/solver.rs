@@ -115,7 +115,9 @@ impl RawSolver {
 /// at zero stiffness nothing moves it.
 pub(super) fn held_first(model: &ArmModel, hold_stiffness_first: bool) -> Vec<usize> {
     match model.actuator {
-        Actuator::Impedance { .. } if hold_stiffness_first => (model.dof()..model.nu()).collect(),
+        Actuator::Impedance { .. } | Actuator::ImpedanceLag { .. } if hold_stiffness_first => {
+            (model.dof()..model.nu()).collect()
+        }
         _ => Vec::new(),
     }
 }

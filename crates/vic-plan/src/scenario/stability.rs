@@ -30,8 +30,27 @@ pub(super) fn check_substep(
         return Ok(());
     }
     let inertia = smallest_inertia(model, task);
+    let h = task.dt / task.substeps as f64;
+    if let Actuator::ImpedanceLag { time_constant, .. } = model.actuator
+        && h > time_constant
+    {
+        // Euler's factor 1 − h/τ_K on the lag turns negative: the stiffness would overshoot
+        // its command and oscillate around it, which no mechanism does.
+        return Err(check.invalid(
+            "actuator",
+            "stiffness_time_constant",
+            format!(
+                "{time_constant} s is shorter than the integration sub-step of {:.2} ms: the \
+                 lag's Euler step would overshoot; use a longer time constant, more substeps, \
+                 or stiffness_dynamics = \"ideal\"",
+                h * 1000.0
+            ),
+        ));
+    }
     let rate = match &model.actuator {
-        Actuator::Impedance { damping } => damping.gain(k_max) / inertia,
+        Actuator::Impedance { damping } | Actuator::ImpedanceLag { damping, .. } => {
+            damping.gain(k_max) / inertia
+        }
         Actuator::Vsa { motor_inertia } => {
             let b = motor_inertia.iter().copied().fold(f64::INFINITY, f64::min);
             (k_max / inertia.min(b)).sqrt()
@@ -48,7 +67,6 @@ pub(super) fn check_substep(
         // on them at any step.
         Integrator::Rosenbrock => return Ok(()),
     };
-    let h = task.dt / task.substeps as f64;
     if h * rate >= limit {
         let needed = (task.dt * rate / limit).floor() as usize + 1;
         return Err(check.invalid(
@@ -157,7 +175,7 @@ pub(super) fn check_hold_stiffness(
     let k = board.hold_stiffness;
     let inertia = smallest_inertia(model, task);
     let rate = match &model.actuator {
-        Actuator::Impedance { damping } => {
+        Actuator::Impedance { damping } | Actuator::ImpedanceLag { damping, .. } => {
             let d = damping.gain(k);
             if d < 0.0 {
                 return Err(check.invalid(

@@ -4,7 +4,7 @@
 use super::error::{ConfigError, FileCheck};
 use super::raw::{
     DampingLaw, PathKind, RawActuator, RawConfig, RawCost, RawField, RawLimits, RawNoise, RawPlant,
-    RawTask,
+    RawTask, StiffnessDynamics,
 };
 use super::stability::{check_hold_stiffness, check_substep};
 use super::{CostWeights, Scenario, Task, TaskPath};
@@ -116,6 +116,8 @@ fn actuator(raw: &RawActuator, dof: usize, check: &FileCheck) -> Result<Actuator
             alpha,
             slope,
             offset,
+            stiffness_dynamics,
+            stiffness_time_constant,
             ..
         } => {
             let damping = match damping {
@@ -134,7 +136,28 @@ fn actuator(raw: &RawActuator, dof: usize, check: &FileCheck) -> Result<Actuator
                     }
                 }
             };
-            Actuator::Impedance { damping }
+            match stiffness_dynamics {
+                StiffnessDynamics::Ideal => {
+                    if stiffness_time_constant.is_some() {
+                        return Err(check.invalid(
+                            "actuator",
+                            "stiffness_time_constant",
+                            "applies to stiffness_dynamics = \"first_order\" only; \
+                             the ideal stiffness acts at once",
+                        ));
+                    }
+                    Actuator::Impedance { damping }
+                }
+                StiffnessDynamics::FirstOrder => {
+                    let why = "for stiffness_dynamics = \"first_order\" (τ_K in s)";
+                    let key = "stiffness_time_constant";
+                    let tau = check.required(*stiffness_time_constant, "actuator", key, why)?;
+                    Actuator::ImpedanceLag {
+                        damping,
+                        time_constant: check.positive(tau, "actuator", key)?,
+                    }
+                }
+            }
         }
         RawActuator::Vsa { motor_inertia, .. } => {
             let b = motor_inertia;
