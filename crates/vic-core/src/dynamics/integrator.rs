@@ -159,7 +159,9 @@ fn solve_stiff<S: Scalar>(model: &ArmModel, m: &[[S; 2]; 2], u: &[S], c: f64, r:
         }
     };
     match &model.actuator {
-        Actuator::Torque => {}
+        // A lagged stiffness is a state, not the control this solve reads: the step is taken
+        // explicitly (`J = 0`), and scenarios refuse this integrator for that actuator.
+        Actuator::Torque | Actuator::ImpedanceLag { .. } => {}
         Actuator::Impedance { damping } => {
             let mut w = *m;
             let mut rhs = [<S as Scalar>::zero(); 2];

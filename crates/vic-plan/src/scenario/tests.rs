@@ -167,3 +167,18 @@ fn sub_steps_are_refused_below_each_integrators_stability_limit() {
     ]);
     assert!(one_step.is_ok(), "{:?}", one_step.err());
 }
+
+/// The Rosenbrock step takes the stiffness as the control it is with ideal stiffness; a lagged
+/// stiffness is a state, so that combination is refused, naming the key.
+#[test]
+fn the_rosenbrock_step_is_refused_for_a_lagged_stiffness() {
+    let lagged = [
+        "actuator.stiffness_dynamics=first_order",
+        "actuator.stiffness_time_constant=0.1",
+    ];
+    assert!(load(&lagged).is_ok(), "{:?}", load(&lagged).err());
+    let e = load(&[lagged[0], lagged[1], "task.integrator=rosenbrock"])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("[task] integrator") && e.contains("state"), "{e}");
+}
