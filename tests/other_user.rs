@@ -29,10 +29,10 @@ use std::time::{Duration, Instant};
 use vic_rt::transport::prefix;
 
 /// `nobody`: the other local user.
-const OTHER: u32 = 65534;
+pub(crate) const OTHER: u32 = 65534;
 
 /// Whether the test can switch users; says why not when it cannot.
-fn can_switch_users() -> bool {
+pub(crate) fn can_switch_users() -> bool {
     // SAFETY: geteuid(2) has no preconditions.
     if unsafe { libc::geteuid() } != 0 {
         eprintln!("skipped: not root (switching users needs root; CI runs this as root)");
@@ -45,17 +45,17 @@ fn can_switch_users() -> bool {
     true
 }
 
-/// An unused uid for test `k` of this process (not in /etc/passwd: no one else's files).
-fn owner_uid(k: u32) -> u32 {
+/// An unused uid for test `k` (0 to 3) of this process (not in /etc/passwd: no one else's files).
+pub(crate) fn owner_uid(k: u32) -> u32 {
     61_000 + (std::process::id() % 1000) * 4 + k
 }
 
-fn root_of(uid: u32) -> PathBuf {
+pub(crate) fn root_of(uid: u32) -> PathBuf {
     PathBuf::from(format!("/tmp/vic-{uid}"))
 }
 
 /// `program` run as `uid` (group `uid`, no supplementary groups).
-fn as_user(uid: u32, program: &str) -> Command {
+pub(crate) fn as_user(uid: u32, program: &str) -> Command {
     let mut c = Command::new("setpriv");
     c.args([
         format!("--reuid={uid}"),
@@ -66,14 +66,14 @@ fn as_user(uid: u32, program: &str) -> Command {
     c
 }
 
-fn board_as(uid: u32, ns: &str) -> Command {
+pub(crate) fn board_as(uid: u32, ns: &str) -> Command {
     let mut c = as_user(uid, env!("CARGO_BIN_EXE_vic-board"));
     c.args(["--config", CONFIG, "--namespace", ns, "--json"]);
     c
 }
 
 /// Removes the owner's root directory whatever happens.
-struct RootGuard(PathBuf);
+pub(crate) struct RootGuard(pub(crate) PathBuf);
 impl Drop for RootGuard {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
@@ -142,10 +142,10 @@ fn another_users_root_directory_or_namespace_file_is_refused_by_name() {
 /// What the watcher saw: every path of the namespace with the modes it was seen with, and every
 /// sighting of a group- or other-writable one.
 #[derive(Default)]
-struct Seen {
-    modes: BTreeMap<PathBuf, BTreeSet<u32>>,
-    violations: Vec<String>,
-    scans: usize,
+pub(crate) struct Seen {
+    pub(crate) modes: BTreeMap<PathBuf, BTreeSet<u32>>,
+    pub(crate) violations: Vec<String>,
+    pub(crate) scans: usize,
 }
 
 impl Seen {
@@ -175,7 +175,7 @@ impl Seen {
 /// inotify on `/dev/shm`, `/tmp` (for the root directory's creation) and every directory under
 /// the root directory as it appears; every event's path checked at once, and full rescans
 /// between events, until `stop`.
-fn watch(ns: String, root: PathBuf, stop: Arc<AtomicBool>) -> Seen {
+pub(crate) fn watch(ns: String, root: PathBuf, stop: Arc<AtomicBool>) -> Seen {
     let prefix = prefix(&ns);
     let mut seen = Seen::default();
     // SAFETY: inotify_init1(2) with valid flags; the descriptor is closed below.
@@ -259,7 +259,7 @@ fn watch(ns: String, root: PathBuf, stop: Arc<AtomicBool>) -> Seen {
 }
 
 /// The namespace's files now (in the owner's root directory and /dev/shm).
-fn namespace_files_of(ns: &str, root: &Path) -> Vec<PathBuf> {
+pub(crate) fn namespace_files_of(ns: &str, root: &Path) -> Vec<PathBuf> {
     let prefix = prefix(ns);
     let mut out: Vec<PathBuf> = std::fs::read_dir("/dev/shm")
         .into_iter()

@@ -2,14 +2,16 @@
 requests a tool or a central process sends (pulse, load, field, noise, reset, stop).
 
 The configuration is the one docs/PROTOCOL.md gives: the namespace's prefix ``vic_{ns}.``, the
-user's private root directory ``/tmp/vic-{uid}/`` (0700), every other iceoryx2 setting at its
+user's private root directory (:func:`root_dir`, 0700), every other iceoryx2 setting at its
 default, and the services opened with the document's limits. The bindings offer iceoryx2's plain
 ``ipc`` service type only, which talks to vic's services unchanged but keeps its global management
-segment (a node counter) in ``/dev/shm`` instead of the private directory; see
-:func:`_restrict_own_files` for what this client does about it.
+segment (a node counter) in ``/dev/shm`` instead of the private directory, and creates a missing
+one world-writable (0666). So this client never creates it: every vic process of a namespace makes
+it owner-only, and the client opens only such a file (:func:`check_global_file`).
 """
 
 import ctypes
+import hashlib
 import os
 import secrets
 import stat
@@ -98,25 +100,83 @@ def prefix(ns):
     return f"vic_{validate_namespace(ns)}."
 
 
+RUNTIME_DIR_VAR = "VIC_RUNTIME_DIR"
+MAX_ROOT_PATH = 26  # bytes, the final / included: iceoryx2's event sockets live in it (as vic)
+
+
+def _session_runtime_dir():
+    """``$XDG_RUNTIME_DIR`` when it is an absolute path to a directory of ours that nobody else
+    may enter and short enough for its ``vic/`` (``MAX_ROOT_PATH``), else None."""
+    path = os.environ.get("XDG_RUNTIME_DIR")
+    if not path or not os.path.isabs(path):
+        return None
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    fits = len(os.path.join(path, "vic/").encode()) <= MAX_ROOT_PATH
+    ok = fits and stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid() and not st.st_mode & 0o077
+    return path if ok else None
+
+
+def _root_place():
+    given = os.environ.get(RUNTIME_DIR_VAR)
+    if given:
+        return given.rstrip("/") + "/", "given"
+    session = _session_runtime_dir()
+    if session is not None:
+        return os.path.join(session, "vic") + "/", "session"
+    return f"/tmp/vic-{os.geteuid()}/", "tmp"
+
+
 def root_dir():
-    return f"/tmp/vic-{os.geteuid()}/"
+    """The private root directory, chosen as vic chooses it: ``$VIC_RUNTIME_DIR/`` if set, else
+    ``$XDG_RUNTIME_DIR/vic/`` if that is our private directory, else ``/tmp/vic-{uid}/``."""
+    return _root_place()[0]
 
 
 def ensure_root_dir():
     """Creates the private root directory (0700) if missing; refuses one that is not a directory
-    of ours that nobody else may enter (as vic does)."""
-    path = root_dir()
+    of ours that nobody else may enter (as vic does), saying what to do."""
+    path, place = _root_place()
+    elsewhere = (
+        f"set {RUNTIME_DIR_VAR} to a directory of yours that only you may enter (mkdir -m 700 "
+        f"DIR, an absolute path of at most {MAX_ROOT_PATH} bytes), the same for every vic process "
+        "and Python client of the namespace"
+    )
+    if not os.path.isabs(path) or len(path.encode()) > MAX_ROOT_PATH:
+        raise VicError(
+            f"iceoryx2 directory {path}: {RUNTIME_DIR_VAR} must be an absolute path of at most "
+            f"{MAX_ROOT_PATH} bytes; {elsewhere}"
+        )
     try:
         os.mkdir(path, 0o700)
     except FileExistsError:
         pass
+    except OSError as e:
+        raise VicError(f"iceoryx2 directory {path}: cannot create it: {e}; {elsewhere}") from e
     st = os.lstat(path)
+    uid = os.geteuid()
+    if place == "tmp" and st.st_uid != uid:
+        in_the_way = (
+            "another user made it first and only they or an administrator can remove it (/tmp "
+            f"is sticky); meanwhile {elsewhere}"
+        )
+    else:
+        in_the_way = f"remove it, or {elsewhere}"
     if not stat.S_ISDIR(st.st_mode):
-        raise VicError(f"{path}: not a directory")
-    if st.st_uid != os.geteuid():
-        raise VicError(f"{path}: belongs to uid {st.st_uid}, not to you (uid {os.geteuid()})")
+        raise VicError(f"iceoryx2 directory {path}: it is not a directory; {in_the_way}")
+    if st.st_uid != uid:
+        raise VicError(
+            f"iceoryx2 directory {path}: it belongs to uid {st.st_uid}, not to you (uid {uid}); "
+            f"{in_the_way}"
+        )
     if st.st_mode & 0o077:
-        raise VicError(f"{path}: mode {st.st_mode & 0o777:o}, other users may enter it (must be 700)")
+        raise VicError(
+            f"iceoryx2 directory {path}: its mode is {st.st_mode & 0o777:o}: other users may "
+            f"enter it (it must be 700); make it private (chmod 700 {path}) if nothing of "
+            "another user is in it, or remove it"
+        )
     return path
 
 
@@ -144,28 +204,80 @@ def check_namespace_owner(ns):
         except FileNotFoundError:
             continue
         if owner != os.geteuid():
-            raise VicError(f"namespace {ns!r}: {path} belongs to uid {owner}, not to you")
+            raise VicError(
+                f"namespace {ns!r}: {path} belongs to uid {owner}, not to you; another user "
+                "holds this namespace (or made the file first, and only they or an "
+                "administrator can remove it from the sticky /dev/shm): use another namespace"
+            )
 
 
-def _restrict_own_files(ns):
-    """Makes the namespace's files in /dev/shm owner-only.
+# The type name iceoryx2 gives the global file's content; the file's name carries its SHA-1.
+_COUNTER_TYPE = "iceoryx2::node::global_management_segment::State"
 
-    iceoryx2's ``ipc`` service creates its global management segment (``…global_mgmt``, a node
-    counter) in /dev/shm and makes it 0666; vic's own service type keeps it in the private
-    directory instead. The bindings cannot choose that type, so this client narrows the file to
-    0600 right after its node is created. In the moment between, another local user could open
-    it and later change the counter: node ids also carry the process id and the creation time,
-    so a changed counter cannot make two nodes' ids collide.
+
+def global_file(ns):
+    """The global management file of iceoryx2's plain ``ipc`` service for namespace ``ns`` in
+    /dev/shm, as iceoryx2 names it:
+    ``{prefix}{sha1 of the type name}_node.{major}_{minor}_{patch}.global_mgmt``."""
+    major, minor, patch = _iceoryx2_version()
+    digest = hashlib.sha1(_COUNTER_TYPE.encode()).hexdigest()
+    return f"/dev/shm/{prefix(ns)}{digest}_node.{major}_{minor}_{patch}.global_mgmt"
+
+
+def _iceoryx2_version():
+    from importlib.metadata import version
+
+    return tuple(int(p) for p in version("iceoryx2").split(".")[:3])
+
+
+def check_global_file(ns):
+    """The ``os.stat_result`` of the namespace's global file if a vic process made it (a regular
+    file of ours that nobody else may open), None while it is missing; raises :class:`VicError`
+    naming the file, its owner or mode, and what to do, for any other file.
+
+    The plain ``ipc`` service creates a missing file world-writable (0666): another local user
+    could open it in that moment and keep a writable handle. A file of ours in /dev/shm (sticky)
+    cannot be removed or replaced by another user, so one that passes this check stays the file
+    the node opens.
     """
-    for f in _listdir("/dev/shm"):
-        if f.startswith(prefix(ns)):
-            path = os.path.join("/dev/shm", f)
-            try:
-                st = os.lstat(path)
-                if st.st_uid == os.geteuid() and st.st_mode & 0o077:
-                    os.chmod(path, 0o600)
-            except OSError:
-                pass
+    path = global_file(ns)
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        raise VicError(f"namespace {ns!r}: {path} is not a regular file; use another namespace")
+    if st.st_uid != os.geteuid():
+        raise VicError(
+            f"namespace {ns!r}: {path} belongs to uid {st.st_uid}, not to you (uid "
+            f"{os.geteuid()}); another user made it and only they or an administrator can "
+            "remove it: use another namespace"
+        )
+    if st.st_mode & 0o077:
+        raise VicError(
+            f"namespace {ns!r}: {path} has mode {st.st_mode & 0o777:o}: other users may have "
+            "opened it for writing (a client of the plain ipc service created it); stop the "
+            "namespace's processes, remove the file and start the board again"
+        )
+    return st
+
+
+def _wait_for_global_file(ns, timeout):
+    """Waits up to ``timeout`` seconds for the board (any vic process) to have made the
+    namespace's global file; returns its stat, or raises :class:`VicError`."""
+    deadline = time.monotonic() + timeout
+    while True:
+        st = check_global_file(ns)
+        if st is not None:
+            return st
+        if time.monotonic() >= deadline:
+            raise VicError(
+                f"no board in namespace {ns!r} after {timeout} s (start one with: vic-board "
+                f"--namespace {ns}); {global_file(ns)} is missing, and this client never "
+                "creates a namespace's files (iceoryx2's Python bindings would make that one "
+                "world-writable)"
+            )
+        time.sleep(0.05)
 
 
 def config(ns):
@@ -226,7 +338,9 @@ class Board:
             raise VicError(f"on_loss={on_loss!r}: one of {', '.join(ON_LOSS)}")
         self.on_loss = on_loss
         iox2.set_log_level(iox2.LogLevel.Error)
+        deadline = time.monotonic() + timeout
         ensure_root_dir()
+        before = _wait_for_global_file(namespace, timeout)
         check_namespace_owner(namespace)
         self._node = (
             iox2.NodeBuilder.new()
@@ -234,8 +348,20 @@ class Board:
             .config(config(namespace))
             .create(iox2.ServiceType.Ipc)
         )
-        _restrict_own_files(namespace)
-        services = self._open_services(timeout)
+        # The node opened the file checked above, unless the namespace's last vic process
+        # removed it in between and the node made a new one (world-writable): then narrow it
+        # and refuse, as no board is left anyway.
+        path = global_file(namespace)
+        after = os.lstat(path)
+        if (after.st_ino, after.st_dev) != (before.st_ino, before.st_dev) or after.st_mode & 0o077:
+            if after.st_uid == os.geteuid():
+                os.chmod(path, 0o600)
+            self._node = None
+            raise VicError(
+                f"namespace {namespace!r}: the board's processes exited while this client "
+                "connected; start the board again"
+            )
+        services = self._open_services(max(0.0, deadline - time.monotonic()))
         self._state_sub = services["state"].subscriber_builder().buffer_size(STATE_BUFFER).create()
         self._telemetry_sub = services["telemetry"].subscriber_builder().buffer_size(1).create()
         # Publishers are opened at the first send: a client that only watches takes no slot a

@@ -20,15 +20,18 @@ pub enum TransportError {
     )]
     CentralAlreadyRunning { namespace: String, pid: u32 },
     /// The private iceoryx2 directory is not safe to use.
-    #[error(
-        "iceoryx2 directory {path}: {reason}; remove it (or fix its owner and mode 700) and \
-         start again"
-    )]
-    UnsafeRoot { path: String, reason: String },
+    #[error("iceoryx2 directory {path}: {reason}; {remedy}")]
+    UnsafeRoot {
+        path: String,
+        reason: String,
+        /// What the user can do about it (where the directory is decides).
+        remedy: String,
+    },
     /// Another user owns one of the namespace's files.
     #[error(
-        "namespace \"{namespace}\": {path} belongs to uid {owner}, not to you; another user's \
-         process holds this namespace: use another --namespace"
+        "namespace \"{namespace}\": {path} belongs to uid {owner}, not to you; another user \
+         holds this namespace (or made the file first, and only they or an administrator can \
+         remove it from the sticky /dev/shm): use another --namespace"
     )]
     ForeignFile {
         namespace: String,

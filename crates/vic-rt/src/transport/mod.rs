@@ -38,8 +38,9 @@ pub use clock::{monotonic_ns, process_session, session_seq};
 pub use error::PortKind;
 pub use error::TransportError;
 pub use namespace::{
-    DEFAULT_NAMESPACE, NodeInfo, NodeLiveness, check_namespace_owner, dead_nodes, ensure_root_dir,
-    list_nodes, namespace_files, prefix, remove_namespace, root_dir, validate_namespace,
+    DEFAULT_NAMESPACE, MAX_ROOT_PATH, NodeInfo, NodeLiveness, RUNTIME_DIR_VAR,
+    check_namespace_owner, dead_nodes, ensure_root_dir, list_nodes, namespace_files,
+    plain_global_file, prefix, remove_namespace, root_dir, validate_namespace,
 };
 pub use ports::{
     BoardObserver, BoardPorts, BoardWatch, CENTRAL_NODE, CentralPorts, MonitorPorts, ObserverPorts,

@@ -30,44 +30,133 @@ pub fn prefix(ns: &str) -> String {
     format!("vic_{ns}.")
 }
 
-/// The user's private iceoryx2 root directory: `/tmp/vic-{uid}/`.
-pub fn root_dir() -> std::path::PathBuf {
+/// The environment variable that names the private root directory instead of the default
+/// place (for a user whose `/tmp/vic-{uid}` another user made first).
+pub const RUNTIME_DIR_VAR: &str = "VIC_RUNTIME_DIR";
+
+/// The longest root directory path [bytes], its final `/` included: iceoryx2's event sockets
+/// live in it, named `{root}{prefix}{id}.event`, and a socket's path must fit the 108 bytes of
+/// `sun_path`: 108 − 37 (the longest prefix) − 39 (a 128-bit id in decimal) − 6 = 26.
+pub const MAX_ROOT_PATH: usize = 26;
+
+/// Where the root directory is, and why there: what the error of an unusable one tells to do
+/// depends on it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RootPlace {
+    /// `$VIC_RUNTIME_DIR/` as given.
+    Given,
+    /// `$XDG_RUNTIME_DIR/vic/`: the login session's own directory (e.g. `/run/user/{uid}`),
+    /// which no other user can enter, so nobody can make `vic/` in it first.
+    Session,
+    /// `/tmp/vic-{uid}/`, when neither is set (or `$XDG_RUNTIME_DIR` is not a directory of this
+    /// user that only they may enter). Another user can make it first: then every process of
+    /// this user is refused, with what to do.
+    Tmp,
+}
+
+/// `$XDG_RUNTIME_DIR` when it is an absolute path to a directory of this user that nobody else
+/// may enter (what the XDG base directory specification promises of it), short enough for its
+/// `vic/` to be a root directory ([`MAX_ROOT_PATH`]).
+fn session_runtime_dir() -> Option<std::path::PathBuf> {
+    use std::os::unix::fs::MetadataExt;
+    let dir = std::path::PathBuf::from(std::env::var_os("XDG_RUNTIME_DIR")?);
+    let m = std::fs::metadata(&dir).ok()?;
     // SAFETY: geteuid(2) has no preconditions and cannot fail.
     let uid = unsafe { libc::geteuid() };
-    std::path::PathBuf::from(format!("/tmp/vic-{uid}/"))
+    let fits = dir.join("vic/").as_os_str().len() <= MAX_ROOT_PATH;
+    (dir.is_absolute() && fits && m.is_dir() && m.uid() == uid && m.mode() & 0o077 == 0)
+        .then_some(dir)
+}
+
+fn root_place() -> (std::path::PathBuf, RootPlace) {
+    if let Some(dir) = std::env::var_os(RUNTIME_DIR_VAR).filter(|d| !d.is_empty()) {
+        let dir = dir.to_string_lossy();
+        return (
+            std::path::PathBuf::from(format!("{}/", dir.trim_end_matches('/'))),
+            RootPlace::Given,
+        );
+    }
+    if let Some(dir) = session_runtime_dir() {
+        return (dir.join("vic/"), RootPlace::Session);
+    }
+    // SAFETY: geteuid(2) has no preconditions and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    (
+        std::path::PathBuf::from(format!("/tmp/vic-{uid}/")),
+        RootPlace::Tmp,
+    )
+}
+
+/// The user's private iceoryx2 root directory: `$VIC_RUNTIME_DIR/` if set, else
+/// `$XDG_RUNTIME_DIR/vic/` if that is the user's private directory, else `/tmp/vic-{uid}/`.
+/// Every process and client of a namespace must see the same (they run with the same
+/// environment).
+pub fn root_dir() -> std::path::PathBuf {
+    root_place().0
 }
 
 /// Creates the private root directory (0700) if it is missing and checks that it is safe: a
 /// directory (not a link), owned by this user, that nobody else may enter or write into.
 pub fn ensure_root_dir() -> Result<std::path::PathBuf, TransportError> {
     use std::os::unix::fs::{DirBuilderExt, MetadataExt};
-    let dir = root_dir();
-    let unsafe_root = |reason: String| TransportError::UnsafeRoot {
-        path: dir.display().to_string(),
+    let (dir, place) = root_place();
+    let path = dir.display().to_string();
+    let elsewhere = format!(
+        "set {RUNTIME_DIR_VAR} to a directory of yours that only you may enter (`mkdir -m 700 \
+         DIR`, an absolute path of at most {MAX_ROOT_PATH} bytes), the same for every vic \
+         process and Python client of the namespace"
+    );
+    let unsafe_root = |reason: String, remedy: String| TransportError::UnsafeRoot {
+        path: path.clone(),
         reason,
+        remedy,
     };
+    if !dir.is_absolute() || path.len() > MAX_ROOT_PATH {
+        return Err(unsafe_root(
+            format!("{RUNTIME_DIR_VAR} must be an absolute path of at most {MAX_ROOT_PATH} bytes"),
+            elsewhere,
+        ));
+    }
     match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
         Ok(()) => {}
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-        Err(e) => return Err(unsafe_root(format!("cannot create it: {e}"))),
+        Err(e) => return Err(unsafe_root(format!("cannot create it: {e}"), elsewhere)),
     }
-    let m = std::fs::symlink_metadata(&dir).map_err(|e| unsafe_root(e.to_string()))?;
+    let m = std::fs::symlink_metadata(&dir)
+        .map_err(|e| unsafe_root(e.to_string(), elsewhere.clone()))?;
     // SAFETY: geteuid(2) has no preconditions and cannot fail.
     let uid = unsafe { libc::geteuid() };
+    // What to do about a directory in the way: in sticky /tmp another user's can be removed
+    // only by them or an administrator, so the remedy is a directory elsewhere.
+    let in_the_way = |owner: u32| match (place, owner == uid) {
+        (RootPlace::Tmp, false) => format!(
+            "another user made it first and only they or an administrator can remove it (/tmp \
+             is sticky); meanwhile {elsewhere}"
+        ),
+        _ => format!("remove it, or {elsewhere}"),
+    };
     if !m.file_type().is_dir() {
-        return Err(unsafe_root("it is not a directory".into()));
+        return Err(unsafe_root(
+            "it is not a directory".into(),
+            in_the_way(m.uid()),
+        ));
     }
     if m.uid() != uid {
-        return Err(unsafe_root(format!(
-            "it belongs to uid {}, not to you (uid {uid})",
-            m.uid()
-        )));
+        return Err(unsafe_root(
+            format!("it belongs to uid {}, not to you (uid {uid})", m.uid()),
+            in_the_way(m.uid()),
+        ));
     }
     if m.mode() & 0o077 != 0 {
-        return Err(unsafe_root(format!(
-            "its mode is {:o}: other users may enter it (it must be 700)",
-            m.mode() & 0o777
-        )));
+        return Err(unsafe_root(
+            format!(
+                "its mode is {:o}: other users may enter it (it must be 700)",
+                m.mode() & 0o777
+            ),
+            format!(
+                "make it private (`chmod 700 {path}`) if nothing of another user is in it, or remove it"
+            ),
+        ));
     }
     Ok(dir)
 }
@@ -86,6 +175,17 @@ pub fn config(ns: &str) -> Result<Config, TransportError> {
         .map_err(|e| TransportError::ipc(ns, "root directory", e))?;
     cfg.global.set_root_path(&root);
     Ok(cfg)
+}
+
+/// The global management file of iceoryx2's plain `ipc` service for namespace `ns`, in
+/// `/dev/shm`: every vic process of the namespace creates it owner-only
+/// ([`super::service::create_plain_global_file`]) for the Python client, which only opens it.
+pub fn plain_global_file(ns: &str) -> Result<std::path::PathBuf, TransportError> {
+    validate_namespace(ns)?;
+    let mut cfg = Config::default();
+    cfg.global.prefix = FileName::new(prefix(ns).as_bytes())
+        .map_err(|e| TransportError::ipc(ns, "file prefix", e))?;
+    super::service::plain_global_file(&cfg).map_err(|e| TransportError::ipc(ns, "global file", e))
 }
 
 /// Refuses a namespace with a file another user owns (in `/dev/shm` or the root directory):

@@ -214,3 +214,84 @@ impl<'b, T: Debug + Send + Sync + ZeroCopySend> DynamicStorageBuilder<'b, T, Own
         self.0.open_or_create().map(OwnerOnlyFile)
     }
 }
+
+/// The content of iceoryx2's global management file, its node counter: the layout of
+/// `iceoryx2::node::global_management_segment::State`, which iceoryx2 keeps private.
+#[derive(Debug, Default)]
+#[repr(C)]
+struct NodeCounter {
+    node_counter: core::sync::atomic::AtomicU32,
+}
+
+// SAFETY: one atomic integer and no pointer: valid in every process that maps it.
+unsafe impl ZeroCopySend for NodeCounter {}
+
+type PlainFile<T> = dynamic_storage::posix_shared_memory::Storage<T>;
+type PlainBuilder<'b, T> = dynamic_storage::posix_shared_memory::Builder<'b, T>;
+type PlainConfig = <PlainFile<NodeCounter> as NamedConceptMgmt>::Configuration;
+
+/// The type name iceoryx2 gives its global file's content: the file name carries its hash, so
+/// the file vic makes must carry the same one as the file the plain `ipc` service opens.
+const ICEORYX2_COUNTER_TYPE: &str = "iceoryx2::node::global_management_segment::State";
+
+/// The storage configuration and name of the plain `ipc` service's global file, as iceoryx2
+/// makes them (`GlobalManagementSegment::dynamic_storage_config`).
+fn plain_global_storage(cfg: &iceoryx2::config::Config) -> Result<(PlainConfig, FileName), String> {
+    use iceoryx2::prelude::SemanticString;
+    use iceoryx2_cal::named_concept::NamedConceptConfiguration;
+    let v = iceoryx2_bb_elementary::package_version::PackageVersion::get();
+    let mut suffix = cfg.global.node.global_mgmt_suffix;
+    suffix
+        .insert_bytes(
+            0,
+            format!(".{}_{}_{}", v.major(), v.minor(), v.patch()).as_bytes(),
+        )
+        .map_err(|e| format!("{e:?}"))?;
+    let mut storage = PlainConfig::default()
+        .prefix(&cfg.global.prefix)
+        .suffix(&suffix)
+        .path_hint(cfg.global.root_path());
+    // SAFETY: sets the name whose hash names the file, before any use of the configuration:
+    // iceoryx2's own (the layout of `NodeCounter` is that type's).
+    unsafe {
+        <PlainFile<NodeCounter> as DynamicStorage<NodeCounter>>::__internal_set_type_name_in_config(
+            &mut storage,
+            ICEORYX2_COUNTER_TYPE,
+        )
+    };
+    let name = FileName::new(b"node").map_err(|e| format!("{e:?}"))?;
+    Ok((storage, name))
+}
+
+/// The path of the plain `ipc` service's global management file in `/dev/shm`
+/// (`{prefix}{sha1 of the type name}_node.{major}_{minor}_{patch}.global_mgmt`).
+pub(super) fn plain_global_file(
+    cfg: &iceoryx2::config::Config,
+) -> Result<std::path::PathBuf, String> {
+    use iceoryx2_cal::named_concept::NamedConceptConfiguration;
+    let (storage, name) = plain_global_storage(cfg)?;
+    Ok(std::path::Path::new("/dev/shm").join(storage.path_for(&name).file_name().to_string()))
+}
+
+/// Creates the global management file of iceoryx2's plain `ipc` service (the one client
+/// that uses it: the Python bindings, which offer no other service type) owner-only, 0600 from
+/// its creation on, unless it exists. The plain service opens an existing file and creates a
+/// missing one world-writable (0666): so the Python client opens only a file a vic process made
+/// (`python/vic_client` refuses to connect while it is missing, foreign or not owner-only), and
+/// no other user ever gets a moment to open it. An existing file is left as it is (the caller
+/// narrows the namespace's files in `/dev/shm` next).
+pub(super) fn create_plain_global_file(cfg: &iceoryx2::config::Config) -> Result<(), String> {
+    let (storage, name) = plain_global_storage(cfg)?;
+    <PlainBuilder<'_, NodeCounter> as NamedConceptBuilder<PlainFile<NodeCounter>>>::new(&name)
+        .config(&storage)
+        .has_ownership(false)
+        .timeout(cfg.global.creation_timeout)
+        .enable_global_access(false)
+        .initializer(|v, _| {
+            v.write(NodeCounter::default());
+            true
+        })
+        .open_or_create()
+        .map(drop)
+        .map_err(|e| format!("{e:?}"))
+}

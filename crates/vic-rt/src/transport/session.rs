@@ -12,6 +12,7 @@ use super::namespace::{
 };
 use super::protocol::{CommandSlice, Control, Disturbance, StateMsg, Telemetry};
 use super::service::Service as Ipc;
+use super::service::create_plain_global_file;
 use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::port::listener::{Listener, ListenerCreateError};
 use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
@@ -105,6 +106,10 @@ impl<S: IpcService> Session<S> {
         // file of the namespace may belong to someone else.
         ensure_root_dir()?;
         check_namespace_owner(ns)?;
+        // The plain `ipc` service's global file, owner-only, for the Python client to open
+        // (it would create a missing one world-writable).
+        create_plain_global_file(&cfg)
+            .map_err(|e| TransportError::ipc(ns, "cannot create the global file in /dev/shm", e))?;
         let name = NodeName::new(node_name).map_err(|e| TransportError::ipc(ns, "node name", e))?;
         // Dead nodes (killed processes) are counted before our node's creation, which already
         // removes some of their resources.
