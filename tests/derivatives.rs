@@ -663,7 +663,8 @@ fn stiff_jacobian(model: &ArmModel, x: &[f64], u: &[f64]) -> DMatrix<f64> {
     // The stiffness controls (none for the torque actuator).
     let k = || DMatrix::from_fn(dof, dof, |r, c| if r == c { u[dof + r] } else { 0.0 });
     match &model.actuator {
-        Actuator::Torque => {}
+        // A lagged stiffness is a state: the step takes it explicitly (and scenarios refuse it).
+        Actuator::Torque | Actuator::ImpedanceLag { .. } => {}
         Actuator::Impedance { damping } => {
             let kd = DMatrix::from_fn(dof, dof, |r, c| {
                 if r == c {

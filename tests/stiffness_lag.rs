@@ -233,6 +233,7 @@ fn the_lagged_derivatives_match_finite_differences() {
                             let z = -0.001 / TAU_K;
                             (1.0 + z + z * z / 2.0 + z.powi(3) / 6.0 + z.powi(4) / 24.0).powi(10)
                         }
+                        Integrator::Rosenbrock => unreachable!("refused for a lagged stiffness"),
                     };
                     assert!((lin.a[(r, r)] - decay).abs() < 1e-12, "{what}");
                     assert!(

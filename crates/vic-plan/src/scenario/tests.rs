@@ -180,5 +180,8 @@ fn the_rosenbrock_step_is_refused_for_a_lagged_stiffness() {
     let e = load(&[lagged[0], lagged[1], "task.integrator=rosenbrock"])
         .unwrap_err()
         .to_string();
-    assert!(e.contains("[task] integrator") && e.contains("state"), "{e}");
+    assert!(
+        e.contains("[task] integrator") && e.contains("state"),
+        "{e}"
+    );
 }
