@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 
 #[test]
 fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board() {
+    let _one = common::bridge::one_link_at_a_time();
     let sooc = sooc_plan();
     let (host_a, host_b, alone) = (
         unique_namespace("bra"),

@@ -16,6 +16,7 @@ const SKEW_NS: i64 = 5_000_000_000;
 
 #[test]
 fn a_trial_between_hosts_whose_clocks_differ_by_5_s_ends_as_on_one_host() {
+    let _one = common::bridge::one_link_at_a_time();
     let sooc = sooc_plan();
     let (host_a, host_b, alone) = (
         unique_namespace("cka"),

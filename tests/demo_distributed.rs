@@ -31,6 +31,7 @@ fn demo(out_dir: &Path, distributed: bool) -> Command {
 #[cfg(feature = "zenoh")]
 #[test]
 fn the_distributed_demo_ends_as_the_one_host_demo_and_reports_the_link() {
+    let _one = common::bridge::one_link_at_a_time();
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("dd{}", std::process::id()));
     let run = |distributed: bool| -> serde_json::Value {
         let out = demo(&dir.join(distributed.to_string()), distributed)
