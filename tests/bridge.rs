@@ -26,7 +26,7 @@ fn a_trial_across_the_bridge_ends_as_on_one_host_and_a_cut_link_holds_the_board(
     let board_side = two_hosts(&mut d, [&host_a, &host_b], &link, &endpoint, [&[], &[]]);
 
     // The same trials (same seeds) on one host and across the link.
-    d.board(&alone, &[]);
+    d.board(&alone, &["--no-rt"]); // as the board across the link (common::bridge::two_hosts)
     let trials = 2;
     let across = run_planner(&host_b, &sooc, "stiffness", trials, false);
     let direct = run_planner(&alone, &sooc, "stiffness", trials, false);
