@@ -18,6 +18,18 @@ pub(super) fn check_substep(
     bounds: &Bounds,
     check: &FileCheck,
 ) -> Result<(), ConfigError> {
+    if matches!(model.actuator, Actuator::ImpedanceLag { .. })
+        && task.integrator == Integrator::Rosenbrock
+    {
+        return Err(check.invalid(
+            "task",
+            "integrator",
+            "\"rosenbrock\" takes the stiffness implicitly as the control it is with \
+             stiffness_dynamics = \"ideal\"; a lagged stiffness is a state: use \"semi_implicit\" \
+             or \"rk4\""
+                .to_string(),
+        ));
+    }
     let dof = model.dof();
     let Some(off) = model.actuator.stiffness_offset(dof) else {
         return Ok(());
@@ -57,18 +69,6 @@ pub(super) fn check_substep(
         }
         Actuator::Torque => return Ok(()),
     };
-    if matches!(model.actuator, Actuator::ImpedanceLag { .. })
-        && task.integrator == Integrator::Rosenbrock
-    {
-        return Err(check.invalid(
-            "task",
-            "integrator",
-            "\"rosenbrock\" takes the stiffness implicitly as the control it is with \
-             stiffness_dynamics = \"ideal\"; a lagged stiffness is a state: use \"semi_implicit\" \
-             or \"rk4\""
-                .to_string(),
-        ));
-    }
     // Where the step's stability region meets the real axis (a damping rate) and, for the
     // Euler steps, the imaginary axis (a spring): 2 for both Euler steps; RK4's region reaches
     // -2.785 on the real axis and ±2.828 on the imaginary one.
