@@ -14,6 +14,7 @@ use super::protocol::{CommandSlice, Control, Disturbance, StateMsg, Telemetry};
 use super::service::Service as Ipc;
 use super::service::create_plain_global_file;
 use iceoryx2::identifiers::UniqueNodeId;
+use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::port::listener::{Listener, ListenerCreateError};
 use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
@@ -114,12 +115,25 @@ impl<S: IpcService> Session<S> {
         // Dead nodes (killed processes) are counted before our node's creation, which already
         // removes some of their resources.
         let dead_before = dead_nodes_in(&cfg);
-        let node = NodeBuilder::new()
-            .name(&name)
-            .config(&cfg)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<S>()
-            .map_err(|e| TransportError::ipc(ns, "cannot create a node", e))?;
+        // A process that leaves the namespace as the last node removes its files (`Drop`),
+        // the node counter's among them; one that does so while this node is being created
+        // takes the counter away under it (seen: a board started while `vic status` polled).
+        // The counter is made again on the next try.
+        let mut tries = 0;
+        let node = loop {
+            match NodeBuilder::new()
+                .name(&name)
+                .config(&cfg)
+                .signal_handling_mode(SignalHandlingMode::Disabled)
+                .create::<S>()
+            {
+                Err(NodeCreationFailure::UnableToGenerateUniqueNodeId) if tries < 5 => {
+                    tries += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                }
+                r => break r.map_err(|e| TransportError::ipc(ns, "cannot create a node", e))?,
+            }
+        };
         // The resources of the rest are removed here so that the services open cleanly.
         let (same_name_alive, _) = live_nodes_named(ns, &cfg, node_name, node.id())?;
         let cleaned_dead_nodes = dead_before.saturating_sub(dead_nodes_in(&cfg));
