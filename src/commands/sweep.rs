@@ -4,10 +4,18 @@
 use crate::cli::{Classify, JsonArg, ScenarioArgs, SeedArgs};
 use crate::progress::Progress;
 use crate::studies::sweep::{
-    Engine, Strategy, SweepOptions, pulse_from_flags, sweep_latency, sweep_stiffness_lag,
-    write_lag_outputs, write_outputs,
+    Engine, Strategy, SweepError, SweepOptions, pulse_from_flags, sweep_latency,
+    sweep_stiffness_lag, write_lag_outputs, write_outputs,
 };
 use std::path::PathBuf;
+
+/// The user's input at fault (scenario, overrides, latencies): exit 2; else the run's: exit 1.
+fn classify(e: SweepError) -> anyhow::Error {
+    match e.is_input() {
+        true => crate::cli::input_error(e),
+        false => anyhow::Error::new(e),
+    }
+}
 
 #[derive(clap::Args)]
 pub(crate) struct Args {
@@ -81,10 +89,7 @@ fn run_lag(a: LagArgs) -> anyhow::Result<()> {
             done.set(done.get() + 1);
         },
     )
-    .map_err(|e| match e.is_input() {
-        true => crate::cli::input_error(e),
-        false => anyhow::Error::new(e),
-    })?;
+    .map_err(classify)?;
     drop(progress);
     if let Some(dir) = &a.out_dir {
         write_lag_outputs(&sweep, dir)?;
@@ -181,10 +186,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         progress.step(done.get(), points, p);
         done.set(done.get() + 1);
     })
-    .map_err(|e| match e.is_input() {
-        true => crate::cli::input_error(e),
-        false => anyhow::Error::new(e),
-    })?;
+    .map_err(classify)?;
     drop(progress);
     if let Some(dir) = &a.out_dir {
         write_outputs(&sweep, dir)?;
